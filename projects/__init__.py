@@ -1,0 +1,1 @@
+"""Namespace for mmdet3d-style plugin projects."""

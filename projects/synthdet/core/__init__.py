@@ -1,0 +1,1 @@
+"""synthdet core (registered with mmdet3d on import)."""

@@ -1,0 +1,1 @@
+"""synthdet datasets (registered with mmdet3d on import)."""

@@ -1,0 +1,1 @@
+"""synthdet models (registered with mmdet3d on import)."""
