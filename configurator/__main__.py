@@ -1,0 +1,27 @@
+"""``python -m configurator {corners,freecad} ...``: dispatch to the stage's sub-commands."""
+import argparse
+import importlib
+import sys
+
+# sub-command -> module exposing ``add_arguments(parser)`` and ``run(args) -> int``
+COMMANDS = {
+    'corners': 'configurator.corners_cli',
+    'freecad': 'configurator.freecad_cli',
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Parse the sub-command and run it; returns the process exit code."""
+    parser = argparse.ArgumentParser(prog='python -m configurator', description=__doc__)
+    subparsers = parser.add_subparsers(dest='command', required=True)
+    modules = {}
+    for name, module_name in COMMANDS.items():
+        module = importlib.import_module(module_name)
+        modules[name] = module
+        module.add_arguments(subparsers.add_parser(name, help=module.__doc__.splitlines()[0]))
+    args = parser.parse_args(argv)
+    return modules[args.command].run(args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
