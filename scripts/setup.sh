@@ -11,7 +11,8 @@ VENV=${SYNTHDET_VENV:-$ROOT/.venv}
 PY=$VENV/bin/python
 STAMPS=$VENV/.synthdet-stamps
 REQ=$ROOT/requirements
-APT_PACKAGES=(libopenblas-dev freecad)
+# libopenblas-dev: MinkowskiEngine's build; libusb-1.0-0: open3d's import; freecad: freecadcmd.
+APT_PACKAGES=(libopenblas-dev libusb-1.0-0 freecad)
 PIP_QUIET=(--disable-pip-version-check --progress-bar off -q)
 export MAX_JOBS=${MAX_JOBS:-2} CFLAGS=${CFLAGS:--g0}
 
@@ -40,7 +41,10 @@ step() {
 
 apt_missing() {
   local missing=()
-  dpkg -s libopenblas-dev >/dev/null 2>&1 || missing+=(libopenblas-dev)
+  local package
+  for package in libopenblas-dev libusb-1.0-0; do
+    dpkg -s "$package" >/dev/null 2>&1 || missing+=("$package")
+  done
   command -v freecadcmd >/dev/null 2>&1 || missing+=(freecad)
   echo "${missing[@]}"
 }
@@ -62,7 +66,10 @@ then run 'make setup' again."
   log "apt: done in $((SECONDS - start)) s"
 }
 
-pip_install() { "$PY" -m pip install "${PIP_QUIET[@]}" "$@"; }
+# The machine's pip config lists local indexes that may not exist; drop pip's warnings about them.
+pip_install() {
+  "$PY" -m pip install "${PIP_QUIET[@]}" "$@" 2>&1 | { grep -v 'is neither a file nor a directory' || true; }
+}
 
 install_mmcv() {
   MMCV_WITH_OPS=1 FORCE_CUDA=0 pip_install --no-build-isolation -r "$REQ/mmcv.txt"
