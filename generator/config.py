@@ -1,0 +1,206 @@
+"""Generator configuration: defaults, loading from JSON/YAML and validation.
+
+Every number a user may change lives in :data:`DEFAULTS`. A user file (``--config FILE``) overrides
+any subset of it; unknown keys, wrong types, negative counts, probabilities outside [0, 1] and
+inverted ranges are rejected with an error that names the file and the key, before any work starts.
+
+Default probabilities reproduce the synthetic counts of the paper's Table 1 for 3 areas x 50
+rooms (chair 364, table 252, sofa 86, yumi 200, 3dprinter 192):
+
+- 4 wall slots per room, each holding a table (p=0.42) or a sofa (p=0.145) or nothing:
+  600 slots -> 252 tables, 87 sofas.
+- 4 chair positions on the inner boundary, each used with p=0.62 (a few are dropped when they
+  would touch a wall item): 600 positions -> ~364 chairs.
+- 2 sides (local left/right) per table, each holding a yumi (p=0.40) or a 3D printer (p=0.39):
+  ~504 sides -> ~200 yumis, ~192 printers.
+"""
+import copy
+import json
+from pathlib import Path
+from typing import Any
+
+DETECTION_CLASSES = ('table', 'chair', 'sofa', 'yumi', '3dprinter')
+STRUCTURE_CLASSES = ('ceiling', 'floor', 'wall', 'door', 'window', 'clutter')
+
+DEFAULTS: dict[str, Any] = {
+    'room': {
+        # probability of each floor shape; they must sum to 1
+        'shapes': {'box': 0.8, 'L': 0.15, 'U': 0.05},
+        'width': [6.0, 11.0],   # x extent of the bounding box, metres
+        'depth': [5.0, 9.0],    # y extent of the bounding box, metres
+        'height': [2.8, 4.0],
+        'doors': [1, 2],        # inclusive range of door openings per room
+        'windows': [0, 3],      # inclusive range of window openings per room
+    },
+    'probabilities': {
+        'table': 0.42,       # per wall slot
+        'sofa': 0.145,       # per wall slot (table and sofa share the slot: sum <= 1)
+        'chair': 0.62,       # per chair position on the inner boundary
+        'yumi': 0.40,        # per table side (yumi and 3dprinter share the side: sum <= 1)
+        '3dprinter': 0.39,   # per table side
+    },
+    'layout': {
+        'wall_slots': 4,          # tables + sofas together, at most 4 (paper)
+        'chair_positions': 4,     # chair positions on the inner boundary (paper)
+        'chair_margin': 1.7,      # distance of the inner boundary from the walls, metres
+        'wall_gap': [0.02, 0.12], # gap between a wall item's back and its wall
+        'clearance': 0.05,        # minimum free distance between any two objects
+        'clutter': [0, 4],        # inclusive range of clutter objects per room
+        'clutter_size': [0.2, 0.8],
+    },
+    'scanner': {
+        'path_coverage': 0.8,      # the two crossing segments span 80 % of the room (paper)
+        'sensor_height': 0.6667,   # fraction of the room height (paper: 2/3)
+        'path_steps': 512,         # sensor positions along the path
+        'batch_rays': 262144,      # rays per Embree call
+        'max_object_rays': 200,    # give up on object points after this many batches
+        'range_noise': 0.0,        # std of the range error, metres (0 = paper-faithful)
+        'angular_jitter': 0.0,     # std of the beam direction error, radians
+        'dropout': 0.0,            # probability that a return is lost
+    },
+}
+
+_SUM_GROUPS = (('probabilities', ('table', 'sofa')), ('probabilities', ('yumi', '3dprinter')))
+
+
+class ConfigError(ValueError):
+    """A bad generator configuration; the message names the source and the key."""
+
+
+def load_config(path: str | Path | None = None) -> dict[str, Any]:
+    """Return the defaults overridden by the JSON or YAML file at ``path``, validated."""
+    config = copy.deepcopy(DEFAULTS)
+    source = '<defaults>'
+    if path is not None:
+        path = Path(path)
+        source = str(path)
+        if not path.is_file():
+            raise ConfigError(f'{path}: configuration file not found')
+        text = path.read_text()
+        try:
+            if path.suffix.lower() in ('.yaml', '.yml'):
+                import yaml
+                user = yaml.safe_load(text)
+            else:
+                user = json.loads(text)
+        except Exception as err:  # parse errors carry the line number in their message
+            raise ConfigError(f'{path}: cannot parse configuration: {err}') from err
+        if user is None:
+            user = {}
+        if not isinstance(user, dict):
+            raise ConfigError(f'{path}: top level must be a mapping, got {type(user).__name__}')
+        _merge(config, user, DEFAULTS, source, '')
+    validate_config(config, source)
+    return config
+
+
+def _merge(target: dict, user: dict, reference: dict, source: str, prefix: str) -> None:
+    for key, value in user.items():
+        where = f'{prefix}{key}'
+        if key not in reference and prefix == 'probabilities.':
+            raise ConfigError(f'{source}: unknown class "{key}" in "probabilities" '
+                              f'(classes: {", ".join(DETECTION_CLASSES)})')
+        if key not in reference:
+            known = ', '.join(sorted(reference))
+            raise ConfigError(f'{source}: unknown key "{where}" (known here: {known})')
+        if isinstance(reference[key], dict) and key != 'shapes':
+            if not isinstance(value, dict):
+                raise ConfigError(f'{source}: "{where}" must be a mapping')
+            _merge(target[key], value, reference[key], source, where + '.')
+        elif key == 'shapes':
+            if not isinstance(value, dict):
+                raise ConfigError(f'{source}: "{where}" must be a mapping of shape -> probability')
+            for shape in value:
+                if shape not in reference[key]:
+                    raise ConfigError(f'{source}: unknown room shape "{shape}" in "{where}" '
+                                      f'(known: {", ".join(reference[key])})')
+            target[key] = {s: value.get(s, 0.0) for s in reference[key]}
+        else:
+            target[key] = value
+
+
+def _number(config: dict, section: str, key: str, source: str) -> float:
+    value = config[section][key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ConfigError(f'{source}: "{section}.{key}" must be a number, got {value!r}')
+    return float(value)
+
+
+def _range(config: dict, section: str, key: str, source: str, integer: bool = False) -> None:
+    value = config[section][key]
+    kind = int if integer else (int, float)
+    if (not isinstance(value, (list, tuple)) or len(value) != 2
+            or any(isinstance(v, bool) or not isinstance(v, kind) for v in value)):
+        what = 'integers' if integer else 'numbers'
+        raise ConfigError(f'{source}: "{section}.{key}" must be a list of two {what} [min, max], '
+                          f'got {value!r}')
+    low, high = value
+    if low < 0:
+        raise ConfigError(f'{source}: "{section}.{key}" must not be negative, got {value!r}')
+    if low > high:
+        raise ConfigError(f'{source}: "{section}.{key}" has min > max: {value!r}')
+
+
+def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
+    """Raise :class:`ConfigError` when any value of ``config`` is out of its domain."""
+    probs = config['probabilities']
+    for cls in probs:
+        if cls not in DETECTION_CLASSES:
+            raise ConfigError(f'{source}: unknown class "{cls}" in "probabilities" '
+                              f'(classes: {", ".join(DETECTION_CLASSES)})')
+        p = _number(config, 'probabilities', cls, source)
+        if not 0.0 <= p <= 1.0:
+            raise ConfigError(f'{source}: probability "probabilities.{cls}" = {p} is outside [0, 1]')
+    for section, keys in _SUM_GROUPS:
+        total = sum(float(config[section][k]) for k in keys)
+        if total > 1.0 + 1e-9:
+            raise ConfigError(f'{source}: "{section}.{keys[0]}" + "{section}.{keys[1]}" = {total:g} '
+                              f'> 1; they share one slot')
+    shapes = config['room']['shapes']
+    for shape, p in shapes.items():
+        if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0.0 <= p <= 1.0:
+            raise ConfigError(f'{source}: "room.shapes.{shape}" must be a probability in [0, 1], '
+                              f'got {p!r}')
+    if abs(sum(shapes.values()) - 1.0) > 1e-6:
+        raise ConfigError(f'{source}: "room.shapes" probabilities sum to {sum(shapes.values()):g}, '
+                          f'not 1')
+    for key in ('width', 'depth', 'height'):
+        _range(config, 'room', key, source)
+        if config['room'][key][0] <= 0:
+            raise ConfigError(f'{source}: "room.{key}" must be positive')
+    if config['room']['width'][0] < 4.0 or config['room']['depth'][0] < 4.0:
+        raise ConfigError(f'{source}: "room.width" and "room.depth" must be at least 4 m')
+    if config['room']['height'][0] < 2.2:
+        raise ConfigError(f'{source}: "room.height" must be at least 2.2 m')
+    for key in ('doors', 'windows'):
+        _range(config, 'room', key, source, integer=True)
+    layout = config['layout']
+    for key in ('wall_slots', 'chair_positions'):
+        value = layout[key]
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise ConfigError(f'{source}: "layout.{key}" must be a non-negative integer, '
+                              f'got {value!r}')
+    if layout['wall_slots'] > 4:
+        raise ConfigError(f'{source}: "layout.wall_slots" = {layout["wall_slots"]}: tables and '
+                          f'sofas share at most 4 wall slots')
+    for key in ('chair_margin', 'clearance'):
+        if _number(config, 'layout', key, source) < 0:
+            raise ConfigError(f'{source}: "layout.{key}" must not be negative')
+    _range(config, 'layout', 'wall_gap', source)
+    _range(config, 'layout', 'clutter', source, integer=True)
+    _range(config, 'layout', 'clutter_size', source)
+    scanner = config['scanner']
+    for key in ('path_coverage', 'sensor_height', 'dropout'):
+        value = _number(config, 'scanner', key, source)
+        if not 0.0 <= value <= 1.0:
+            raise ConfigError(f'{source}: "scanner.{key}" = {value} is outside [0, 1]')
+    if scanner['dropout'] >= 1.0:
+        raise ConfigError(f'{source}: "scanner.dropout" must be below 1')
+    for key in ('range_noise', 'angular_jitter'):
+        if _number(config, 'scanner', key, source) < 0:
+            raise ConfigError(f'{source}: "scanner.{key}" must not be negative')
+    for key in ('path_steps', 'batch_rays', 'max_object_rays'):
+        value = scanner[key]
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ConfigError(f'{source}: "scanner.{key}" must be a positive integer, '
+                              f'got {value!r}')

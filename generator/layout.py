@@ -1,0 +1,526 @@
+"""Room layouts: the paper's placement rules, as boxes and parameters, in plain numpy.
+
+A layout decides what goes where; it knows nothing of Blender. The rules (paper, Sec. 3.1):
+
+- the room is a parametric box (optionally L- or U-shaped) that holds everything;
+- each class has an appearance probability;
+- tables and sofas stand along the walls and share that space, at most 4 together;
+- chairs go at 4 positions on an inner boundary, each with a random rotation;
+- yumis and 3D printers stand only on tables, at most one on each local side (left = -x, right = +x).
+
+Beyond the paper: L/U rooms, clutter objects (class ``clutter``) and door/window openings.
+No two objects intersect: every placement is checked with oriented-box tests and dropped when no
+free position is found after a few tries.
+
+Frames: metres, z up, yaw in radians counter-clockwise from +x. An object's local frame has xy
+centred on its bounding box, z = 0 at its lowest point, and its front towards local -y.
+"""
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from generator.config import DETECTION_CLASSES
+
+EPS = 1e-9
+
+
+@dataclass(frozen=True)
+class AssetSpec:
+    """What the layout needs to know about one asset instance: its class, name and extents."""
+
+    cls: str
+    name: str
+    asset: str
+    params: Mapping[str, Any]
+    size: tuple[float, float, float]
+    top_z: float | None = None
+    top_size: tuple[float, float] | None = None
+
+
+Catalog = Mapping[str, Sequence[AssetSpec]]
+
+
+def catalog_from_library(library: Any) -> dict[str, list[AssetSpec]]:
+    """Build a layout catalog from an asset library (``library.instances(cls)``)."""
+    catalog = {}
+    for cls in DETECTION_CLASSES:
+        specs = []
+        for inst in library.instances(cls):
+            top_size = None if inst.top_size is None else tuple(float(v) for v in inst.top_size)
+            specs.append(AssetSpec(cls=inst.cls, name=inst.name, asset=inst.asset,
+                                   params=dict(inst.params),
+                                   size=tuple(float(v) for v in inst.size),
+                                   top_z=None if inst.top_z is None else float(inst.top_z),
+                                   top_size=top_size))
+        catalog[cls] = specs
+    return catalog
+
+
+@dataclass
+class PlacedObject:
+    """One object of a room: its asset, oriented box and the instance it stands on."""
+
+    instance: str
+    spec: AssetSpec
+    center: np.ndarray  # (3,) centre of the oriented bounding box
+    yaw: float
+    on: str | None = None
+
+    @property
+    def cls(self) -> str:
+        return self.spec.cls
+
+    @property
+    def size(self) -> np.ndarray:
+        return np.asarray(self.spec.size, dtype=float)
+
+    @property
+    def base(self) -> np.ndarray:
+        """Origin of the local frame in the world: box centre in xy, lowest point in z."""
+        return np.array([self.center[0], self.center[1], self.center[2] - self.size[2] / 2])
+
+    def box_dict(self) -> dict[str, Any]:
+        return {'center': [round(float(v), 6) for v in self.center],
+                'size': [round(float(v), 6) for v in self.size],
+                'yaw': round(float(self.yaw), 6)}
+
+
+@dataclass
+class Opening:
+    """A door or window cut into wall ``wall`` (polygon edge index), from ``u0`` to ``u1``."""
+
+    kind: str
+    wall: int
+    u0: float
+    u1: float
+    z0: float
+    z1: float
+
+
+@dataclass
+class RoomLayout:
+    """A room: clockwise floor polygon, height, openings and objects."""
+
+    shape: str
+    polygon: np.ndarray  # (N, 2), clockwise seen from above
+    height: float
+    objects: list[PlacedObject] = field(default_factory=list)
+    openings: list[Opening] = field(default_factory=list)
+
+    def counts(self) -> dict[str, int]:
+        result = {cls: 0 for cls in DETECTION_CLASSES}
+        for obj in self.objects:
+            if obj.cls in result:
+                result[obj.cls] += 1
+        return result
+
+
+# ----------------------------------------------------------------------------- geometry helpers
+
+def rotation2d(yaw: float) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s], [s, c]])
+
+
+def box_corners_xy(center: Sequence[float], size: Sequence[float], yaw: float) -> np.ndarray:
+    """Corners (4, 2) of an oriented rectangle, counter-clockwise."""
+    hx, hy = size[0] / 2, size[1] / 2
+    local = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
+    return local @ rotation2d(yaw).T + np.asarray(center[:2], dtype=float)
+
+
+def rectangles_overlap(a: np.ndarray, b: np.ndarray, clearance: float = 0.0) -> bool:
+    """Separating-axis test of two convex quads (4, 2): True if closer than ``clearance``."""
+    for quad in (a, b):
+        for i in range(4):
+            edge = quad[(i + 1) % 4] - quad[i]
+            axis = np.array([-edge[1], edge[0]])
+            axis /= np.linalg.norm(axis) + EPS
+            pa, pb = a @ axis, b @ axis
+            if pa.max() + clearance <= pb.min() or pb.max() + clearance <= pa.min():
+                return False
+    return True
+
+
+def boxes_intersect(a: PlacedObject, b: PlacedObject, clearance: float = 0.0) -> bool:
+    """True if the oriented boxes of ``a`` and ``b`` overlap (or are closer than ``clearance``)."""
+    az0, az1 = a.center[2] - a.size[2] / 2, a.center[2] + a.size[2] / 2
+    bz0, bz1 = b.center[2] - b.size[2] / 2, b.center[2] + b.size[2] / 2
+    if az1 <= bz0 + EPS or bz1 <= az0 + EPS:
+        return False
+    return rectangles_overlap(box_corners_xy(a.center, a.size, a.yaw),
+                              box_corners_xy(b.center, b.size, b.yaw), clearance)
+
+
+def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """Even-odd test of points (M, 2) against a simple polygon (N, 2); boundary counts as either."""
+    x, y = points[:, 0:1], points[:, 1:2]
+    x0, y0 = polygon[:, 0], polygon[:, 1]
+    x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
+    crosses = (y0 > y) != (y1 > y)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        x_at = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+    return (crosses & (x < x_at)).sum(axis=1) % 2 == 1
+
+
+def _segments_cross(p0, p1, q0, q1) -> bool:
+    def orient(a, b, c):
+        return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+    d1, d2 = orient(q0, q1, p0), orient(q0, q1, p1)
+    d3, d4 = orient(p0, p1, q0), orient(p0, p1, q1)
+    return d1 * d2 < -EPS and d3 * d4 < -EPS
+
+
+def quad_inside_polygon(quad: np.ndarray, polygon: np.ndarray) -> bool:
+    """True if the convex quad lies inside the simple polygon (touching allowed)."""
+    if not points_in_polygon(quad, polygon).all():
+        return False
+    if points_in_polygon(polygon, quad[::-1] if _area(quad) < 0 else quad).any():
+        return False
+    for i in range(len(quad)):
+        for j in range(len(polygon)):
+            if _segments_cross(quad[i], quad[(i + 1) % 4], polygon[j],
+                               polygon[(j + 1) % len(polygon)]):
+                return False
+    return True
+
+
+def _area(polygon: np.ndarray) -> float:
+    """Signed area (positive = counter-clockwise)."""
+    x, y = polygon[:, 0], polygon[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+
+
+def inward_normals(polygon: np.ndarray) -> np.ndarray:
+    """Unit inward normal (N, 2) of each edge i -> i+1 of a clockwise polygon."""
+    d = np.roll(polygon, -1, axis=0) - polygon
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return np.stack([d[:, 1], -d[:, 0]], axis=1)
+
+
+def offset_polygon(polygon: np.ndarray, distance: float) -> np.ndarray:
+    """Move every edge of a clockwise polygon inwards by ``distance`` (mitred corners)."""
+    n = inward_normals(polygon)
+    n_prev = np.roll(n, 1, axis=0)
+    scale = distance / (1.0 + np.sum(n * n_prev, axis=1))
+    return polygon + (n + n_prev) * scale[:, None]
+
+
+def min_leg_width(polygon: np.ndarray) -> float:
+    """Smallest distance between two parallel, facing edges (the narrowest part of the room)."""
+    n = inward_normals(polygon)
+    best = np.inf
+    for i in range(len(polygon)):
+        for j in range(len(polygon)):
+            if np.dot(n[i], n[j]) < -0.999:
+                gap = float(np.dot(polygon[j] - polygon[i], n[i]))
+                # facing edges must overlap along their direction to bound a leg of the room
+                d = polygon[(i + 1) % len(polygon)] - polygon[i]
+                d = d / np.linalg.norm(d)
+                a = sorted([0.0, float(np.dot(polygon[(i + 1) % len(polygon)] - polygon[i], d))])
+                b = sorted([float(np.dot(polygon[j] - polygon[i], d)),
+                            float(np.dot(polygon[(j + 1) % len(polygon)] - polygon[i], d))])
+                if gap > 0 and min(a[1], b[1]) - max(a[0], b[0]) > EPS:
+                    best = min(best, gap)
+    return best
+
+
+# ----------------------------------------------------------------------------- room shapes
+
+def sample_room(rng: np.random.Generator, room_cfg: Mapping[str, Any]) -> tuple[str, np.ndarray, float]:
+    """Sample a room shape, its clockwise floor polygon (min corner at the origin) and height."""
+    shapes = list(room_cfg['shapes'])
+    probs = np.array([room_cfg['shapes'][s] for s in shapes], dtype=float)
+    shape = shapes[int(rng.choice(len(shapes), p=probs / probs.sum()))]
+    w = round(float(rng.uniform(*room_cfg['width'])), 2)
+    d = round(float(rng.uniform(*room_cfg['depth'])), 2)
+    h = round(float(rng.uniform(*room_cfg['height'])), 2)
+    if shape == 'box':
+        poly = [(0, 0), (0, d), (w, d), (w, 0)]
+    elif shape == 'L':
+        cw = round(float(rng.uniform(0.35, 0.5)) * w, 2)
+        cd = round(float(rng.uniform(0.35, 0.5)) * d, 2)
+        poly = [(0, 0), (0, d), (w - cw, d), (w - cw, d - cd), (w, d - cd), (w, 0)]
+    else:  # U: a notch in the middle of the far wall
+        nw = round(float(rng.uniform(0.3, 0.4)) * w, 2)
+        a = round(float(rng.uniform(0.25 * w, 0.75 * w - nw)), 2)
+        nd = round(float(rng.uniform(0.3, 0.45)) * d, 2)
+        poly = [(0, 0), (0, d), (a, d), (a, d - nd), (a + nw, d - nd), (a + nw, d), (w, d), (w, 0)]
+    polygon = np.array(poly, dtype=float)
+    if shape != 'box':
+        if rng.random() < 0.5:  # mirror x, keep clockwise
+            polygon[:, 0] = w - polygon[:, 0]
+            polygon = polygon[::-1]
+        if rng.random() < 0.5:  # mirror y
+            polygon[:, 1] = d - polygon[:, 1]
+            polygon = polygon[::-1]
+        polygon = np.roll(polygon, -int(np.lexsort((polygon[:, 1], polygon[:, 0]))[0]), axis=0)
+    return shape, np.ascontiguousarray(polygon), h
+
+
+# ----------------------------------------------------------------------------- placement
+
+class _Placer:
+    """Keeps the placed objects and answers 'is this box free?'."""
+
+    def __init__(self, polygon: np.ndarray, height: float, clearance: float):
+        self.polygon = polygon
+        self.height = height
+        self.clearance = clearance
+        self.objects: list[PlacedObject] = []
+        self.blockers: list[PlacedObject] = []  # keep-out volumes (door swings), not written
+        self.counters: dict[str, int] = {}
+
+    def is_free(self, candidate: PlacedObject, ignore: str | None = None) -> bool:
+        if candidate.center[2] + candidate.size[2] / 2 > self.height - 0.05:
+            return False
+        quad = box_corners_xy(candidate.center, candidate.size, candidate.yaw)
+        if not quad_inside_polygon(quad, self.polygon):
+            return False
+        for other in self.objects + self.blockers:
+            if other.instance == ignore:
+                continue
+            if boxes_intersect(candidate, other, self.clearance):
+                return False
+        return True
+
+    def add(self, spec: AssetSpec, center: np.ndarray, yaw: float, on: str | None = None) -> PlacedObject:
+        self.counters[spec.cls] = self.counters.get(spec.cls, 0) + 1
+        obj = PlacedObject(f'{spec.cls}_{self.counters[spec.cls]}', spec, center, yaw, on)
+        self.objects.append(obj)
+        return obj
+
+
+def _wrap_angle(yaw: float) -> float:
+    return float((yaw + np.pi) % (2 * np.pi) - np.pi)
+
+
+def _pick(rng: np.random.Generator, probs: Mapping[str, float], classes: Sequence[str]) -> str | None:
+    """Draw one of ``classes`` with their probabilities, or None with the remaining mass."""
+    r = rng.random()
+    acc = 0.0
+    for cls in classes:
+        acc += probs[cls]
+        if r < acc:
+            return cls
+    return None
+
+
+def _fits_on_side(table: AssetSpec, item: AssetSpec, margin: float = 0.03) -> list[int]:
+    """Quarter turns (0..3) in which ``item`` fits on one half of the table top."""
+    if table.top_size is None or table.top_z is None:
+        return []
+    half_w, depth = table.top_size[0] / 2 - margin, table.top_size[1] - 2 * margin
+    turns = []
+    for k in range(4):
+        sx, sy = (item.size[0], item.size[1]) if k % 2 == 0 else (item.size[1], item.size[0])
+        if sx <= half_w and sy <= depth:
+            turns.append(k)
+    return turns
+
+
+def _turns_for(item: AssetSpec, table: AssetSpec) -> list[int]:
+    turns = _fits_on_side(table, item)
+    if item.cls == 'yumi':  # the robot faces the front of the table, like its operator
+        turns = [k for k in turns if k == 0]
+    return turns
+
+
+def _place_wall_item(rng, placer: _Placer, spec: AssetSpec, wall: int, gap_range,
+                     tries: int = 12) -> PlacedObject | None:
+    polygon = placer.polygon
+    p0, p1 = polygon[wall], polygon[(wall + 1) % len(polygon)]
+    length = float(np.linalg.norm(p1 - p0))
+    direction = (p1 - p0) / length
+    normal = inward_normals(polygon)[wall]
+    width, depth = spec.size[0], spec.size[1]
+    if width > length - 0.2:
+        return None
+    yaw = _wrap_angle(float(np.arctan2(normal[0], -normal[1])))
+    for _ in range(tries):
+        u = rng.uniform(0.1 + width / 2, length - 0.1 - width / 2)
+        gap = rng.uniform(*gap_range)
+        xy = p0 + direction * u + normal * (gap + depth / 2)
+        candidate = PlacedObject('', spec, np.array([xy[0], xy[1], spec.size[2] / 2]), yaw)
+        if placer.is_free(candidate):
+            return placer.add(spec, candidate.center, yaw)
+    return None
+
+
+def _place_on_table(rng, placer: _Placer, table: PlacedObject, side: int, item: AssetSpec) -> bool:
+    """Put ``item`` on the left (side=-1) or right (side=+1) half of ``table``'s top."""
+    turns = _turns_for(item, table.spec)
+    if not turns:
+        return False
+    k = int(rng.choice(turns))
+    sx, sy = (item.size[0], item.size[1]) if k % 2 == 0 else (item.size[1], item.size[0])
+    top_w, top_d = table.spec.top_size
+    slack_x = max(0.0, top_w / 2 - 0.03 - sx) / 2
+    slack_y = max(0.0, top_d - 0.06 - sy) / 2
+    local = np.array([side * top_w / 4 + rng.uniform(-slack_x, slack_x) * 0.8,
+                      rng.uniform(-slack_y, slack_y) * 0.8])
+    xy = table.center[:2] + rotation2d(table.yaw) @ local
+    z0 = table.base[2] + table.spec.top_z
+    yaw = _wrap_angle(table.yaw + k * np.pi / 2)
+    candidate = PlacedObject('', item, np.array([xy[0], xy[1], z0 + item.size[2] / 2]), yaw)
+    if not placer.is_free(candidate, ignore=table.instance):
+        return False
+    placer.add(item, candidate.center, yaw, on=table.instance)
+    return True
+
+
+def _place_openings(rng, placer: _Placer, room_cfg, layout: RoomLayout) -> None:
+    polygon = layout.polygon
+    lengths = np.linalg.norm(np.roll(polygon, -1, axis=0) - polygon, axis=1)
+    normals = inward_normals(polygon)
+    per_wall: dict[int, list[tuple[float, float]]] = {}
+    n_doors = int(rng.integers(room_cfg['doors'][0], room_cfg['doors'][1] + 1))
+    n_windows = int(rng.integers(room_cfg['windows'][0], room_cfg['windows'][1] + 1))
+    for kind in ['door'] * n_doors + ['window'] * n_windows:
+        for _ in range(10):
+            if kind == 'door':
+                width = rng.uniform(0.9, 1.3)
+                z0, z1 = 0.0, min(rng.uniform(2.0, 2.3), layout.height - 0.3)
+            else:
+                width = rng.uniform(0.8, 2.0)
+                z0 = rng.uniform(0.9, 1.2)
+                z1 = z0 + min(rng.uniform(0.8, 1.6), layout.height - z0 - 0.3)
+            eligible = np.flatnonzero(lengths >= width + 0.8)
+            if len(eligible) == 0:
+                break
+            wall = int(rng.choice(eligible, p=lengths[eligible] / lengths[eligible].sum()))
+            u0 = rng.uniform(0.4, lengths[wall] - 0.4 - width)
+            u1 = u0 + width
+            if any(u0 < b + 0.3 and a < u1 + 0.3 for a, b in per_wall.get(wall, [])):
+                continue
+            per_wall.setdefault(wall, []).append((u0, u1))
+            layout.openings.append(Opening(kind, wall, round(u0, 3), round(u1, 3),
+                                           round(z0, 3), round(z1, 3)))
+            if kind == 'door':  # keep the door's swing free
+                direction = (polygon[(wall + 1) % len(polygon)] - polygon[wall]) / lengths[wall]
+                xy = polygon[wall] + direction * (u0 + u1) / 2 + normals[wall] * 0.5
+                yaw = float(np.arctan2(direction[1], direction[0]))
+                spec = AssetSpec('keepout', 'door_swing', 'keepout', {}, (width + 0.2, 1.0, z1))
+                placer.blockers.append(PlacedObject(f'door_swing_{len(placer.blockers)}', spec,
+                                                    np.array([xy[0], xy[1], z1 / 2]), yaw))
+            break
+
+
+def _place_clutter(rng, placer: _Placer, layout_cfg) -> None:
+    low, high = layout_cfg['clutter']
+    lo_xy, hi_xy = placer.polygon.min(axis=0), placer.polygon.max(axis=0)
+    for _ in range(int(rng.integers(low, high + 1))):
+        kind = 'box' if rng.random() < 0.6 else 'cylinder'
+        sx = round(float(rng.uniform(*layout_cfg['clutter_size'])), 3)
+        sy = sx if kind == 'cylinder' else round(float(rng.uniform(*layout_cfg['clutter_size'])), 3)
+        sz = round(float(rng.uniform(0.2, 1.2)), 3)
+        colour = [int(v) for v in rng.integers(40, 220, size=3)]
+        spec = AssetSpec('clutter', f'clutter/{kind}', f'clutter/{kind}',
+                         {'kind': kind, 'color': colour}, (sx, sy, sz))
+        for _ in range(20):
+            xy = rng.uniform(lo_xy, hi_xy)
+            yaw = float(rng.uniform(-np.pi, np.pi))
+            candidate = PlacedObject('', spec, np.array([xy[0], xy[1], sz / 2]), yaw)
+            if placer.is_free(candidate):
+                placer.add(spec, candidate.center, yaw)
+                break
+
+
+def generate_layout(rng: np.random.Generator, catalog: Catalog,
+                    config: Mapping[str, Any]) -> RoomLayout:
+    """Sample one room and its objects following the placement rules (see module docstring)."""
+    room_cfg, probs, layout_cfg = config['room'], config['probabilities'], config['layout']
+    shape, polygon, height = sample_room(rng, room_cfg)
+    layout = RoomLayout(shape, polygon, height)
+    placer = _Placer(polygon, height, float(layout_cfg['clearance']))
+    _place_openings(rng, placer, room_cfg, layout)
+
+    # tables and sofas share the wall slots: the longest walls, at most 4
+    lengths = np.linalg.norm(np.roll(polygon, -1, axis=0) - polygon, axis=1)
+    tie_break = rng.random(len(lengths))
+    walls = [int(i) for i in np.lexsort((tie_break, -np.round(lengths, 3)))
+             if lengths[i] >= 1.8][:layout_cfg['wall_slots']]
+    for wall in walls:
+        cls = _pick(rng, probs, ('table', 'sofa'))
+        if cls is None or not catalog.get(cls):
+            continue
+        if cls == 'sofa':
+            spec = catalog['sofa'][int(rng.integers(len(catalog['sofa'])))]
+            _place_wall_item(rng, placer, spec, wall, layout_cfg['wall_gap'])
+            continue
+        # decide what goes on the table first, then pick a table whose top holds it
+        items = []
+        for side in (-1, 1):
+            item_cls = _pick(rng, probs, ('yumi', '3dprinter'))
+            pool = [s for s in catalog.get(item_cls, ())
+                    if any(_turns_for(s, t) for t in catalog['table'])]
+            if pool:
+                items.append((side, pool[int(rng.integers(len(pool)))]))
+        tables = list(catalog['table'])
+        while True:
+            fitting = [t for t in tables if all(_turns_for(item, t) for _, item in items)]
+            if fitting or not items:
+                break
+            items.pop(int(rng.integers(len(items))))  # nothing holds both: drop one
+        if not fitting:
+            fitting = tables
+        table_spec = fitting[int(rng.integers(len(fitting)))]
+        table = _place_wall_item(rng, placer, table_spec, wall, layout_cfg['wall_gap'])
+        if table is None:
+            continue
+        for side, item in items:
+            _place_on_table(rng, placer, table, side, item)
+
+    # chairs: 4 evenly spaced positions on the inner boundary, random phase and rotations
+    if catalog.get('chair') and layout_cfg['chair_positions'] > 0:
+        margin = min(float(layout_cfg['chair_margin']), 0.3 * min_leg_width(polygon))
+        inner = offset_polygon(polygon, margin)
+        edges = np.roll(inner, -1, axis=0) - inner
+        cumulative = np.concatenate([[0.0], np.cumsum(np.linalg.norm(edges, axis=1))])
+        perimeter = cumulative[-1]
+        phase = rng.random()
+        n_pos = layout_cfg['chair_positions']
+        for k in range(n_pos):
+            if rng.random() >= probs['chair']:
+                continue
+            spec = catalog['chair'][int(rng.integers(len(catalog['chair'])))]
+            for attempt in range(8):
+                shift = 0.0 if attempt == 0 else rng.uniform(-0.15, 0.15)
+                s = ((phase + k / n_pos + shift) % 1.0) * perimeter
+                i = min(int(np.searchsorted(cumulative, s, side='right')) - 1, len(inner) - 1)
+                t = (s - cumulative[i]) / max(cumulative[i + 1] - cumulative[i], EPS)
+                xy = inner[i] + t * edges[i]
+                yaw = float(rng.uniform(-np.pi, np.pi))
+                candidate = PlacedObject('', spec, np.array([xy[0], xy[1], spec.size[2] / 2]), yaw)
+                if placer.is_free(candidate):
+                    placer.add(spec, candidate.center, yaw)
+                    break
+
+    _place_clutter(rng, placer, layout_cfg)
+    layout.objects = placer.objects
+    return layout
+
+
+def layout_meta(layout: RoomLayout) -> dict[str, Any]:
+    """The ``room`` and ``objects`` parts of ``meta.json``."""
+    room = {'polygon': [[round(float(x), 6), round(float(y), 6)] for x, y in layout.polygon],
+            'height': round(float(layout.height), 6), 'shape': layout.shape,
+            'openings': [{'kind': o.kind, 'wall': o.wall, 'u': [o.u0, o.u1], 'z': [o.z0, o.z1]}
+                         for o in layout.openings]}
+    objects = [{'instance': o.instance, 'class': o.cls, 'asset': o.spec.asset,
+                'params': _jsonable(o.spec.params), 'box': o.box_dict(), 'on': o.on}
+               for o in layout.objects]
+    return {'room': room, 'objects': objects}
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, (np.floating, float)):
+        return round(float(value), 6)
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
