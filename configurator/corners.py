@@ -1,0 +1,599 @@
+"""Room corners from a scan: floor and ceiling levels, traced room outline, clockwise corners.
+
+Method (``docs/corners.md`` explains it in full):
+
+1. floor and ceiling levels are the lowest and highest strong peaks of the z histogram;
+2. wall points are the points between them (a margin away from both); their dominant
+   directions come from a rotation search that makes their projections sharpest;
+3. in that wall-aligned frame, every point is binned into a 2D occupancy grid; closing,
+   hole filling and opening leave the room's footprint, whose boundary is traced
+   (crack following) into a polygon; this works for L-, U- and T-shaped rooms, where
+   angle ordering and convex hulls fail;
+4. the polygon is simplified (Douglas-Peucker, then walls shorter than ``min_edge`` are
+   merged into their neighbours, the 1D analogue of clustering corner candidates with
+   an eps);
+5. each wall line is refitted to the wall points near it (a histogram peak, then a
+   total-least-squares fit), snapped to the dominant directions when within
+   ``snap_angle``, and consecutive lines are intersected into the corners.
+"""
+from __future__ import annotations
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+CORNERS_FORMAT = 'synthdet.corners/1'
+
+
+class CornerDetectionError(ValueError):
+    """The scan does not show a room: no points, non-finite values, or no walls."""
+
+
+@dataclass(frozen=True)
+class CornerParams:
+    """Tuning of :func:`detect_corners`; lengths in metres, angles in radians."""
+
+    level_bin: float = 0.01  # z histogram bin for the floor and ceiling levels
+    min_room_height: float = 1.0  # a smaller vertical extent has no walls
+    wall_margin: float = 0.12  # wall points stay this far from the floor and ceiling
+    angle_cell: float = 0.02  # wall-point grid cell of the rotation search
+    points_per_cell: float = 8.0  # footprint cell size targets this many points per cell
+    min_cell: float = 0.04
+    max_cell: float = 0.2
+    min_edge: float = 0.25  # shorter walls are merged into their neighbours
+    min_turn: float = math.radians(12)  # smaller direction changes are not corners
+    snap_angle: float = math.radians(5)  # walls this close to a dominant direction snap to it
+    inlier_width: float = 0.03  # half width of the slab of points that belong to a wall plane
+    on_polygon_tol: float = 0.05  # quality: wall points this close to the outline are on it
+    min_wall_support: float = 0.4  # fraction of the outline that must be backed by wall points
+    max_quality_points: int = 200_000  # subsample for the quality figures (deterministic)
+
+
+@dataclass
+class RoomOutline:
+    """Result of :func:`detect_corners`: the room polygon and its levels."""
+
+    corners: np.ndarray  # (K, 2) metres, clockwise seen from above, scan frame
+    floor_z: float
+    ceiling_z: float
+    wall_angle: float  # dominant wall direction in [0, pi/2), radians
+    quality: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class _WallLine:
+    point: np.ndarray  # a point on the line
+    direction: np.ndarray  # unit vector along the polygon's clockwise traversal
+    inliers: int = 0
+    support: float = 0.0  # fraction of the edge length backed by inlier points
+
+
+# --------------------------------------------------------------------------- public API
+
+
+def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> RoomOutline:
+    """Find the room outline of a scan given as an ``(N, >=3)`` array of ``x y z ...``."""
+    params = params or CornerParams()
+    points = np.asarray(points)
+    if points.ndim != 2 or points.shape[1] < 3:
+        raise CornerDetectionError(f'points must be an (N, 3+) array, got shape {points.shape}')
+    if len(points) == 0:
+        raise CornerDetectionError('the scan holds no points')
+    xyz = points[:, :3].astype(np.float64, copy=False)
+    bad = ~np.isfinite(xyz).all(axis=1)
+    if bad.any():
+        raise CornerDetectionError(f'the scan has {int(bad.sum())} points with non-finite '
+                                   f'coordinates (first at row {int(np.flatnonzero(bad)[0])})')
+
+    floor_z, ceiling_z = find_levels(xyz[:, 2], params)
+    in_band = (xyz[:, 2] > floor_z + params.wall_margin) & \
+        (xyz[:, 2] < ceiling_z - params.wall_margin)
+    wall_xy = xyz[in_band, :2]
+    if len(wall_xy) < 100:
+        raise CornerDetectionError(f'no walls found: only {len(wall_xy)} points lie between '
+                                   f'the floor (z={floor_z:.2f}) and ceiling (z={ceiling_z:.2f})')
+
+    angle = dominant_wall_angle(wall_xy, params.angle_cell)
+    to_frame = _rotation(-angle)  # wall-aligned frame: dominant walls along the axes
+    frame_xy = xyz[:, :2] @ to_frame.T
+    frame_walls = wall_xy @ to_frame.T
+
+    outline, cell = _traced_outline(frame_xy, params)
+    outline = simplify_outline(outline, tolerance=1.5 * cell, min_edge=params.min_edge,
+                               min_turn=params.min_turn)
+    if len(outline) < 3:
+        raise CornerDetectionError('no walls found: the footprint of the points has no area')
+    lines = _fit_wall_lines(outline, frame_walls, cell, params)
+    supported = sum(line.support * _edge_length(outline, i) for i, line in enumerate(lines))
+    perimeter = sum(_edge_length(outline, i) for i in range(len(outline)))
+    if supported < params.min_wall_support * perimeter:
+        raise CornerDetectionError(
+            f'no walls found: wall points back only {supported / perimeter:.0%} of the room '
+            f'outline (need {params.min_wall_support:.0%})')
+    lines = _snap_directions(lines, params.snap_angle)
+    corners = _intersect_lines(lines, params.min_edge, params.min_turn)
+    if len(corners) < 3:
+        raise CornerDetectionError('no walls found: fewer than 3 wall lines were fitted')
+
+    corners = corners @ _rotation(angle).T
+    corners = _canonical_order(corners)
+    quality = _quality(corners, wall_xy, lines, params)
+    return RoomOutline(corners=corners, floor_z=floor_z, ceiling_z=ceiling_z,
+                       wall_angle=float(angle % (math.pi / 2)), quality=quality)
+
+
+def corners_for_scan(scan_path: str | os.PathLike,
+                     params: CornerParams | None = None) -> dict:
+    """Read a scan file and return its ``synthdet.corners/1`` dictionary."""
+    from configurator.scan_io import read_scan
+    outline = detect_corners(read_scan(scan_path), params)
+    return outline_to_dict(outline, str(scan_path))
+
+
+def outline_to_dict(outline: RoomOutline, scan: str) -> dict:
+    """The ``synthdet.corners/1`` dictionary of an outline found in the scan ``scan``."""
+    return {
+        'format': CORNERS_FORMAT,
+        'scan': scan,
+        'corners': [[round(float(x), 4), round(float(y), 4)] for x, y in outline.corners],
+        'floor_z': round(float(outline.floor_z), 4),
+        'ceiling_z': round(float(outline.ceiling_z), 4),
+        'quality': {key: round(float(value), 4) for key, value in outline.quality.items()},
+    }
+
+
+def write_corners(path: str | os.PathLike, corners: dict) -> None:
+    """Validate a ``synthdet.corners/1`` dictionary and write it as JSON atomically."""
+    path = Path(path)
+    _validate_corners(corners, str(path))
+    tmp = path.with_name(path.name + '.tmp')
+    tmp.write_text(json.dumps(corners, indent=2) + '\n')
+    os.replace(tmp, path)
+
+
+def load_corners(path: str | os.PathLike) -> dict:
+    """Read and validate a ``synthdet.corners/1`` JSON file; raises ``ValueError`` if bad."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as error:
+        raise ValueError(f'{path}:{error.lineno}: not valid JSON ({error.msg})') from None
+    _validate_corners(data, str(path))
+    return data
+
+
+# --------------------------------------------------------------------------- levels and angle
+
+
+def find_levels(z: np.ndarray, params: CornerParams | None = None) -> tuple[float, float]:
+    """Floor and ceiling heights: the lowest and highest strong peaks of the z histogram.
+
+    A peak is strong if it holds a quarter of the biggest peak of its half of the range.
+    Without a ceiling peak (an open scan) the ceiling is the 99.9th z percentile.
+    """
+    params = params or CornerParams()
+    low, high = np.percentile(z, [0.1, 99.9])
+    if high - low < params.min_room_height:
+        raise CornerDetectionError(f'no walls found: the scan is only {high - low:.2f} m tall')
+    edges = np.arange(low - 2 * params.level_bin, high + 3 * params.level_bin, params.level_bin)
+    hist = np.convolve(np.histogram(z, edges)[0], [1, 2, 1], mode='same').astype(np.float64)
+    centres = (edges[:-1] + edges[1:]) / 2
+    is_peak = (hist >= np.roll(hist, 1)) & (hist >= np.roll(hist, -1)) & (hist > 0)
+    lower = centres < (low + high) / 2
+
+    floor_candidates = np.flatnonzero(is_peak & lower & (hist >= 0.25 * hist[lower].max()))
+    floor_z = _level_at(z, centres[floor_candidates[0]], params.level_bin)
+    upper = ~lower
+    ceiling_candidates = np.flatnonzero(is_peak & upper & (hist >= 0.25 * hist[upper].max()))
+    if hist[upper].max() >= 0.2 * hist[floor_candidates[0]]:
+        ceiling_z = _level_at(z, centres[ceiling_candidates[-1]], params.level_bin)
+    else:
+        ceiling_z = float(high)
+    return floor_z, ceiling_z
+
+
+def _level_at(z: np.ndarray, peak: float, level_bin: float) -> float:
+    near = z[np.abs(z - peak) < 4 * level_bin]
+    return float(np.median(near))
+
+
+def dominant_wall_angle(wall_xy: np.ndarray, cell: float = 0.02) -> float:
+    """Direction in [0, pi/2) of the dominant (Manhattan) walls of 2D wall points.
+
+    The points are binned into ``cell`` squares; for each candidate angle the occupied
+    cells are projected onto the two rotated axes, and the angle whose 1D histograms are
+    sharpest (largest sum of squared bin counts) wins: a coarse 1 degree sweep, then a
+    0.05 degree refinement.
+    """
+    keys = np.floor((wall_xy - wall_xy.min(axis=0)) / cell).astype(np.int64)
+    width = int(keys[:, 1].max()) + 1
+    counts = np.bincount(keys[:, 0] * width + keys[:, 1])
+    occupied = np.flatnonzero(counts)
+    weights = counts[occupied].astype(np.float64)
+    centres = np.stack([occupied // width, occupied % width], axis=1) * cell
+
+    def sharpness(theta: float) -> float:
+        c, s = math.cos(theta), math.sin(theta)
+        score = 0.0
+        for axis in (centres @ [c, s], centres @ [-s, c]):
+            bins = np.floor((axis - axis.min()) / cell).astype(np.int64)
+            score += float(np.square(np.bincount(bins, weights)).sum())
+        return score
+
+    coarse = np.radians(np.arange(0.0, 90.0, 1.0))
+    best = coarse[int(np.argmax([sharpness(t) for t in coarse]))]
+    fine = best + np.radians(np.arange(-1.0, 1.0001, 0.05))
+    best = fine[int(np.argmax([sharpness(t) for t in fine]))]
+    return float(best % (math.pi / 2))
+
+
+def _rotation(theta: float) -> np.ndarray:
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+# --------------------------------------------------------------------------- footprint tracing
+
+
+def _traced_outline(frame_xy: np.ndarray, params: CornerParams) -> tuple[np.ndarray, float]:
+    """Trace the boundary of the points' footprint; returns (clockwise polygon, cell size)."""
+    low = frame_xy.min(axis=0)
+    extent = frame_xy.max(axis=0) - low
+    area = max(float(extent[0] * extent[1]), 1e-6)
+    cell = float(np.clip(math.sqrt(params.points_per_cell * area / len(frame_xy)),
+                         params.min_cell, params.max_cell))
+    pad = 4
+    shape = (np.floor(extent / cell).astype(int) + 1 + 2 * pad)
+    keys = np.floor((frame_xy - low) / cell).astype(np.int64) + pad
+    counts = np.bincount(keys[:, 0] * shape[1] + keys[:, 1], minlength=shape[0] * shape[1])
+    footprint = counts.reshape(shape) > 0
+    square = np.ones((3, 3), dtype=bool)
+    footprint = ndimage.binary_closing(footprint, square, iterations=2)
+    footprint = ndimage.binary_fill_holes(footprint)
+    footprint = ndimage.binary_opening(footprint, square, iterations=2)
+    labels, count = ndimage.label(footprint)
+    if count == 0:
+        return np.zeros((0, 2)), cell
+    sizes = np.bincount(labels.ravel())
+    sizes[0] = 0
+    footprint = labels == int(np.argmax(sizes))
+    loop = trace_boundary(footprint)
+    origin = low - pad * cell
+    return origin + loop * cell, cell
+
+
+def trace_boundary(mask: np.ndarray) -> np.ndarray:
+    """Outer boundary of a 2D boolean mask (``mask[ix, iy]``) as a clockwise lattice polygon.
+
+    Crack following: every side between an inside and an outside cell becomes a directed
+    edge with the inside on its right; edges are chained (turning right at the rare
+    diagonal contacts) and the loop enclosing the largest area is returned as ``(K, 2)``
+    lattice coordinates (cell corners) with collinear vertices removed.
+    """
+    padded = np.pad(mask.astype(bool), 1)
+    inside = padded[1:-1, 1:-1]
+    ix, iy = np.nonzero(inside & ~padded[1:-1, :-2])  # bottom side open
+    starts = [np.stack([ix + 1, iy], 1)]
+    ends = [np.stack([ix, iy], 1)]
+    ix, iy = np.nonzero(inside & ~padded[1:-1, 2:])  # top side open
+    starts.append(np.stack([ix, iy + 1], 1))
+    ends.append(np.stack([ix + 1, iy + 1], 1))
+    ix, iy = np.nonzero(inside & ~padded[:-2, 1:-1])  # left side open
+    starts.append(np.stack([ix, iy], 1))
+    ends.append(np.stack([ix, iy + 1], 1))
+    ix, iy = np.nonzero(inside & ~padded[2:, 1:-1])  # right side open
+    starts.append(np.stack([ix + 1, iy + 1], 1))
+    ends.append(np.stack([ix + 1, iy], 1))
+    starts = np.concatenate(starts)
+    ends = np.concatenate(ends)
+    if len(starts) == 0:
+        return np.zeros((0, 2))
+
+    outgoing: dict[tuple[int, int], list[int]] = {}
+    for index, start in enumerate(map(tuple, starts.tolist())):
+        outgoing.setdefault(start, []).append(index)
+    used = np.zeros(len(starts), dtype=bool)
+    best_loop, best_area = None, 0.0
+    for first in range(len(starts)):
+        if used[first]:
+            continue
+        loop = []
+        edge = first
+        while not used[edge]:
+            used[edge] = True
+            loop.append(starts[edge])
+            here = tuple(ends[edge].tolist())
+            heading = ends[edge] - starts[edge]
+            options = [e for e in outgoing[here] if not used[e]]
+            if not options:
+                break
+            # prefer the right turn, then straight on, then left (keeps diagonal contacts apart)
+            edge = min(options, key=lambda e: _turn_rank(heading, ends[e] - starts[e]))
+        polygon = np.array(loop, dtype=np.float64)
+        area = -_signed_area(polygon)  # clockwise loops have negative signed area
+        if area > best_area:
+            best_loop, best_area = polygon, area
+    if best_loop is None:
+        return np.zeros((0, 2))
+    return _drop_collinear(best_loop)
+
+
+def _turn_rank(heading: np.ndarray, new: np.ndarray) -> int:
+    cross = heading[0] * new[1] - heading[1] * new[0]
+    return 0 if cross < 0 else (1 if cross == 0 else 2)
+
+
+def _drop_collinear(polygon: np.ndarray) -> np.ndarray:
+    previous = np.roll(polygon, 1, axis=0)
+    following = np.roll(polygon, -1, axis=0)
+    a = polygon - previous
+    b = following - polygon
+    cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return polygon[np.abs(cross) > 1e-9]
+
+
+def _signed_area(polygon: np.ndarray) -> float:
+    x, y = polygon[:, 0], polygon[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+
+
+# --------------------------------------------------------------------------- simplification
+
+
+def simplify_outline(polygon: np.ndarray, tolerance: float, min_edge: float,
+                     min_turn: float) -> np.ndarray:
+    """Simplify a closed clockwise polygon: Douglas-Peucker, then merge short walls.
+
+    A wall shorter than ``min_edge`` disappears: if its neighbours are (anti)parallel (a
+    jog or a spike) both its ends are dropped, otherwise its ends are replaced by the
+    intersection of the neighbouring walls. Vertices turning less than ``min_turn`` go.
+    """
+    polygon = _douglas_peucker_closed(np.asarray(polygon, dtype=np.float64), tolerance)
+    while len(polygon) >= 3:
+        polygon = _drop_small_turns(polygon, min_turn)
+        if len(polygon) < 3:
+            break
+        lengths = np.linalg.norm(np.roll(polygon, -1, axis=0) - polygon, axis=1)
+        shortest = int(np.argmin(lengths))
+        if lengths[shortest] >= min_edge:
+            break
+        polygon = _remove_edge(polygon, shortest)
+    return polygon
+
+
+def _douglas_peucker_closed(polygon: np.ndarray, tolerance: float) -> np.ndarray:
+    if len(polygon) <= 3:
+        return polygon
+    first = 0
+    far = int(np.argmax(np.linalg.norm(polygon - polygon[first], axis=1)))
+    keep = np.zeros(len(polygon), dtype=bool)
+    keep[[first, far]] = True
+    closed = np.vstack([polygon, polygon[:1]])
+    for start, end in ((first, far), (far, len(polygon))):
+        stack = [(start, end)]
+        while stack:
+            i, j = stack.pop()
+            if j - i < 2:
+                continue
+            a, b = closed[i], closed[j]
+            segment = closed[i + 1:j]
+            direction = b - a
+            norm = np.linalg.norm(direction)
+            if norm < 1e-12:
+                distance = np.linalg.norm(segment - a, axis=1)
+            else:
+                distance = np.abs(direction[0] * (segment[:, 1] - a[1]) -
+                                  direction[1] * (segment[:, 0] - a[0])) / norm
+            k = int(np.argmax(distance))
+            if distance[k] > tolerance:
+                keep[i + 1 + k] = True
+                stack += [(i, i + 1 + k), (i + 1 + k, j)]
+    return polygon[keep]
+
+
+def _drop_small_turns(polygon: np.ndarray, min_turn: float) -> np.ndarray:
+    while len(polygon) >= 3:
+        incoming = polygon - np.roll(polygon, 1, axis=0)
+        outgoing = np.roll(polygon, -1, axis=0) - polygon
+        turn = np.abs(np.arctan2(incoming[:, 0] * outgoing[:, 1] - incoming[:, 1] * outgoing[:, 0],
+                                 (incoming * outgoing).sum(axis=1)))
+        weakest = int(np.argmin(turn))
+        if turn[weakest] >= min_turn:
+            break
+        polygon = np.delete(polygon, weakest, axis=0)
+    return polygon
+
+
+def _remove_edge(polygon: np.ndarray, k: int) -> np.ndarray:
+    """Remove edge k (from vertex k to k+1) of a closed polygon."""
+    n = len(polygon)
+    before, start, end, after = (polygon[(k + i) % n] for i in (-1, 0, 1, 2))
+    crossing = _line_intersection(before, start - before, end, after - end, min_sine=0.5)
+    kept = [i for i in range(n) if i not in (k, (k + 1) % n)]
+    if crossing is None or n <= 4:
+        return polygon[kept]
+    result = polygon.copy()
+    result[k] = crossing
+    return np.delete(result, (k + 1) % n, axis=0)
+
+
+def _line_intersection(p: np.ndarray, d: np.ndarray, q: np.ndarray, e: np.ndarray,
+                       min_sine: float) -> np.ndarray | None:
+    """Intersection of lines p + s d and q + t e, or None if they are nearly parallel."""
+    cross = d[0] * e[1] - d[1] * e[0]
+    if abs(cross) <= min_sine * np.linalg.norm(d) * np.linalg.norm(e):
+        return None
+    s = ((q[0] - p[0]) * e[1] - (q[1] - p[1]) * e[0]) / cross
+    return p + s * d
+
+
+def _edge_length(polygon: np.ndarray, i: int) -> float:
+    return float(np.linalg.norm(polygon[(i + 1) % len(polygon)] - polygon[i]))
+
+
+# --------------------------------------------------------------------------- wall line fits
+
+
+def _fit_wall_lines(outline: np.ndarray, walls: np.ndarray, cell: float,
+                    params: CornerParams) -> list[_WallLine]:
+    """Refit every outline edge to the wall points near it (wall-aligned frame)."""
+    band = 2.5 * cell + 0.05
+    lines = []
+    for i in range(len(outline)):
+        a, b = outline[i], outline[(i + 1) % len(outline)]
+        length = float(np.linalg.norm(b - a))
+        direction = (b - a) / length
+        normal = np.array([-direction[1], direction[0]])  # outward for clockwise polygons
+        margin = min(0.2, 0.3 * length)
+        # cheap bounding-box preselection before the exact slab test
+        low = np.minimum(a, b) - band
+        high = np.maximum(a, b) + band
+        near = walls[((walls >= low) & (walls <= high)).all(axis=1)]
+        offset = (near - a) @ normal
+        along = (near - a) @ direction
+        near = near[(np.abs(offset) < band) & (along > margin) & (along < length - margin)]
+        line = _WallLine(point=a.copy(), direction=direction)
+        if len(near) >= 10:
+            offset = (near - a) @ normal
+            bins = np.arange(-band, band + 0.005, 0.005)
+            hist = np.convolve(np.histogram(offset, bins)[0], np.ones(5), mode='same')
+            peak = bins[int(np.argmax(hist))] + 0.0025
+            inliers = near[np.abs(offset - peak) < params.inlier_width]
+            for _ in range(2):  # total least squares, then refit on the fitted line's slab
+                if len(inliers) < 10:
+                    break
+                centre = inliers.mean(axis=0)
+                _, vectors = np.linalg.eigh(np.cov((inliers - centre).T))
+                fitted = vectors[:, 1] * np.sign(vectors[:, 1] @ direction)
+                line = _WallLine(point=centre, direction=fitted, inliers=len(inliers))
+                residual = (near - centre) @ np.array([-fitted[1], fitted[0]])
+                inliers = near[np.abs(residual) < params.inlier_width]
+            if line.inliers:
+                usable = max(length - 2 * margin, 1e-6)
+                along = (inliers - a) @ direction
+                covered = np.unique(np.floor((along - margin) / 0.1).astype(int))
+                line.support = float(min(1.0, len(covered) * 0.1 / usable))
+        lines.append(line)
+    return lines
+
+
+def _snap_directions(lines: list[_WallLine], snap_angle: float) -> list[_WallLine]:
+    """Snap lines near the frame's axes to one common, refined Manhattan direction."""
+    quarter = math.pi / 2
+    deviations, weights = [], []
+    for line in lines:
+        theta = math.atan2(line.direction[1], line.direction[0])
+        deviation = (theta + quarter / 2) % quarter - quarter / 2
+        deviations.append(deviation)
+        weights.append(line.inliers if abs(deviation) < snap_angle else 0)
+    if sum(weights) == 0:
+        return lines
+    common = float(np.average(deviations, weights=weights))
+    snapped = []
+    for line, deviation in zip(lines, deviations):
+        if abs(deviation) < snap_angle or line.inliers == 0:
+            theta = math.atan2(line.direction[1], line.direction[0]) - deviation + common
+            line = _WallLine(point=line.point, direction=np.array([math.cos(theta),
+                                                                  math.sin(theta)]),
+                             inliers=line.inliers, support=line.support)
+        snapped.append(line)
+    return snapped
+
+
+def _intersect_lines(lines: list[_WallLine], min_edge: float, min_turn: float) -> np.ndarray:
+    """Corners between consecutive wall lines; degenerate walls are dropped and retried."""
+    lines = list(lines)
+    while len(lines) >= 3:
+        n = len(lines)
+        corners = []
+        parallel = None
+        for i in range(n):
+            previous, current = lines[i - 1], lines[i]
+            point = _line_intersection(previous.point, previous.direction, current.point,
+                                       current.direction, min_sine=math.sin(min_turn))
+            if point is None:
+                parallel = i
+                break
+            corners.append(point)
+        if parallel is not None:  # two consecutive (anti)parallel walls: keep the better one
+            weaker = min((parallel - 1) % n, parallel, key=lambda j: lines[j].inliers)
+            del lines[weaker]
+            continue
+        corners = np.array(corners)
+        lengths = np.linalg.norm(np.roll(corners, -1, axis=0) - corners, axis=1)
+        edge_dirs = np.roll(corners, -1, axis=0) - corners
+        agrees = np.einsum('ij,ij->i', edge_dirs, [line.direction for line in lines]) > 0
+        bad = np.flatnonzero((lengths < min_edge / 2) | ~agrees)
+        if len(bad) == 0:
+            return corners
+        del lines[int(min(bad, key=lambda j: lines[j].inliers))]
+    return np.zeros((0, 2))
+
+
+# --------------------------------------------------------------------------- output helpers
+
+
+def _canonical_order(corners: np.ndarray) -> np.ndarray:
+    """Clockwise order starting at the corner nearest the bounding box's (min x, min y)."""
+    if _signed_area(corners) > 0:
+        corners = corners[::-1]
+    start = int(np.argmin(np.linalg.norm(corners - corners.min(axis=0), axis=1)))
+    return np.roll(corners, -start, axis=0)
+
+
+def distance_to_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """Distance from each 2D point to the closed polygon's boundary."""
+    best = np.full(len(points), np.inf)
+    for a, b in zip(polygon, np.roll(polygon, -1, axis=0)):
+        d = b - a
+        t = np.clip(((points - a) @ d) / max(float(d @ d), 1e-12), 0.0, 1.0)
+        best = np.minimum(best, np.linalg.norm(points - (a + t[:, None] * d), axis=1))
+    return best
+
+
+def _quality(corners: np.ndarray, wall_xy: np.ndarray, lines: list[_WallLine],
+             params: CornerParams) -> dict[str, float]:
+    if len(wall_xy) > params.max_quality_points:
+        rng = np.random.default_rng(0)
+        wall_xy = wall_xy[rng.choice(len(wall_xy), params.max_quality_points, replace=False)]
+    distance = distance_to_polygon(wall_xy, corners)
+    on = distance < params.on_polygon_tol
+    supports = [line.support for line in lines if line.inliers]
+    return {
+        'wall_points_on_polygon': float(on.mean()),
+        'wall_rms_residual_m': float(np.sqrt(np.mean(np.square(distance[on])))) if on.any()
+        else params.on_polygon_tol,
+        'min_wall_support': float(min(supports)) if supports else 0.0,
+    }
+
+
+def _validate_corners(data: object, where: str) -> None:
+    if not isinstance(data, dict):
+        raise ValueError(f'{where}: expected a JSON object, got {type(data).__name__}')
+    if data.get('format') != CORNERS_FORMAT:
+        raise ValueError(f'{where}: unknown format {data.get("format")!r}, expected '
+                         f'{CORNERS_FORMAT!r}')
+    corners = data.get('corners')
+    if not isinstance(corners, list) or len(corners) < 3 or not all(
+            isinstance(c, list) and len(c) == 2 and
+            all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                for v in c) for c in corners):
+        raise ValueError(f'{where}: "corners" must be a list of at least 3 [x, y] finite numbers')
+    if _signed_area(np.array(corners, dtype=np.float64)) >= 0:
+        raise ValueError(f'{where}: "corners" must be clockwise seen from above')
+    for key in ('floor_z', 'ceiling_z'):
+        value = data.get(key)
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or \
+                not math.isfinite(value):
+            raise ValueError(f'{where}: "{key}" must be a finite number')
+    if data['ceiling_z'] <= data['floor_z']:
+        raise ValueError(f'{where}: "ceiling_z" must be above "floor_z"')
+    if not isinstance(data.get('scan'), str):
+        raise ValueError(f'{where}: "scan" must be a string')
+    quality = data.get('quality')
+    if not isinstance(quality, dict) or 'wall_points_on_polygon' not in quality:
+        raise ValueError(f'{where}: "quality" must hold "wall_points_on_polygon"')
