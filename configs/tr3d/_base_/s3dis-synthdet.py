@@ -1,0 +1,72 @@
+# S3DIS-format data for TR3D: real areas 1-6 and generated areas 7-9, converted to info pickles
+# by tools/create_data.py (data/s3dis/s3dis_infos_Area_N.pkl). The pipelines are TR3D's
+# published S3DIS ones: 100,000 sampled points, RGB, random flips, +-5 % scaling and 0.1 m
+# translation jitter, no rotation (the boxes are axis-aligned). The test pipeline is the flat
+# equivalent of mmdet3d's single-scale, no-flip MultiScaleFlipAug3D.
+# Experiments pick the areas and classes: they fill `train_dataloader.dataset.dataset.datasets`
+# with one `dict(train_area_dataset, ann_file=..., metainfo=...)` per training area and set the
+# test area's ann_file and metainfo in val/test_dataloader.
+_base_ = ['mmdet3d::_base_/datasets/s3dis-3d.py']
+
+dataset_type = 'SynthdetS3DISDataset'
+data_root = 'data/s3dis/'
+num_points = 100000
+
+train_pipeline = [
+    dict(
+        type='LoadPointsFromFile',
+        coord_type='DEPTH',
+        shift_height=False,
+        use_color=True,
+        load_dim=6,
+        use_dim=[0, 1, 2, 3, 4, 5]),
+    dict(type='LoadAnnotations3D', with_bbox_3d=True, with_label_3d=True),
+    dict(type='PointSample', num_points=num_points),
+    dict(
+        type='RandomFlip3D',
+        sync_2d=False,
+        flip_ratio_bev_horizontal=0.5,
+        flip_ratio_bev_vertical=0.5),
+    dict(
+        type='GlobalRotScaleTrans',
+        rot_range=[0, 0],
+        scale_ratio_range=[0.95, 1.05],
+        translation_std=[0.1, 0.1, 0.1],
+        shift_height=False),
+    dict(type='NormalizePointsColor', color_mean=None),
+    dict(type='Pack3DDetInputs', keys=['points', 'gt_bboxes_3d', 'gt_labels_3d'])
+]
+test_pipeline = [
+    dict(
+        type='LoadPointsFromFile',
+        coord_type='DEPTH',
+        shift_height=False,
+        use_color=True,
+        load_dim=6,
+        use_dim=[0, 1, 2, 3, 4, 5]),
+    dict(type='PointSample', num_points=num_points),
+    dict(type='NormalizePointsColor', color_mean=None),
+    dict(type='Pack3DDetInputs', keys=['points'])
+]
+
+# One training area; experiments add `ann_file` and `metainfo`.
+train_area_dataset = dict(
+    type=dataset_type,
+    data_root=data_root,
+    pipeline=train_pipeline,
+    filter_empty_gt=False,
+    box_type_3d='Depth')
+
+# TR3D's S3DIS loader: batch 16, the concatenated training areas repeated 13 times per epoch.
+train_dataloader = dict(
+    batch_size=16,
+    num_workers=8,
+    persistent_workers=True,
+    sampler=dict(type='DefaultSampler', shuffle=True),
+    dataset=dict(
+        type='RepeatDataset',
+        times=13,
+        dataset=dict(type='ConcatDataset', datasets=[])))
+val_dataloader = dict(
+    dataset=dict(type=dataset_type, data_root=data_root, pipeline=test_pipeline))
+test_dataloader = val_dataloader

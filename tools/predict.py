@@ -1,0 +1,118 @@
+"""Detect objects in scans and write one ``<scan>.pred.json`` per scan.
+
+Usage: python tools/predict.py CONFIG CHECKPOINT POINTS... --out DIR [--score-thr 0.3]
+                               [--device cpu|cuda:0] [--seed 0] [--cfg-options k=v ...]
+
+POINTS are ``.bin`` (float32 N x 6), S3DIS ``.txt`` or ``.ply`` scans (x y z r g b, colours
+0-255), read with ``configurator.scan_io.read_scan``. The scan is shifted so that its minimum
+is at the origin, like the converted training data, and passed through the config's test
+pipeline with mmdet3d's inference API; the detections are shifted back, so they are in the
+input scan's own frame (``"format": "synthdet.predictions/1"``, see docs/training.md).
+"""
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO_ROOT))  # the configs' custom_imports load `projects.synthdet`
+
+import torch  # noqa: E402
+from mmdet3d.apis import inference_detector, init_model  # noqa: E402
+from mmengine.config import Config, DictAction  # noqa: E402
+from mmengine.runner import set_random_seed  # noqa: E402
+
+from configurator.scan_io import read_scan  # noqa: E402
+
+PREDICTIONS_FORMAT = 'synthdet.predictions/1'
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """Parse the command line."""
+    parser = argparse.ArgumentParser(description='Detect objects in scans with a checkpoint.')
+    parser.add_argument('config', help='config file, e.g. configs/tr3d/exp2.py')
+    parser.add_argument('checkpoint', help='checkpoint file')
+    parser.add_argument('points', nargs='+', help='scans: .bin (float32 N x 6), .txt or .ply')
+    parser.add_argument('--out', required=True, help='output directory for <scan>.pred.json')
+    parser.add_argument('--score-thr', type=float, default=0.3,
+                        help='keep detections with at least this score (default 0.3)')
+    parser.add_argument('--device', default='cuda:0' if torch.cuda.is_available() else 'cpu')
+    parser.add_argument('--seed', type=int, default=0, help='seed of the point sampling')
+    parser.add_argument('--cfg-options', nargs='+', action=DictAction,
+                        help='override config keys')
+    return parser.parse_args(argv)
+
+
+def output_path(scan: Path, out_dir: Path) -> Path:
+    """``<out_dir>/<scan stem>.pred.json``."""
+    return out_dir / f'{scan.stem}.pred.json'
+
+
+def detect(model: torch.nn.Module, points: np.ndarray, score_thr: float,
+           seed: int) -> list[dict]:
+    """Run the model on an ``(N, 6)`` scan (colours 0-255); detections in the scan's frame."""
+    shift = points[:, :3].min(axis=0)
+    shifted = points.astype(np.float32)
+    shifted[:, :3] = points[:, :3] - shift
+    set_random_seed(seed)
+    result, _ = inference_detector(model, shifted)
+    pred = result.pred_instances_3d
+    keep = pred.scores_3d >= score_thr
+    boxes = pred.bboxes_3d[keep]
+    centres = boxes.gravity_center.cpu().numpy().astype(np.float64) + shift
+    sizes = boxes.dims.cpu().numpy().astype(np.float64)
+    yaws = boxes.yaw.cpu().numpy().astype(np.float64)
+    scores = pred.scores_3d[keep].cpu().numpy()
+    labels = pred.labels_3d[keep].cpu().numpy()
+    classes = model.dataset_meta['classes']
+    order = np.argsort(-scores, kind='stable')
+    return [{
+        'class': classes[labels[i]],
+        'score': round(float(scores[i]), 6),
+        'center': [round(float(v), 6) for v in centres[i]],
+        'size': [round(float(v), 6) for v in sizes[i]],
+        'yaw': round(float(yaws[i]), 6),
+    } for i in order]
+
+
+def main(argv: list[str] | None = None) -> list[Path]:
+    """Predict every scan and write its JSON; returns the written paths."""
+    args = parse_args(argv)
+    scans = [Path(p) for p in args.points]
+    out_dir = Path(args.out)
+    targets: dict[Path, Path] = {}
+    for scan in scans:
+        target = output_path(scan, out_dir)
+        if target in targets:
+            raise SystemExit(f'{scan} and {targets[target]} would both be written to {target}; '
+                             'predict them into different --out directories')
+        targets[target] = scan
+
+    cfg = Config.fromfile(args.config)
+    if args.cfg_options:
+        cfg.merge_from_dict(args.cfg_options)
+    model = init_model(cfg, args.checkpoint, device=args.device)
+    model_name = Path(args.config).stem
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    for target, scan in tqdm(targets.items(), desc='predict', unit='scan'):
+        detections = detect(model, read_scan(scan), args.score_thr, args.seed)
+        document = {
+            'format': PREDICTIONS_FORMAT,
+            'scan': str(scan),
+            'model': model_name,
+            'classes': list(model.dataset_meta['classes']),
+            'detections': detections,
+        }
+        tmp = target.with_name(target.name + '.tmp')
+        tmp.write_text(json.dumps(document, indent=2) + '\n')
+        tmp.replace(target)
+        written.append(target)
+    return written
+
+
+if __name__ == '__main__':
+    main()
