@@ -1,0 +1,1 @@
+"""Code that runs inside FreeCAD (``ImportSynthdet.FCMacro`` and ``synthdet_freecad``)."""

@@ -1,0 +1,137 @@
+"""What ``ImportSynthdet.FCMacro`` runs: ask for the files (GUI) or read them from the
+environment (headless), import, and report.
+
+Headless options come from ``SYNTHDET_JOB`` (a ``synthdet.freecad-job/1`` JSON, written by
+``python -m configurator freecad``) or from ``SYNTHDET_PREDICTIONS``, ``SYNTHDET_CORNERS``,
+``SYNTHDET_OUT``, ``SYNTHDET_LIBRARY``, ``SYNTHDET_MIN_SCORE`` and ``SYNTHDET_WALL_THICKNESS``.
+If ``SYNTHDET_RESULT`` is set, a ``synthdet.freecad-result/1`` JSON is written there, on
+failure too; a headless failure also exits with code 1.
+"""
+import json
+import os
+import traceback
+
+import FreeCAD as App
+
+from . import document, schema
+
+ENV_JOB = 'SYNTHDET_JOB'
+ENV_RESULT = 'SYNTHDET_RESULT'
+ENV_OPTIONS = {
+    'predictions': 'SYNTHDET_PREDICTIONS',
+    'corners': 'SYNTHDET_CORNERS',
+    'out': 'SYNTHDET_OUT',
+    'library': 'SYNTHDET_LIBRARY',
+    'min_score': 'SYNTHDET_MIN_SCORE',
+    'wall_thickness': 'SYNTHDET_WALL_THICKNESS',
+}
+EXPECTED_ERRORS = (schema.SchemaError, ValueError, RuntimeError, OSError)
+
+
+def options_from_environment(overrides: dict | None = None, require_out: bool = True) -> dict:
+    """The import options: the job file named by ``SYNTHDET_JOB``, else the single variables
+    (with ``overrides``, e.g. the files picked in the GUI, taking precedence)."""
+    job_path = os.environ.get(ENV_JOB)
+    if job_path and not overrides:
+        return schema.read_job(job_path)
+    raw = {'format': schema.JOB_FORMAT}
+    for key, variable in ENV_OPTIONS.items():
+        value = os.environ.get(variable)
+        if not value:
+            continue
+        if key in ('min_score', 'wall_thickness'):
+            try:
+                value = float(value)
+            except ValueError:
+                raise schema.SchemaError(f'{variable}: expected a number, got {value!r}') from None
+        raw[key] = value
+    raw.update(overrides or {})
+    if 'predictions' not in raw:
+        raise schema.SchemaError(f'set {ENV_OPTIONS["predictions"]} (or {ENV_JOB})')
+    if 'out' not in raw:
+        if require_out:
+            raise schema.SchemaError(f'set {ENV_OPTIONS["out"]} (or {ENV_JOB})')
+        raw['out'] = '-'
+    return schema.validate_job(raw, 'environment')
+
+
+def import_into(doc, options: dict) -> dict:
+    """Validate the option's files and import them into ``doc``; returns the import report."""
+    predictions = schema.read_predictions(options['predictions'])
+    corners = schema.read_corners(options['corners']) if options['corners'] else None
+    return document.import_detections(doc, predictions, corners, options['library'],
+                                      options['min_score'], options['wall_thickness'])
+
+
+def write_result(path: str | None, result: dict) -> None:
+    """Write the result JSON (atomically) if a result path was given."""
+    if not path:
+        return
+    result = dict(result, format=schema.RESULT_FORMAT)
+    temporary = f'{path}.tmp{os.getpid()}'
+    with open(temporary, 'w', encoding='utf-8') as stream:
+        json.dump(result, stream, indent=1, ensure_ascii=False)
+    os.replace(temporary, path)
+
+
+def run_headless() -> None:
+    """Import from the environment's files into a new document and save it."""
+    result_path = os.environ.get(ENV_RESULT)
+    try:
+        options = options_from_environment()
+        out = os.path.abspath(options['out'])
+        if not out.lower().endswith('.fcstd'):
+            raise ValueError(f'output {out!r} must end with .FCStd')
+        doc = App.newDocument('SynthdetRoom')
+        doc.Label = os.path.splitext(os.path.basename(out))[0]
+        report = import_into(doc, options)
+        os.makedirs(os.path.dirname(out), exist_ok=True)
+        if os.path.exists(out):
+            os.remove(out)
+        doc.saveAs(out)
+        App.closeDocument(doc.Name)
+    except Exception as error:  # the process boundary: every failure goes to the result file
+        if isinstance(error, EXPECTED_ERRORS):
+            message = str(error)
+        else:
+            message = f'{type(error).__name__}: {error}\n{traceback.format_exc()}'
+        App.Console.PrintError(f'synthdet import failed: {message}\n')
+        write_result(result_path, {'status': 'error', 'error': message, 'warnings': []})
+        raise SystemExit(1) from None
+    for warning in report['warnings']:
+        App.Console.PrintWarning(f'synthdet import: {warning}\n')
+    write_result(result_path, dict(report, status='ok', error=None, document=out))
+
+
+def run_gui() -> None:
+    """Ask for the predictions (and optionally corners) and import into the active document."""
+    import FreeCADGui as Gui
+    from PySide import QtGui
+
+    window = Gui.getMainWindow()
+    predictions, _ = QtGui.QFileDialog.getOpenFileName(
+        window, 'synthdet: predictions JSON', '', 'Predictions (*.json);;All files (*)')
+    if not predictions:
+        return
+    corners, _ = QtGui.QFileDialog.getOpenFileName(
+        window, 'synthdet: room corners JSON (cancel for no room)', os.path.dirname(predictions),
+        'Corners (*.json);;All files (*)')
+    try:
+        options = options_from_environment({'predictions': predictions, 'corners': corners or None},
+                                           require_out=False)
+        doc = App.ActiveDocument or App.newDocument('SynthdetRoom')
+        report = import_into(doc, options)
+    except EXPECTED_ERRORS as error:
+        QtGui.QMessageBox.critical(window, 'synthdet import', str(error))
+        return
+    if report['warnings']:
+        QtGui.QMessageBox.warning(window, 'synthdet import', '\n'.join(report['warnings']))
+    Gui.SendMsgToActiveView('ViewFit')
+
+
+def main() -> None:
+    """Run the import the way the current FreeCAD (GUI or headless) allows."""
+    if App.GuiUp:
+        run_gui()
+    else:
+        run_headless()

@@ -1,0 +1,142 @@
+"""Build a parametric FreeCAD document (.FCStd) from a scan's detections and room corners.
+
+``python -m configurator freecad --scan SCAN --predictions PRED.json --out room.FCStd
+[--corners CORNERS.json] [--library DIR] [--min-score 0.3] [--wall-thickness 0.1]``
+
+The inputs are validated here, then real ``freecadcmd`` runs ``ImportSynthdet.FCMacro`` (the
+same macro a FreeCAD user runs from the GUI) with a job JSON, and the macro's result JSON is
+checked.
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from configurator.predictions import (JOB_FORMAT, RESULT_FORMAT, load_json, read_corners,
+                                      read_predictions, validate_corners)
+
+MACRO = Path(__file__).resolve().parent / 'freecad' / 'ImportSynthdet.FCMacro'
+
+
+class FreecadFailed(RuntimeError):
+    """FreeCAD did not produce the document."""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Register the ``freecad`` sub-command's options."""
+    parser.add_argument('--scan', required=True, help='the scan (.txt, .bin or .ply)')
+    parser.add_argument('--predictions', required=True, help='synthdet.predictions/1 JSON')
+    parser.add_argument('--out', required=True, help='FreeCAD document to write (.FCStd)')
+    parser.add_argument('--corners', help='synthdet.corners/1 JSON; computed from the scan '
+                        'when omitted')
+    parser.add_argument('--library', help='folder of <class>.step files replacing the '
+                        'built-in models')
+    parser.add_argument('--min-score', type=float, default=0.3,
+                        help='skip detections scoring below this (default 0.3)')
+    parser.add_argument('--wall-thickness', type=float, default=0.1,
+                        help='wall thickness in metres (default 0.1)')
+    parser.add_argument('--freecadcmd', default=os.environ.get('SYNTHDET_FREECADCMD',
+                                                               'freecadcmd'),
+                        help='FreeCAD command-line executable (default: freecadcmd)')
+    parser.add_argument('--timeout', type=float, default=900.0,
+                        help='seconds to wait for FreeCAD (default 900)')
+
+
+def _check_scan(scan: Path) -> None:
+    if not scan.is_file():
+        raise ValueError(f'{scan}: scan file not found')
+    if scan.stat().st_size == 0:
+        raise ValueError(f'{scan}: the scan is empty')
+
+
+def _corners_from_scan(scan: Path) -> dict:
+    from configurator.corners import corners_for_scan
+    return validate_corners(corners_for_scan(scan), f'corners computed from {scan}')
+
+
+def _run_freecad(job: dict, work_dir: Path, freecadcmd: str, timeout: float) -> dict:
+    job_path = work_dir / 'job.json'
+    result_path = work_dir / 'result.json'
+    job_path.write_text(json.dumps(job, indent=1), encoding='utf-8')
+    env = dict(os.environ, SYNTHDET_JOB=str(job_path), SYNTHDET_RESULT=str(result_path))
+    try:
+        process = subprocess.run([freecadcmd, str(MACRO)], env=env, cwd=work_dir, timeout=timeout,
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                 errors='replace')
+    except FileNotFoundError:
+        raise FreecadFailed(f'{freecadcmd!r} not found: install FreeCAD (apt-get install '
+                            'freecad) or pass --freecadcmd') from None
+    except subprocess.TimeoutExpired:
+        raise FreecadFailed(f'FreeCAD did not finish within {timeout:.0f} s') from None
+    if not result_path.is_file():
+        output = (process.stderr.strip() or process.stdout.strip())[-2000:]
+        raise FreecadFailed(f'FreeCAD exited with code {process.returncode} without a result '
+                            f'from {MACRO.name}:\n{output}')
+    result = load_json(str(result_path))
+    if not isinstance(result, dict) or result.get('format') != RESULT_FORMAT:
+        raise FreecadFailed(f'{result_path}: not a {RESULT_FORMAT} result')
+    if result.get('status') != 'ok':
+        raise FreecadFailed(f'FreeCAD import failed: {result.get("error")}')
+    return result
+
+
+def build_document(scan: Path, predictions: Path, out: Path, corners: Path | None = None,
+                   library: Path | None = None, min_score: float = 0.3,
+                   wall_thickness: float = 0.1, freecadcmd: str = 'freecadcmd',
+                   timeout: float = 900.0) -> dict:
+    """Validate the inputs, run FreeCAD and return the macro's result (objects, warnings).
+
+    Raises ``SchemaError``/``ValueError`` for bad inputs and ``FreecadFailed`` when FreeCAD
+    does not produce the document.
+    """
+    scan, predictions, out = Path(scan), Path(predictions), Path(out).resolve()
+    _check_scan(scan)
+    read_predictions(str(predictions))
+    if out.suffix.lower() != '.fcstd':
+        raise ValueError(f'{out}: the output must end with .FCStd')
+    if library is not None and not Path(library).is_dir():
+        raise ValueError(f'{library}: library folder not found')
+    if not 0.0 <= min_score <= 1.0:
+        raise ValueError(f'--min-score {min_score}: expected a score in [0, 1]')
+    if not wall_thickness > 0.0:
+        raise ValueError(f'--wall-thickness {wall_thickness}: expected a positive thickness')
+    with tempfile.TemporaryDirectory(prefix='synthdet-freecad-') as work:
+        work_dir = Path(work)
+        if corners is not None:
+            read_corners(str(corners))
+            corners_path = Path(corners).resolve()
+        else:
+            corners_path = work_dir / 'corners.json'
+            corners_path.write_text(json.dumps(_corners_from_scan(scan)), encoding='utf-8')
+        job = {'format': JOB_FORMAT, 'predictions': str(predictions.resolve()),
+               'corners': str(corners_path), 'out': str(out),
+               'library': str(Path(library).resolve()) if library is not None else None,
+               'min_score': min_score, 'wall_thickness': wall_thickness}
+        result = _run_freecad(job, work_dir, freecadcmd, timeout)
+    if not out.is_file():
+        raise FreecadFailed(f'FreeCAD reported success but {out} was not written')
+    return result
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the sub-command; prints warnings and a summary, returns the exit code."""
+    try:
+        result = build_document(args.scan, args.predictions, args.out, args.corners, args.library,
+                                args.min_score, args.wall_thickness, args.freecadcmd,
+                                args.timeout)
+    except (ValueError, FreecadFailed) as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 1
+    for warning in result['warnings']:
+        print(f'warning: {warning}', file=sys.stderr)
+    groups = {}
+    for obj in result['objects']:
+        groups[obj['group']] = groups.get(obj['group'], 0) + 1
+    summary = ', '.join(f'{count} in {group}' for group, count in sorted(groups.items()))
+    print(f'wrote {result["document"]}: {len(result["objects"])} objects'
+          f'{" (" + summary + ")" if summary else ""}, '
+          f'{result["skipped_low_score"]} below --min-score')
+    return 0
