@@ -1,0 +1,297 @@
+"""Convert S3DIS-format areas (the real S3DIS or synthetic ones) to mmdet3d's v1.1 infos.
+
+Reads ``root/Stanford3dDataset_v1.2_Aligned_Version/Area_N/<room>/Annotations/<class>_<k>.txt``
+and writes, in ``out_dir``, for every room:
+
+- ``points/Area_N_<room>.bin``: float32 (N, 6), xyz shifted so the room's minimum is 0, colours 0-255;
+- ``semantic_mask/Area_N_<room>.bin``: int64 ids of :data:`SEMANTIC_CLASSES`;
+- ``instance_mask/Area_N_<room>.bin``: int64, annotation files numbered 1..K in natural file
+  order (structural ones included; 0 means unannotated), like mmdet3d's collect step;
+
+and per area ``s3dis_infos_Area_N.pkl`` in the format mmdet3d 1.4's ``update_infos_to_v2``
+writes for S3DIS. Boxes are the axis-aligned min/max of each detection instance's points.
+Importing this module needs numpy and numba only (no torch, no mmdet3d).
+"""
+import os
+import pickle
+import re
+import warnings
+from collections import Counter
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Iterator, Sequence
+
+import numpy as np
+from tqdm import tqdm
+
+from .point_text import PointFileError, compile_parser, read_point_file
+from .s3dis_classes import DETECTION_CLASSES, FALLBACK_CLASS, SEMANTIC_CLASSES
+
+S3DIS_DIR = 'Stanford3dDataset_v1.2_Aligned_Version'
+OUTPUT_DIRS = ('points', 'instance_mask', 'semantic_mask')
+PARTIAL_SUFFIX = '.partial'
+ON_ERROR_CHOICES = ('raise', 'skip')
+_SEMANTIC_ID = {name: i for i, name in enumerate(SEMANTIC_CLASSES)}
+_DETECTION_LABEL = {name: i for i, name in enumerate(DETECTION_CLASSES)}
+
+
+class S3DISLayoutError(ValueError):
+    """The input folder does not have the S3DIS layout; the message names the path."""
+
+
+class UnknownClassWarning(UserWarning):
+    """Annotation files of classes outside SEMANTIC_CLASSES were converted as clutter."""
+
+
+@dataclass
+class SkippedInput:
+    """A line, file or room left out by ``on_error='skip'``; ``line`` is None for whole files."""
+    path: str
+    line: int | None
+    reason: str
+
+
+@dataclass
+class ConversionSummary:
+    """What a conversion wrote and what it left out."""
+    rooms_per_area: dict[int, int] = field(default_factory=dict)
+    num_points: int = 0
+    instances_per_class: Counter = field(default_factory=Counter)
+    skipped: list[SkippedInput] = field(default_factory=list)
+    unknown_classes: dict[str, list[str]] = field(default_factory=dict)
+
+    def report(self) -> str:
+        """Human-readable multi-line summary."""
+        lines = [f'converted {sum(self.rooms_per_area.values())} rooms '
+                 f'({", ".join(f"Area_{a}: {n}" for a, n in self.rooms_per_area.items())}), '
+                 f'{self.num_points} points',
+                 'detection instances: ' + ', '.join(
+                     f'{name} {self.instances_per_class[name]}' for name in DETECTION_CLASSES)]
+        for name, files in sorted(self.unknown_classes.items()):
+            lines.append(f'unknown class {name!r} converted as {FALLBACK_CLASS}: {len(files)} '
+                         f'file(s), e.g. {files[0]}')
+        if self.skipped:
+            lines.append(f'skipped {len(self.skipped)} input(s):')
+            lines += [f'  {s.path}' + (f':{s.line}' if s.line is not None else '') + f': {s.reason}'
+                      for s in self.skipped]
+        return '\n'.join(lines)
+
+
+@dataclass
+class _RoomResult:
+    name: str
+    num_points: int
+    instances: list[dict]
+    skipped: list[SkippedInput]
+    unknown: dict[str, list[str]]
+
+
+def _natural_key(name: str) -> list:
+    return [int(part) if part.isdigit() else part for part in re.split(r'(\d+)', name)]
+
+
+def find_areas(root_path: str | Path) -> list[int]:
+    """Area numbers N with a folder ``Area_N`` under the S3DIS data folder, sorted."""
+    data_dir = Path(root_path) / S3DIS_DIR
+    if not data_dir.is_dir():
+        raise S3DISLayoutError(f'{data_dir}: S3DIS data folder not found')
+    return sorted(int(p.name[5:]) for p in data_dir.iterdir()
+                  if p.is_dir() and re.fullmatch(r'Area_\d+', p.name))
+
+
+def list_rooms(area_dir: Path) -> list[str]:
+    """Room folder names of an area in natural order (``office_2`` before ``office_10``)."""
+    return sorted((p.name for p in area_dir.iterdir() if p.is_dir() and not p.name.startswith('.')),
+                  key=_natural_key)
+
+
+def annotation_class(path: Path) -> str:
+    """Class name of an annotation file: the file name before the first ``_``."""
+    return path.stem.split('_')[0]
+
+
+def _partial_paths(out_dir: Path, name: str) -> list[Path]:
+    return [out_dir / sub / f'{name}.bin{PARTIAL_SUFFIX}' for sub in OUTPUT_DIRS]
+
+
+def _box(points_xyz: np.ndarray) -> list[float]:
+    """Axis-aligned [cx, cy, cz, dx, dy, dz] of float32 points, computed in float32."""
+    lo, hi = points_xyz.min(axis=0), points_xyz.max(axis=0)
+    return np.concatenate([(lo + hi) / 2, hi - lo]).tolist()
+
+
+def _read_room(room_dir: Path, skip: bool
+               ) -> tuple[list[tuple[str, np.ndarray]], list[SkippedInput], dict[str, list[str]]]:
+    ann_dir = room_dir / 'Annotations'
+    files = sorted(ann_dir.glob('*.txt'), key=lambda p: _natural_key(p.name)) \
+        if ann_dir.is_dir() else []
+    if not files:
+        raise S3DISLayoutError(f'{ann_dir}: no Annotations/<class>_<k>.txt files')
+    chunks, skipped, unknown = [], [], {}
+    for path in files:
+        class_name = annotation_class(path)
+        if class_name not in _SEMANTIC_ID:
+            unknown.setdefault(class_name, []).append(str(path))
+            class_name = FALLBACK_CLASS
+        try:
+            points, bad_lines = read_point_file(path, skip_bad_lines=skip)
+        except PointFileError as error:
+            if not skip:
+                raise
+            skipped.append(SkippedInput(str(path), None, f'file left out: {error.reason}'))
+            continue
+        skipped += [SkippedInput(str(b.path), b.line, b.reason) for b in bad_lines]
+        chunks.append((class_name, points))
+    return chunks, skipped, unknown
+
+
+def convert_room(room_dir: Path, name: str, out_dir: Path, skip: bool) -> _RoomResult:
+    """Convert one room, writing its three .bin files under ``.partial`` names.
+
+    Returns the room's detection instances (``bbox_3d``, ``bbox_label_3d``) in instance order.
+    """
+    try:
+        chunks, skipped, unknown = _read_room(room_dir, skip)
+    except S3DISLayoutError as error:
+        if not skip:
+            raise
+        return _RoomResult(name, 0, [], [SkippedInput(str(room_dir), None, str(error))], {})
+    if not chunks:
+        skipped.append(SkippedInput(str(room_dir), None, 'room left out: no valid annotation file'))
+        return _RoomResult(name, 0, [], skipped, unknown)
+    counts = np.array([len(points) for _, points in chunks])
+    points = np.concatenate([points for _, points in chunks])
+    points[:, :3] -= points[:, :3].min(axis=0)
+    points = points.astype(np.float32)
+    semantic = np.repeat(np.array([_SEMANTIC_ID[c] for c, _ in chunks], dtype=np.int64), counts)
+    instance = np.repeat(np.arange(1, len(chunks) + 1, dtype=np.int64), counts)
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    instances = [{'bbox_3d': _box(points[start:end, :3]), 'bbox_label_3d': _DETECTION_LABEL[c]}
+                 for (c, _), start, end in zip(chunks, starts[:-1], starts[1:])
+                 if c in _DETECTION_LABEL]
+    for array, path in zip((points, instance, semantic), _partial_paths(out_dir, name)):
+        array.tofile(path)
+    return _RoomResult(name, len(points), instances, skipped, unknown)
+
+
+def _convert_room_task(task: tuple[Path, str, Path, bool]) -> _RoomResult:
+    return convert_room(*task)
+
+
+def _info(sample_idx: int, result: _RoomResult) -> dict:
+    file_name = f'{result.name}.bin'
+    return {'sample_idx': sample_idx,
+            'lidar_points': {'num_pts_feats': 6, 'lidar_path': file_name},
+            'instances': result.instances,
+            'pts_semantic_mask_path': file_name,
+            'pts_instance_mask_path': file_name}
+
+
+def info_metainfo() -> dict:
+    """The ``metainfo`` block of every info pickle written here."""
+    return {'categories': dict(_DETECTION_LABEL), 'dataset': 's3dis', 'info_version': '1.1'}
+
+
+def _write_pickle_atomic(obj: object, path: Path) -> None:
+    partial = path.with_name(path.name + PARTIAL_SUFFIX)
+    with open(partial, 'wb') as f:
+        pickle.dump(obj, f, protocol=pickle.HIGHEST_PROTOCOL)
+    os.replace(partial, path)
+
+
+def _run(tasks: list, pool: ProcessPoolExecutor | None) -> Iterator[_RoomResult]:
+    if pool is None:
+        return map(_convert_room_task, tasks)
+    return pool.map(_convert_room_task, tasks)
+
+
+def _convert_area(area: int, rooms: list[str], data_dir: Path, out_dir: Path, skip: bool,
+                  pool: ProcessPoolExecutor | None, progress: tqdm) -> list[_RoomResult]:
+    names = [f'Area_{area}_{room}' for room in rooms]
+    tasks = [(data_dir / f'Area_{area}' / room, name, out_dir, skip)
+             for room, name in zip(rooms, names)]
+    results = []
+    try:
+        for result in _run(tasks, pool):
+            results.append(result)
+            progress.update(1)
+    except BaseException:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+        _remove_partials(out_dir, names)
+        raise
+    converted = [r for r in results if r.num_points > 0]
+    for result in converted:
+        for partial in _partial_paths(out_dir, result.name):
+            os.replace(partial, partial.with_name(partial.name[:-len(PARTIAL_SUFFIX)]))
+    data_list = [_info(i, result) for i, result in enumerate(converted)]
+    _write_pickle_atomic({'metainfo': info_metainfo(), 'data_list': data_list},
+                         out_dir / f's3dis_infos_Area_{area}.pkl')
+    return results
+
+
+def _remove_partials(out_dir: Path, names: Iterable[str]) -> None:
+    for name in names:
+        for partial in _partial_paths(out_dir, name):
+            partial.unlink(missing_ok=True)
+
+
+def convert_s3dis(root_path: str | Path, out_dir: str | Path, areas: Sequence[int] | None = None,
+                  workers: int = 1, on_error: str = 'raise') -> ConversionSummary:
+    """Convert S3DIS-format areas under ``root_path`` into .bin files and info pickles in ``out_dir``.
+
+    Args:
+        root_path: folder holding ``Stanford3dDataset_v1.2_Aligned_Version``.
+        out_dir: output folder (``points/``, ``instance_mask/``, ``semantic_mask/``, pickles).
+        areas: area numbers to convert; default: every ``Area_N`` found.
+        workers: processes converting rooms in parallel.
+        on_error: ``'raise'`` stops at the first bad input with an error naming file and line;
+            ``'skip'`` leaves out bad lines, empty files and unreadable rooms and lists them in
+            the summary. Either way an area's outputs appear only once the area is complete.
+
+    Annotation files of unknown classes are converted as clutter, with one
+    :class:`UnknownClassWarning` for the whole run.
+    """
+    if on_error not in ON_ERROR_CHOICES:
+        raise ValueError(f'on_error must be one of {ON_ERROR_CHOICES}, got {on_error!r}')
+    if workers < 1:
+        raise ValueError(f'workers must be >= 1, got {workers}')
+    data_dir, out_dir = Path(root_path) / S3DIS_DIR, Path(out_dir)
+    found = find_areas(root_path)
+    areas = found if areas is None else list(areas)
+    missing = [a for a in areas if a not in found]
+    if missing:
+        raise S3DISLayoutError(f'{data_dir}: no folder for area(s) {missing} (found {found})')
+    if not areas:
+        raise S3DISLayoutError(f'{data_dir}: no Area_N folder found')
+    rooms = {area: list_rooms(data_dir / f'Area_{area}') for area in areas}
+    for sub in OUTPUT_DIRS:
+        (out_dir / sub).mkdir(parents=True, exist_ok=True)
+    summary = ConversionSummary()
+    compile_parser()  # once here rather than in every worker
+    pool = ProcessPoolExecutor(workers) if workers > 1 else None
+    try:
+        with tqdm(total=sum(map(len, rooms.values())), desc='convert S3DIS rooms',
+                  unit='room') as progress:
+            for area in areas:
+                results = _convert_area(area, rooms[area], data_dir, out_dir,
+                                        on_error == 'skip', pool, progress)
+                summary.rooms_per_area[area] = sum(r.num_points > 0 for r in results)
+                for result in results:
+                    summary.num_points += result.num_points
+                    summary.instances_per_class.update(
+                        DETECTION_CLASSES[inst['bbox_label_3d']] for inst in result.instances)
+                    summary.skipped += result.skipped
+                    for name, files in result.unknown.items():
+                        summary.unknown_classes.setdefault(name, []).extend(files)
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    if summary.unknown_classes:
+        warnings.warn(
+            'annotation files of unknown classes were converted as '
+            f'{FALLBACK_CLASS}: ' + ', '.join(f'{name} ({len(files)} files)' for name, files in
+                                            sorted(summary.unknown_classes.items())),
+            UnknownClassWarning, stacklevel=2)
+    return summary

@@ -1,0 +1,61 @@
+"""Create mmdet3d info pickles and point/mask .bin files from S3DIS-format data.
+
+Example::
+
+    python tools/create_data.py s3dis --root-path data/s3dis --out-dir data/s3dis --workers 2
+"""
+import argparse
+import importlib
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+DATASETS_DIR = REPO_ROOT / 'projects' / 'synthdet' / 'datasets'
+
+
+def import_converter() -> ModuleType:
+    """Import ``s3dis_converter`` without running ``projects.synthdet.__init__``.
+
+    The package's ``__init__`` registers the mmdet3d plugin (torch, mmcv, mmdet3d,
+    MinkowskiEngine); conversion needs only numpy and numba, so it also runs on a machine
+    (or at a moment) where the training stack is not importable.
+    """
+    name = 'synthdet_datasets_standalone'
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(
+            name, DATASETS_DIR / '__init__.py', submodule_search_locations=[str(DATASETS_DIR)])
+        sys.modules[name] = importlib.util.module_from_spec(spec)  # package, __init__ not run
+    return importlib.import_module(f'{name}.s3dis_converter')
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest='dataset', required=True)
+    s3dis = sub.add_parser('s3dis', help='S3DIS-format areas (real areas 1-6, synthetic 7-9)')
+    s3dis.add_argument('--root-path', required=True,
+                       help='folder holding Stanford3dDataset_v1.2_Aligned_Version/')
+    s3dis.add_argument('--out-dir', required=True, help='output folder (e.g. the same data/s3dis)')
+    s3dis.add_argument('--areas', type=int, nargs='+', help='area numbers (default: all found)')
+    s3dis.add_argument('--workers', type=int, default=1, help='parallel processes over rooms')
+    s3dis.add_argument('--on-error', choices=('raise', 'skip'), default='raise',
+                       help='stop at the first bad input, or skip bad lines/files and report them')
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    converter = import_converter()
+    try:
+        summary = converter.convert_s3dis(args.root_path, args.out_dir, areas=args.areas,
+                                          workers=args.workers, on_error=args.on_error)
+    except (converter.PointFileError, converter.S3DISLayoutError) as error:
+        print(f'create_data: error: {error}', file=sys.stderr)
+        return 1
+    print(summary.report())
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
