@@ -1,0 +1,187 @@
+"""Procedural chairs: four legs, an office pedestal with a star base, or a cantilever sled base;
+with or without armrests; panel, slatted, open-frame or rounded backrests. Front faces -y."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from generator.assets import palette
+from generator.assets.builder import (MeshBuilder, circle, pick, rot_x, rounded_rect,
+                                      translate, uniform)
+
+VARIANTS = ('fourleg', 'pedestal', 'sled')
+BACKRESTS = ('panel', 'slats', 'frame', 'rounded')
+
+
+def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
+    """Draw a variant (cycled by index) and its dimensions in metres."""
+    variant = VARIANTS[index % len(VARIANTS)]
+    office = variant == 'pedestal'
+    params = {
+        'seat_height': uniform(rng, 0.43, 0.52) if office else uniform(rng, 0.42, 0.48),
+        'seat_width': uniform(rng, 0.44, 0.52) if office else uniform(rng, 0.40, 0.48),
+        'seat_depth': uniform(rng, 0.42, 0.50) if office else uniform(rng, 0.38, 0.46),
+        'seat_thickness': uniform(rng, 0.05, 0.09) if office else uniform(rng, 0.02, 0.06),
+        'backrest': pick(rng, BACKRESTS),
+        'back_height': uniform(rng, 0.40, 0.68) if office else uniform(rng, 0.32, 0.48),
+        'back_tilt': uniform(rng, 0.05, 0.25),
+        'armrests': bool(rng.random() < (0.7 if office else 0.4)),
+        'arm_height': uniform(rng, 0.18, 0.26),
+        'frame_colour': list(pick(rng, palette.METAL if variant != 'fourleg' else
+                                  palette.METAL + palette.WOOD)),
+        'seat_colour': list(pick(rng, palette.FABRIC + palette.WOOD[:2])),
+    }
+    if variant == 'fourleg':
+        params['leg_profile'] = pick(rng, ('square', 'round'))
+        params['leg_splay'] = uniform(rng, 0.0, 0.03)
+        params['stretchers'] = bool(rng.random() < 0.5)
+    elif variant == 'pedestal':
+        params['base_radius'] = uniform(rng, 0.28, 0.34)
+        params['spokes'] = 5
+    return variant, params
+
+
+def build(variant: str, params: dict) -> MeshBuilder:
+    """Build the chair's mesh from its parameters."""
+    mb = MeshBuilder()
+    frame = mb.material('frame', params['frame_colour'])
+    seat = mb.material('seat', params['seat_colour'])
+    width, depth = params['seat_width'], params['seat_depth']
+    seat_top, thickness = params['seat_height'], params['seat_thickness']
+    seat_bottom = seat_top - thickness
+    mb.prism(rounded_rect(width, depth, 0.04), thickness, seat, translate(0, 0, seat_bottom))
+    if variant == 'fourleg':
+        _four_legs(mb, params, frame)
+    elif variant == 'pedestal':
+        _pedestal(mb, params, frame)
+    elif variant == 'sled':
+        _sled(mb, params, frame)
+    else:
+        raise ValueError(f'unknown chair variant {variant!r}')
+    _backrest(mb, variant, params, frame, seat)
+    if params['armrests']:
+        _armrests(mb, variant, params, frame, seat)
+    return mb
+
+
+def _four_legs(mb: MeshBuilder, params: dict, frame: int) -> None:
+    width, depth = params['seat_width'], params['seat_depth']
+    top = params['seat_height'] - params['seat_thickness']
+    splay = params['leg_splay']
+    half = 0.018
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            x, y = sx * (width / 2 - 0.03), sy * (depth / 2 - 0.03)
+            start, end = (x + sx * splay, y + sy * splay, 0.0), (x, y, top)
+            if params['leg_profile'] == 'square':
+                mb.bar(start, end, 2 * half, 2 * half, frame)
+            else:
+                mb.rod(start, end, half, frame)
+    # apron under the seat
+    mb.box_between((-width / 2 + 0.03, -depth / 2 + 0.03, top - 0.06),
+                   (width / 2 - 0.03, depth / 2 - 0.03, top), frame)
+    if params['stretchers']:
+        z = 0.16
+        for sx in (-1, 1):
+            x = sx * (width / 2 - 0.03 + splay * (1 - z / top))
+            mb.rod((x, -depth / 2 + 0.03, z), (x, depth / 2 - 0.03, z), 0.01, frame)
+
+
+def _pedestal(mb: MeshBuilder, params: dict, frame: int) -> None:
+    top = params['seat_height'] - params['seat_thickness']
+    radius = params['base_radius']
+    for k in range(params['spokes']):
+        angle = 2 * math.pi * k / params['spokes'] - math.pi / 2
+        tip = (radius * math.cos(angle), radius * math.sin(angle))
+        mb.bar((0.0, 0.0, 0.10), (tip[0], tip[1], 0.07), 0.04, 0.035, frame)
+        mb.cylinder(0.025, 0.06, frame, translate(tip[0], tip[1], 0.0))
+    mb.cylinder(0.05, 0.08, frame, translate(0, 0, 0.06))
+    mb.cylinder(0.028, top - 0.2, frame, translate(0, 0, 0.14), segments=12)
+    mb.box_between((-0.11, -0.12, top - 0.06), (0.11, 0.12, top), frame)
+
+
+def _sled(mb: MeshBuilder, params: dict, frame: int) -> None:
+    width, depth = params['seat_width'], params['seat_depth']
+    top = params['seat_height'] - params['seat_thickness']
+    radius = 0.011
+    for sx in (-1, 1):
+        x = sx * (width / 2 - 0.02)
+        front, back = -depth / 2 - 0.02, depth / 2 + 0.01
+        mb.rod((x, front, radius), (x, back, radius), radius, frame)
+        mb.rod((x, front + 0.04, radius), (x, -depth / 2 + 0.04, top), radius, frame)
+        mb.rod((x, back, radius), (x, depth / 2 - 0.04, top), radius, frame)
+    mb.box_between((-width / 2 + 0.02, -depth / 2 + 0.04, top - 0.02),
+                   (width / 2 - 0.02, depth / 2 - 0.04, top), frame)
+
+
+def _backrest(mb: MeshBuilder, variant: str, params: dict, frame: int, seat: int) -> None:
+    width, depth = params['seat_width'], params['seat_depth']
+    height, style = params['back_height'], params['backrest']
+    thick = 0.03 if variant != 'pedestal' else 0.06
+    base = (translate(0, depth / 2 - thick / 2, params['seat_height'] - params['seat_thickness'])
+            @ rot_x(-params['back_tilt']))
+    panel_width = width - 0.02 if variant != 'pedestal' else width - 0.04
+    if variant == 'pedestal':
+        # spine from the seat mechanism to the back panel
+        mb.bar((0, -depth / 2 + 0.1, 0.0), (0, 0.02, 0.0), 0.06, 0.02, frame, base)
+        mb.bar((0, 0.02, -0.01), (0, 0.02, 0.22), 0.06, 0.02, frame, base)
+    else:
+        for sx in (-1, 1):
+            x = sx * (width / 2 - 0.03)
+            mb.bar((x, 0, 0.0), (x, 0, height), 0.03, 0.03, frame, base)
+    lower = 0.12 if variant != 'pedestal' else 0.16
+    if style == 'panel':
+        mb.box_between((-panel_width / 2, -thick / 2, lower), (panel_width / 2, thick / 2, height),
+                       seat, base)
+    elif style == 'slats':
+        count = 4 if height > 0.4 else 3
+        slat = (height - lower) / (2 * count - 1)
+        for k in range(count):
+            z0 = lower + 2 * k * slat
+            mb.box_between((-panel_width / 2, -thick / 4, z0), (panel_width / 2, thick / 4,
+                                                                 z0 + slat), seat, base)
+    elif style == 'frame':
+        rail = 0.06
+        mb.box_between((-panel_width / 2, -thick / 2, height - rail),
+                       (panel_width / 2, thick / 2, height), seat, base)
+        mb.box_between((-panel_width / 2, -thick / 4, lower), (panel_width / 2, thick / 4,
+                                                               lower + rail / 2), frame, base)
+        mb.box_between((-0.05, -thick / 4, lower), (0.05, thick / 4, height - rail), frame, base)
+    elif style == 'rounded':
+        # panel outline in the back's x/z plane: straight sides, an arched top
+        arch = 0.25 * panel_width
+        outline = [(panel_width / 2, lower), *[
+            (panel_width / 2 * math.cos(a), height - arch + arch * math.sin(a))
+            for a in np.linspace(0.0, math.pi, 13)], (-panel_width / 2, lower)]
+        # extrude along -y: rot_x(+pi/2) maps the prism's z to -y and its y to z
+        mb.prism(outline, thick, seat, base @ translate(0, thick / 2, 0) @ rot_x(math.pi / 2))
+    else:
+        raise ValueError(f'unknown backrest {style!r}')
+
+
+def _armrests(mb: MeshBuilder, variant: str, params: dict, frame: int, seat: int) -> None:
+    width, depth = params['seat_width'], params['seat_depth']
+    seat_top = params['seat_height']
+    arm_z = seat_top + params['arm_height']
+    for sx in (-1, 1):
+        x = sx * (width / 2 + 0.02)
+        if variant == 'pedestal':
+            inner = sx * (width / 2 - 0.06)
+            mb.bar((inner, 0.02, seat_top - params['seat_thickness'] - 0.01),
+                   (x, 0.02, seat_top - params['seat_thickness'] - 0.01), 0.04, 0.02, frame)
+            mb.bar((x, 0.02, seat_top - params['seat_thickness'] - 0.02), (x, 0.02, arm_z),
+                   0.04, 0.025, frame)
+            mb.box_between((x - 0.04, -0.12, arm_z), (x + 0.04, 0.14, arm_z + 0.03), seat)
+        elif variant == 'sled':
+            radius = 0.011
+            mb.rod((x, -depth / 2 + 0.06, seat_top - params['seat_thickness']),
+                   (x, -depth / 2 + 0.06, arm_z), radius, frame)
+            mb.rod((x, -depth / 2 + 0.06, arm_z), (x, depth / 2 - 0.02, arm_z), radius, frame)
+            mb.box_between((x - 0.025, -depth / 2 + 0.04, arm_z), (x + 0.025, depth / 2 - 0.05,
+                                                                   arm_z + 0.02), seat)
+        else:
+            mb.bar((x, -depth / 2 + 0.06, seat_top - params['seat_thickness']),
+                   (x, -depth / 2 + 0.06, arm_z), 0.03, 0.03, frame)
+            mb.box_between((x - 0.025, -depth / 2 + 0.03, arm_z), (x + 0.025, depth / 2,
+                                                                   arm_z + 0.025), frame)
