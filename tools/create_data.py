@@ -16,18 +16,22 @@ DATASETS_DIR = REPO_ROOT / 'projects' / 'synthdet' / 'datasets'
 
 
 def import_converter() -> ModuleType:
-    """Import ``s3dis_converter`` without running ``projects.synthdet.__init__``.
+    """Import ``projects.synthdet.datasets.s3dis_converter`` without running the ``__init__`` of
+    ``projects.synthdet`` and its ``datasets`` package.
 
-    The package's ``__init__`` registers the mmdet3d plugin (torch, mmcv, mmdet3d,
-    MinkowskiEngine); conversion needs only numpy and numba, so it also runs on a machine
-    (or at a moment) where the training stack is not importable.
+    Those register the mmdet3d plugin (torch, mmcv, mmdet3d, MinkowskiEngine); conversion needs
+    only numpy and numba, so it also runs where the training stack is not importable. The
+    packages keep their real names, which numba's on-disk cache of the parser refers to.
     """
-    name = 'synthdet_datasets_standalone'
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(
-            name, DATASETS_DIR / '__init__.py', submodule_search_locations=[str(DATASETS_DIR)])
-        sys.modules[name] = importlib.util.module_from_spec(spec)  # package, __init__ not run
-    return importlib.import_module(f'{name}.s3dis_converter')
+    if str(REPO_ROOT) not in sys.path:
+        sys.path.insert(0, str(REPO_ROOT))
+    for name, folder in (('projects.synthdet', DATASETS_DIR.parent),
+                         ('projects.synthdet.datasets', DATASETS_DIR)):
+        if name not in sys.modules:
+            spec = importlib.util.spec_from_file_location(
+                name, folder / '__init__.py', submodule_search_locations=[str(folder)])
+            sys.modules[name] = importlib.util.module_from_spec(spec)  # __init__ not run
+    return importlib.import_module('projects.synthdet.datasets.s3dis_converter')
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:

@@ -25,6 +25,9 @@ class PointFileError(ValueError):
         super().__init__(f'{path}:{line}: {reason}')
         self.path, self.line, self.reason = path, line, reason
 
+    def __reduce__(self):  # keeps the fields when raised in a worker process
+        return PointFileError, (self.path, self.line, self.reason)
+
 
 @dataclass
 class BadLine:
@@ -147,16 +150,14 @@ def _parse_reference(path: Path, data: bytes, skip_bad_lines: bool
         tokens = line.split()
         if not tokens:
             continue
-        reason = None
-        if len(tokens) != NUM_COLUMNS:
+        bad = [t for t in tokens if not _NUMBER.fullmatch(t)]
+        if bad:
+            reason = _describe_bad_token(bad[0])
+        elif len(tokens) != NUM_COLUMNS:
             reason = f'expected {NUM_COLUMNS} columns (x y z r g b), found {len(tokens)}'
         else:
-            bad = [t for t in tokens if not _NUMBER.fullmatch(t)]
-            if bad:
-                reason = _describe_bad_token(bad[0])
-            else:
-                values = [float(t) for t in tokens]
-                reason = _check_row(values, tokens)
+            values = [float(t) for t in tokens]
+            reason = _check_row(values, tokens)
         if reason is None:
             rows.append(values)
         elif skip_bad_lines:
