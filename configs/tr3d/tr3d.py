@@ -9,6 +9,7 @@
 # after 5 epochs (the LR decay never triggers; set train_cfg.max_epochs=12 for TR3D's own 1x
 # schedule), validates every epoch and keeps the checkpoint with the best validation mAP@0.25
 # (`best_mAP_0.25_epoch_N.pth`) next to the latest epoch's checkpoint (for --resume).
+# The head's voxel size is set from the detector's `voxel_size`.
 # Experiments (data, classes, label2level) are in exp1.py, exp2.py, exp3.py.
 _base_ = ['mmdet3d::_base_/default_runtime.py']
 custom_imports = dict(imports=['projects.synthdet'], allow_failed_imports=False)
@@ -31,7 +32,6 @@ model = dict(
         num_classes=5,
         in_channels=128,
         num_reg_outs=6,
-        voxel_size=voxel_size,
         pts_center_threshold=6,
         label2level=(1, 0, 1, 1, 0),
         bbox_loss=dict(type='TR3DAxisAlignedIoULoss', mode='diou', reduction='none'),

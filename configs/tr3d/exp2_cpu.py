@@ -1,0 +1,73 @@
+# Experiment 2 at CPU scale: the same data, classes, model and optimiser as exp2.py, shrunk so
+# that training on 2 x 50 generated rooms (areas 7, 8; test area 9) takes about an hour on 2 CPU
+# cores. Differences from exp2.py (all others, e.g. the schedule of 5 epochs with validation and
+# best-checkpoint keeping, are unchanged):
+# - voxels of 2 cm instead of 1 cm (model.voxel_size; TR3D's output levels become 32 and 64 cm);
+# - 40,000 sampled points per room instead of 100,000, in training and testing;
+# - the training areas are repeated 2 times per epoch instead of 13;
+# - batch 4 instead of 16, 1 loader worker instead of 8; the learning rate is unchanged;
+# - log every 10 iterations instead of 50.
+# Nothing here selects a device: the Runner uses a GPU when there is one.
+_base_ = ['./exp2.py']
+
+metainfo = dict(classes=('table', 'chair', 'sofa', 'yumi', '3dprinter'))
+train_area = [7, 8]
+test_area = 9
+num_points = 40000
+
+model = dict(voxel_size=0.02)
+
+train_pipeline = [
+    dict(
+        type='LoadPointsFromFile',
+        coord_type='DEPTH',
+        shift_height=False,
+        use_color=True,
+        load_dim=6,
+        use_dim=[0, 1, 2, 3, 4, 5]),
+    dict(type='LoadAnnotations3D', with_bbox_3d=True, with_label_3d=True),
+    dict(type='PointSample', num_points=num_points),
+    dict(
+        type='RandomFlip3D',
+        sync_2d=False,
+        flip_ratio_bev_horizontal=0.5,
+        flip_ratio_bev_vertical=0.5),
+    dict(
+        type='GlobalRotScaleTrans',
+        rot_range=[0, 0],
+        scale_ratio_range=[0.95, 1.05],
+        translation_std=[0.1, 0.1, 0.1],
+        shift_height=False),
+    dict(type='NormalizePointsColor', color_mean=None),
+    dict(type='Pack3DDetInputs', keys=['points', 'gt_bboxes_3d', 'gt_labels_3d'])
+]
+test_pipeline = [
+    dict(
+        type='LoadPointsFromFile',
+        coord_type='DEPTH',
+        shift_height=False,
+        use_color=True,
+        load_dim=6,
+        use_dim=[0, 1, 2, 3, 4, 5]),
+    dict(type='PointSample', num_points=num_points),
+    dict(type='NormalizePointsColor', color_mean=None),
+    dict(type='Pack3DDetInputs', keys=['points'])
+]
+
+train_dataloader = dict(
+    batch_size=4,
+    num_workers=1,
+    dataset=dict(
+        times=2,
+        dataset=dict(datasets=[
+            dict(_base_.train_area_dataset, pipeline=train_pipeline,
+                 ann_file=f's3dis_infos_Area_{area}.pkl', metainfo=metainfo)
+            for area in train_area
+        ])))
+val_dataloader = dict(
+    dataset=dict(
+        ann_file=f's3dis_infos_Area_{test_area}.pkl', metainfo=metainfo,
+        pipeline=test_pipeline))
+test_dataloader = val_dataloader
+
+default_hooks = dict(logger=dict(interval=10))

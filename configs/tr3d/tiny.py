@@ -1,0 +1,71 @@
+# Tiny TR3D for the tests: tests/test_tr3d_overfit.py overfits a few small generated rooms with it
+# and tests/test_tr3d_tools.py runs the tools on it. Same model and classes as exp2.py; the
+# differences make it train in a minute on a CPU core:
+# - data: area 1 of a test folder (set data_root of the train/val/test datasets, e.g. with
+#   --cfg-options), trained and tested on the same rooms;
+# - 2 cm voxels (model.voxel_size) and 10,000 sampled points instead of 1 cm and 100,000;
+# - no scaling/translation jitter (flips only), batch 2, no dataset repeat, no worker processes;
+# - 8 epochs, validation after the last only, log every 5 iterations.
+_base_ = ['./exp2.py']
+
+data_root = 'data/s3dis_tiny/'
+metainfo = dict(classes=('table', 'chair', 'sofa', 'yumi', '3dprinter'))
+train_area = [1]
+test_area = 1
+num_points = 10000
+
+model = dict(voxel_size=0.02)
+
+train_pipeline = [
+    dict(
+        type='LoadPointsFromFile',
+        coord_type='DEPTH',
+        shift_height=False,
+        use_color=True,
+        load_dim=6,
+        use_dim=[0, 1, 2, 3, 4, 5]),
+    dict(type='LoadAnnotations3D', with_bbox_3d=True, with_label_3d=True),
+    dict(type='PointSample', num_points=num_points),
+    dict(
+        type='RandomFlip3D',
+        sync_2d=False,
+        flip_ratio_bev_horizontal=0.5,
+        flip_ratio_bev_vertical=0.5),
+    dict(type='NormalizePointsColor', color_mean=None),
+    dict(type='Pack3DDetInputs', keys=['points', 'gt_bboxes_3d', 'gt_labels_3d'])
+]
+test_pipeline = [
+    dict(
+        type='LoadPointsFromFile',
+        coord_type='DEPTH',
+        shift_height=False,
+        use_color=True,
+        load_dim=6,
+        use_dim=[0, 1, 2, 3, 4, 5]),
+    dict(type='PointSample', num_points=num_points),
+    dict(type='NormalizePointsColor', color_mean=None),
+    dict(type='Pack3DDetInputs', keys=['points'])
+]
+
+train_dataloader = dict(
+    batch_size=2,
+    num_workers=0,
+    persistent_workers=False,
+    dataset=dict(
+        times=1,
+        dataset=dict(datasets=[
+            dict(_base_.train_area_dataset, data_root=data_root, pipeline=train_pipeline,
+                 ann_file=f's3dis_infos_Area_{area}.pkl', metainfo=metainfo)
+            for area in train_area
+        ])))
+val_dataloader = dict(
+    num_workers=0,
+    dataset=dict(
+        data_root=data_root,
+        ann_file=f's3dis_infos_Area_{test_area}.pkl',
+        metainfo=metainfo,
+        pipeline=test_pipeline))
+test_dataloader = val_dataloader
+
+train_cfg = dict(max_epochs=8, val_interval=8)
+default_hooks = dict(logger=dict(interval=5))

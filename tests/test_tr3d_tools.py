@@ -1,0 +1,359 @@
+"""TR3D configs and tools through the real registries, Runner and command lines (issue 5).
+
+A module fixture writes two small generated rooms (tests/s3dis_fixtures.py), converts them with
+the real converter and trains the tiny config for one epoch (2 iterations) with tools/train.py;
+the tests then resume, test, predict and count with that checkpoint.
+"""
+import copy
+import importlib.util
+import json
+import subprocess
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+import torch
+from mmengine.config import Config
+from mmengine.hooks import Hook
+from mmengine.registry import init_default_scope
+from mmengine.runner import Runner, load_checkpoint
+
+from configurator.scan_io import read_scan, write_scan
+from projects.synthdet.datasets.s3dis_converter import convert_s3dis
+from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
+
+REPO = Path(__file__).resolve().parents[1]
+CONFIG_DIR = REPO / 'configs' / 'tr3d'
+CONFIGS = sorted(CONFIG_DIR.glob('*.py'))
+TINY = CONFIG_DIR / 'tiny.py'
+TINY_CLASSES = ['table', 'chair', 'sofa', 'yumi', '3dprinter']
+SYNTHETIC_CLASSES = ('table', 'chair', 'sofa', 'yumi', '3dprinter')
+# (training areas, test area, classes) of the paper's experiments as this project defines them.
+EXPERIMENTS = {
+    'exp1': ([1, 2, 3, 4, 6], 5, ('table', 'chair', 'sofa', 'bookcase', 'board')),
+    'exp2': ([7, 8], 9, SYNTHETIC_CLASSES),
+    'exp3': ([1, 2, 3, 4, 6, 7, 8, 9], 5, SYNTHETIC_CLASSES),
+}
+
+
+def load_tool(name: str) -> ModuleType:
+    """Import tools/<name>.py (the tools folder is scripts, not a package)."""
+    spec = importlib.util.spec_from_file_location(f'synthdet_tools_{name}', REPO / 'tools' /
+                                                  f'{name}.py')
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def run_tool(*args: str) -> subprocess.CompletedProcess:
+    """Run a tool as a user would; fail with its output if it exits non-zero."""
+    proc = subprocess.run([sys.executable, *map(str, args)], cwd=REPO, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, f'{args[0]} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}'
+    return proc
+
+
+def data_options(data_root: Path) -> list[str]:
+    """--cfg-options pointing the tiny config's datasets at a converted folder."""
+    return [f'train_dataloader.dataset.dataset.datasets.0.data_root={data_root}/',
+            f'val_dataloader.dataset.data_root={data_root}/',
+            f'test_dataloader.dataset.data_root={data_root}/']
+
+
+def tiny_config(data_root: Path, work_dir: Path, name: str, **options) -> Config:
+    """The tiny config with its data in ``data_root``, as the Runner gets it."""
+    cfg = Config.fromfile(str(TINY))
+    cfg.merge_from_dict(dict(o.split('=', 1) for o in data_options(data_root)))
+    cfg.merge_from_dict(options)
+    cfg.work_dir = str(work_dir)
+    cfg.experiment_name = name
+    return cfg
+
+
+@pytest.fixture(scope='module')
+def tiny(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """Two converted rooms and a work dir trained for one epoch by tools/train.py."""
+    root = tmp_path_factory.mktemp('tr3d_tools')
+    truth = write_synthetic_area(root / 'raw', area=1, n_rooms=2, seed=11, points_per_object=300)
+    convert_s3dis(root / 'raw', root / 'data', areas=[1])
+    work_dir = root / 'work'
+    run_tool('tools/train.py', TINY, '--work-dir', work_dir, '--cfg-options',
+             *data_options(root / 'data'), 'train_dataloader.batch_size=1',
+             'train_cfg.max_epochs=1', 'train_cfg.val_interval=1')
+    return dict(root=root, data=root / 'data', work=work_dir, truth=truth,
+                raw=root / 'raw' / S3DIS_DIR / 'Area_1')
+
+
+@pytest.mark.parametrize('path', CONFIGS, ids=[p.stem for p in CONFIGS])
+def test_registry_builds_the_model_of_every_config(path: Path) -> None:
+    from mmdet3d.registry import MODELS
+    from projects.synthdet.models import TR3DDetector
+
+    cfg = Config.fromfile(str(path))
+    init_default_scope(cfg.default_scope)
+    model = MODELS.build(cfg.model)
+    assert isinstance(model, TR3DDetector)
+    classes = tuple(cfg.test_dataloader.dataset.metainfo['classes'])
+    assert model.bbox_head.num_classes == len(classes) == len(cfg.model.bbox_head.label2level)
+    train_sets = cfg.train_dataloader.dataset.dataset.datasets
+    assert all(tuple(d.metainfo['classes']) == classes for d in train_sets)
+    assert all(d.type == 'SynthdetS3DISDataset' for d in [*train_sets, cfg.test_dataloader.dataset])
+    assert cfg.val_evaluator.type == 'IndoorMetric'
+    assert cfg.default_hooks.checkpoint.save_best == 'mAP_0.25'
+    assert cfg.optim_wrapper.optimizer == dict(type='AdamW', lr=0.001, weight_decay=0.0001)
+    assert cfg.optim_wrapper.clip_grad.max_norm == 10
+    experiment = path.stem.split('_')[0]
+    if experiment in EXPERIMENTS:
+        train_areas, test_area, expected_classes = EXPERIMENTS[experiment]
+        assert [d.ann_file for d in train_sets] == [
+            f's3dis_infos_Area_{a}.pkl' for a in train_areas]
+        assert cfg.test_dataloader.dataset.ann_file == f's3dis_infos_Area_{test_area}.pkl'
+        assert cfg.val_dataloader.dataset.ann_file == f's3dis_infos_Area_{test_area}.pkl'
+        assert classes == expected_classes
+    if path.stem in EXPERIMENTS:  # the full-scale configs: TR3D's published S3DIS settings
+        assert cfg.model.voxel_size == model.bbox_head.voxel_size == 0.01
+        assert cfg.train_dataloader.batch_size == 16 and cfg.train_dataloader.dataset.times == 13
+        assert cfg.train_cfg.max_epochs == 5 and cfg.train_cfg.val_interval == 1
+        sample = [t for t in train_sets[0].pipeline if t.type == 'PointSample']
+        assert sample[0].num_points == 100000
+
+
+def test_full_scale_experiments_share_one_architecture() -> None:
+    from mmdet3d.registry import MODELS
+
+    counts = {}
+    for name in EXPERIMENTS:
+        cfg = Config.fromfile(str(CONFIG_DIR / f'{name}.py'))
+        init_default_scope(cfg.default_scope)
+        counts[name] = sum(p.numel() for p in MODELS.build(cfg.model).parameters())
+    assert len(set(counts.values())) == 1, counts
+
+
+class StateProbe(Hook):
+    """Records the Runner's position, optimizer and weights when training (re)starts."""
+
+    def before_train(self, runner: Runner) -> None:
+        self.epoch, self.iter = runner.epoch, runner.iter
+        self.optimizer = copy.deepcopy(runner.optim_wrapper.state_dict())
+        self.weights = copy.deepcopy(runner.model.state_dict())
+
+
+def assert_same_tree(a, b) -> None:
+    """Nested dicts/lists of tensors and numbers are equal."""
+    if isinstance(a, dict):
+        assert a.keys() == b.keys()
+        for key in a:
+            assert_same_tree(a[key], b[key])
+    elif isinstance(a, (list, tuple)):
+        assert len(a) == len(b)
+        for x, y in zip(a, b):
+            assert_same_tree(x, y)
+    elif isinstance(a, torch.Tensor):
+        assert torch.equal(a, b)
+    else:
+        assert a == b
+
+
+def test_checkpoints_save_resume_and_load(tiny: dict) -> None:
+    work = tiny['work']
+    saved = work / 'epoch_1.pth'
+    assert saved.is_file() and list(work.glob('best_mAP_0.25_epoch_1.pth'))
+    checkpoint = torch.load(saved, map_location='cpu', weights_only=False)
+    assert checkpoint['meta']['epoch'] == 1 and checkpoint['meta']['iter'] == 2
+    assert list(checkpoint['meta']['dataset_meta']['classes']) == TINY_CLASSES
+    steps = {int(s['step']) for s in checkpoint['optimizer']['state'].values()}
+    assert steps == {2}
+
+    cfg = tiny_config(tiny['data'], work, 'resume', **{
+        'train_dataloader.batch_size': 1, 'train_cfg.max_epochs': 2, 'train_cfg.val_interval': 1})
+    cfg.resume, cfg.load_from = True, str(saved)
+    runner = Runner.from_cfg(cfg)
+    probe = StateProbe()
+    runner.register_hook(probe)
+    runner.train()
+    assert (probe.epoch, probe.iter) == (1, 2)
+    assert_same_tree(probe.optimizer, checkpoint['optimizer'])
+    assert_same_tree(probe.weights, checkpoint['state_dict'])
+    assert runner.iter == 4 and runner.epoch == 2
+    resumed = torch.load(work / 'epoch_2.pth', map_location='cpu', weights_only=False)
+    assert resumed['meta']['iter'] == 4
+    assert {int(s['step']) for s in resumed['optimizer']['state'].values()} == {4}
+    assert not (work / 'epoch_1.pth').exists()  # max_keep_ckpts=1
+
+    from mmdet3d.registry import MODELS
+    model = MODELS.build(cfg.model)
+    load_checkpoint(model, str(work / 'epoch_2.pth'), map_location='cpu')
+    assert_same_tree(model.state_dict(), resumed['state_dict'])
+    assert any(not torch.equal(resumed['state_dict'][k], v)
+               for k, v in checkpoint['state_dict'].items())  # training changed the weights
+
+
+def test_table3_layout_from_indoor_metric_results() -> None:
+    test_tool = load_tool('test')
+    metrics = {'table_AP_0.25': 0.96, 'chair_AP_0.25': 0.72, 'mAP_0.25': 0.84,
+               'table_AP_0.50': 0.87, 'chair_AP_0.50': 0.45, 'mAP_0.50': 0.66}
+    rows = test_tool.table3(metrics, ['table', 'chair', 'yumi'])
+    assert rows == {'mAP@0.25': {'table': 0.96, 'chair': 0.72, 'yumi': None, 'mean': 0.84},
+                    'mAP@0.5': {'table': 0.87, 'chair': 0.45, 'yumi': None, 'mean': 0.66}}
+    text = test_tool.format_table3(rows).splitlines()
+    assert text[0].split() == ['metric', 'table', 'chair', 'yumi', 'mean']
+    assert text[1].split() == ['mAP@0.25', '0.960', '0.720', '-', '0.840']
+    assert text[2].split() == ['mAP@0.5', '0.870', '0.450', '-', '0.660']
+    with pytest.raises(KeyError, match='mAP_0.50'):
+        test_tool.table3({'mAP_0.25': 0.5}, ['table'])
+
+
+def test_test_tool_prints_and_writes_table3(tiny: dict) -> None:
+    out_dir = tiny['root'] / 'test_out'
+    checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
+    proc = run_tool('tools/test.py', TINY, checkpoint, '--work-dir', out_dir, '--cfg-options',
+                    *data_options(tiny['data']))
+    table = json.loads((out_dir / 'table3.json').read_text())
+    assert table['format'] == 'synthdet.table3/1' and table['classes'] == TINY_CLASSES
+    assert list(table['rows']) == ['mAP@0.25', 'mAP@0.5']
+    for thr, row in zip(('0.25', '0.50'), table['rows'].values()):
+        assert list(row) == [*TINY_CLASSES, 'mean']
+        # every class is in the test rooms, so IndoorMetric reports an AP for each
+        assert all(0.0 <= row[c] <= 1.0 for c in TINY_CLASSES)
+        assert row['mean'] == pytest.approx(np.mean([row[c] for c in TINY_CLASSES]))
+        assert row['mean'] == table['metrics'][f'mAP_{thr}']
+    lines = proc.stdout.splitlines()
+    header = next(i for i, line in enumerate(lines) if line.split()[:1] == ['metric'])
+    assert lines[header].split() == ['metric', *TINY_CLASSES, 'mean']
+    assert lines[header + 1].split()[0] == 'mAP@0.25'
+    assert float(lines[header + 1].split()[-1]) == pytest.approx(
+        table['rows']['mAP@0.25']['mean'], abs=5e-4)
+    assert lines[header + 2].split()[0] == 'mAP@0.5'
+
+
+def test_predict_writes_detections_in_each_scan_frame(tiny: dict) -> None:
+    room_txt = tiny['raw'] / 'office_1' / 'office_1.txt'
+    room_bin = tiny['data'] / 'points' / 'Area_1_office_1.bin'
+    room_ply = tiny['root'] / 'scans' / 'office_1_copy.ply'
+    room_ply.parent.mkdir()
+    points = read_scan(room_txt)
+    write_scan(room_ply, points)
+    out = tiny['root'] / 'pred'
+    checkpoint = tiny['work'] / 'epoch_1.pth'
+    if not checkpoint.exists():  # the resume test keeps only the newest epoch
+        checkpoint = tiny['work'] / 'epoch_2.pth'
+    run_tool('tools/predict.py', TINY, checkpoint, room_txt, room_bin, room_ply, '--out', out,
+             '--score-thr', '0', '--cfg-options', 'model.test_cfg.score_thr=0.0',
+             *data_options(tiny['data']))
+    documents = {}
+    for name in ('office_1', 'Area_1_office_1', 'office_1_copy'):
+        document = json.loads((out / f'{name}.pred.json').read_text())
+        assert document['format'] == 'synthdet.predictions/1'
+        assert document['model'] == 'tiny' and document['classes'] == TINY_CLASSES
+        assert document['detections'], 'score_thr 0 keeps every box left after NMS'
+        for det in document['detections']:
+            assert set(det) == {'class', 'score', 'center', 'size', 'yaw'}
+            assert det['class'] in TINY_CLASSES and 0.0 <= det['score'] <= 1.0
+            assert len(det['center']) == 3 and len(det['size']) == 3
+            assert all(s > 0 for s in det['size']) and det['yaw'] == 0.0
+        scores = [det['score'] for det in document['detections']]
+        assert scores == sorted(scores, reverse=True)
+        documents[name] = document
+    assert documents['office_1']['scan'] == str(room_txt)
+
+    def centres(name: str) -> np.ndarray:
+        return np.array([d['center'] for d in documents[name]['detections']])
+
+    room_min, room_max = points[:, :3].min(axis=0), points[:, :3].max(axis=0)
+    for name in ('office_1', 'office_1_copy'):  # the raw room frame, far from the origin
+        assert np.all(centres(name) > room_min - 0.5) and np.all(centres(name) < room_max + 0.5)
+    # The converted .bin is the same room shifted by its minimum: same detections, shifted.
+    assert np.all(centres('Area_1_office_1') > -0.5)
+    assert np.all(centres('Area_1_office_1') < room_max - room_min + 0.5)
+    assert len(documents['office_1']['detections']) == len(
+        documents['Area_1_office_1']['detections'])
+    np.testing.assert_allclose(centres('office_1') - room_min, centres('Area_1_office_1'),
+                               atol=1e-3)
+
+
+def test_count_table_counts_correct_and_incorrect_detections(tmp_path: Path) -> None:
+    count_table = load_tool('count_table')
+    room = tmp_path / 'Area_9' / 'lab_1'
+    room.mkdir(parents=True)
+    (room / 'lab_1.txt').write_text('0 0 0 0 0 0\n')
+    objects = [
+        ('chair_1', 'chair', [1.0, 1.0, 0.45], [0.5, 0.5, 0.9], 0.0),
+        ('chair_2', 'chair', [3.0, 1.0, 0.45], [0.5, 0.5, 0.9], 0.0),
+        # rotated by 90 degrees: its axis-aligned box is 0.7 x 1.2
+        ('table_1', 'table', [2.0, 3.0, 0.375], [1.2, 0.7, 0.75], np.pi / 2),
+    ]
+    (room / 'meta.json').write_text(json.dumps({
+        'format': 'synthdet.room/1', 'seed': 0, 'generator': {},
+        'room': {'polygon': [[0, 0], [0, 5], [5, 5], [5, 0]], 'height': 3.0},
+        'objects': [{'instance': i, 'class': c, 'asset': f'{c}/x', 'params': {},
+                     'box': {'center': ctr, 'size': size, 'yaw': yaw}, 'on': None}
+                    for i, c, ctr, size, yaw in objects]}))
+
+    def det(cls, score, center, size):
+        return {'class': cls, 'score': score, 'center': center, 'size': size, 'yaw': 0.0}
+
+    predictions = {
+        'sd': (['table', 'chair', 'sofa', 'yumi', '3dprinter'], [
+            det('chair', 0.9, [1.02, 1.0, 0.45], [0.5, 0.5, 0.9]),  # correct
+            det('chair', 0.8, [1.0, 1.02, 0.45], [0.5, 0.5, 0.9]),  # duplicate: incorrect
+            det('chair', 0.2, [3.0, 1.0, 0.45], [0.5, 0.5, 0.9]),  # below 0.3: ignored
+            det('table', 0.7, [2.0, 3.0, 0.375], [0.7, 1.2, 0.75]),  # correct (enclosing box)
+            det('yumi', 0.5, [4.0, 4.0, 0.5], [0.5, 0.5, 1.0]),  # no yumi: incorrect
+        ]),
+        'baseline': (['table', 'chair', 'sofa', 'bookcase', 'board'], [
+            det('table', 0.9, [2.0, 3.0, 0.375], [1.2, 0.7, 0.75]),  # IoU 0.41: correct
+            det('chair', 0.9, [3.25, 1.0, 0.45], [0.5, 0.5, 0.9]),  # IoU 0.33: correct
+            det('chair', 0.9, [1.4, 1.0, 0.45], [0.5, 0.5, 0.9]),  # IoU 0.11: incorrect
+        ]),
+    }
+    for model, (classes, detections) in predictions.items():
+        (tmp_path / model).mkdir()
+        (tmp_path / model / 'lab_1.pred.json').write_text(json.dumps({
+            'format': 'synthdet.predictions/1', 'scan': 'Area_9/lab_1/lab_1.txt',
+            'model': model, 'classes': classes, 'detections': detections}))
+    out = tmp_path / 'table4.json'
+    table = count_table.main([str(tmp_path / 'sd'), str(tmp_path / 'baseline'), '--scan-root',
+                              str(tmp_path), '--out', str(out)])
+    assert json.loads(out.read_text()) == table
+    assert table['format'] == 'synthdet.table4/1'
+    assert table['classes'] == ['table', 'chair', 'sofa', 'bookcase', 'board', 'yumi',
+                                '3dprinter']
+    (row,) = table['scans']
+    assert row['truth'] == {'table': 1, 'chair': 2, 'sofa': 0, 'bookcase': 0, 'board': 0,
+                            'yumi': 0, '3dprinter': 0}
+    sd, baseline = row['models']['sd'], row['models']['baseline']
+    assert sd['chair'] == {'correct': 1, 'incorrect': 1}
+    assert sd['table'] == {'correct': 1, 'incorrect': 0}
+    assert sd['yumi'] == {'correct': 0, 'incorrect': 1}
+    assert sd['bookcase'] is None and baseline['yumi'] is None
+    assert baseline['table'] == {'correct': 1, 'incorrect': 0}
+    assert baseline['chair'] == {'correct': 1, 'incorrect': 1}
+
+    bad = tmp_path / 'bad.pred.json'
+    bad.write_text(json.dumps({'format': 'synthdet.predictions/0'}))
+    with pytest.raises(SystemExit, match='bad.pred.json'):
+        count_table.main([str(bad)])
+
+
+def test_count_table_reads_ground_truth_from_info_pickles(tiny: dict, tmp_path: Path) -> None:
+    count_table = load_tool('count_table')
+    info_file = tiny['data'] / 's3dis_infos_Area_1.pkl'
+    truth = count_table.truth_from_infos([str(info_file)])
+    assert set(truth) == {'Area_1_office_1.bin', 'Area_1_lab_1.bin'}
+    # The converted boxes are the fixture's true boxes, shifted by the room minimum.
+    boxes = truth['Area_1_office_1.bin']
+    expected = tiny['truth']['office_1']
+    assert sorted(c for c, _ in boxes) == sorted(b['class'] for b in expected)
+    detections = [{'class': c, 'score': 0.9, 'center': b[:3], 'size': b[3:], 'yaw': 0.0}
+                  for c, b in boxes]
+    (tmp_path / 'Area_1_office_1.pred.json').write_text(json.dumps({
+        'format': 'synthdet.predictions/1', 'scan': 'data/s3dis/points/Area_1_office_1.bin',
+        'model': 'tiny', 'classes': TINY_CLASSES, 'detections': detections}))
+    table = count_table.main([str(tmp_path), '--infos', str(info_file)])
+    cells = table['scans'][0]['models']['tiny']
+    for cls in TINY_CLASSES:
+        n = sum(c == cls for c, _ in boxes)
+        assert table['scans'][0]['truth'][cls] == n
+        assert cells[cls] == {'correct': n, 'incorrect': 0}
