@@ -15,13 +15,13 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 DATASETS_DIR = REPO_ROOT / 'projects' / 'synthdet' / 'datasets'
 
 
-def import_converter() -> ModuleType:
-    """Import ``projects.synthdet.datasets.s3dis_converter`` without running the ``__init__`` of
-    ``projects.synthdet`` and its ``datasets`` package.
+def import_datasets_module(module: str) -> ModuleType:
+    """Import ``projects.synthdet.datasets.<module>`` without running the ``__init__`` of
+    ``projects.synthdet`` and of its ``datasets`` package.
 
-    Those register the mmdet3d plugin (torch, mmcv, mmdet3d, MinkowskiEngine); conversion needs
-    only numpy and numba, so it also runs where the training stack is not importable. The
-    packages keep their real names, which numba's on-disk cache of the parser refers to.
+    Those register the mmdet3d plugin (torch, mmcv, mmdet3d, MinkowskiEngine); conversion and
+    statistics need only numpy and numba, so they also run where the training stack is not
+    importable. The packages keep their real names, to which numba's on-disk cache refers.
     """
     if str(REPO_ROOT) not in sys.path:
         sys.path.insert(0, str(REPO_ROOT))
@@ -31,7 +31,7 @@ def import_converter() -> ModuleType:
             spec = importlib.util.spec_from_file_location(
                 name, folder / '__init__.py', submodule_search_locations=[str(folder)])
             sys.modules[name] = importlib.util.module_from_spec(spec)  # __init__ not run
-    return importlib.import_module('projects.synthdet.datasets.s3dis_converter')
+    return importlib.import_module(f'projects.synthdet.datasets.{module}')
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -50,7 +50,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    converter = import_converter()
+    converter = import_datasets_module('s3dis_converter')
     try:
         summary = converter.convert_s3dis(args.root_path, args.out_dir, areas=args.areas,
                                           workers=args.workers, on_error=args.on_error)

@@ -1,0 +1,77 @@
+"""Detection instances per class and area, counted from the info pickles (the paper's Table 1)."""
+import pickle
+from collections import Counter
+from pathlib import Path
+from typing import Sequence
+
+from .s3dis_classes import REAL_AREAS
+
+TABLE1_CLASSES = ('chair', 'table', 'sofa', 'bookcase', 'board', 'yumi', '3dprinter')
+
+
+def info_path(data_root: str | Path, area: int) -> Path:
+    return Path(data_root) / f's3dis_infos_Area_{area}.pkl'
+
+
+def find_info_areas(data_root: str | Path) -> list[int]:
+    """Areas N with an ``s3dis_infos_Area_N.pkl`` in data_root, sorted."""
+    names = (p.name[len('s3dis_infos_Area_'):-len('.pkl')]
+             for p in Path(data_root).glob('s3dis_infos_Area_*.pkl'))
+    return sorted(int(n) for n in names if n.isdigit())
+
+
+def count_instances(data_root: str | Path, areas: Sequence[int] | None = None
+                    ) -> dict[int, Counter]:
+    """Count detection instances per class name in each area's info pickle.
+
+    Label ids are resolved through the pickle's own ``metainfo['categories']``; instances
+    labelled -1 (ignored classes) are not counted.
+    """
+    areas = find_info_areas(data_root) if areas is None else list(areas)
+    if not areas:
+        raise FileNotFoundError(f'{data_root}: no s3dis_infos_Area_N.pkl found')
+    counts = {}
+    for area in areas:
+        path = info_path(data_root, area)
+        if not path.is_file():
+            raise FileNotFoundError(f'{path}: info pickle not found (run tools/create_data.py)')
+        with open(path, 'rb') as f:
+            infos = pickle.load(f)
+        names = {label: name for name, label in infos['metainfo']['categories'].items()}
+        counts[area] = Counter(names[inst['bbox_label_3d']] for info in infos['data_list']
+                               for inst in info['instances'] if inst['bbox_label_3d'] >= 0)
+    return counts
+
+
+def table1_rows(counts: dict[int, Counter], classes: Sequence[str] = TABLE1_CLASSES
+                ) -> list[tuple[str, list[float]]]:
+    """Rows of Table 1: one per area, S3DIS total (areas 1-6), synthetic total (the other
+    areas), total, and the synthetic share in % (NaN where a class has no instance)."""
+    def total(areas):
+        return [sum(counts[a][c] for a in areas) for c in classes]
+
+    real = [a for a in counts if a in REAL_AREAS]
+    synthetic = [a for a in counts if a not in REAL_AREAS]
+    rows = [(f'Area {a}', total([a])) for a in sorted(counts)]
+    real_total, synthetic_total, grand_total = total(real), total(synthetic), total(counts)
+    share = [100.0 * s / t if t else float('nan') for s, t in zip(synthetic_total, grand_total)]
+    return rows + [('S3DIS (areas 1-6)', real_total), ('Synthetic (areas 7+)', synthetic_total),
+                   ('Total', grand_total), ('Synthetic share %', share)]
+
+
+def format_table1(counts: dict[int, Counter], classes: Sequence[str] = TABLE1_CLASSES) -> str:
+    """Table 1 as aligned plain text; zero counts print as '-' like the paper."""
+    def cell(value: float, is_share: bool) -> str:
+        if is_share:
+            return '-' if value != value else f'{value:.1f}'
+        return str(int(value)) if value else '-'
+
+    rows = table1_rows(counts, classes)
+    width = max(len(label) for label, _ in rows)
+    widths = [max(len(c), 6) for c in classes]
+    lines = [' ' * width + ' ' + ' '.join(c.rjust(w) for c, w in zip(classes, widths))]
+    for label, values in rows:
+        is_share = label.startswith('Synthetic share')
+        lines.append(label.ljust(width) + ' ' + ' '.join(
+            cell(v, is_share).rjust(w) for v, w in zip(values, widths)))
+    return '\n'.join(lines)

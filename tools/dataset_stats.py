@@ -1,0 +1,32 @@
+"""Print the paper's Table 1: detection instances per class and area, S3DIS vs synthetic.
+
+Counts come from the info pickles ``<data_root>/s3dis_infos_Area_N.pkl`` written by
+``tools/create_data.py``. Example::
+
+    python tools/dataset_stats.py data/s3dis --areas 1 2 3 4 5 6 7 8 9
+"""
+import argparse
+import sys
+
+from create_data import import_datasets_module
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('data_root', help='folder holding s3dis_infos_Area_N.pkl')
+    parser.add_argument('--areas', type=int, nargs='+', help='areas (default: every pickle found)')
+    args = parser.parse_args(argv)
+    instance_counts = import_datasets_module('instance_counts')
+    try:
+        counts = instance_counts.count_instances(args.data_root, args.areas)
+    except FileNotFoundError as error:
+        print(f'dataset_stats: error: {error}', file=sys.stderr)
+        return 1
+    print(f'Table 1: detection instances per class, counted from the info pickles in '
+          f'{args.data_root}')
+    print(instance_counts.format_table1(counts))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
