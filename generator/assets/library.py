@@ -6,12 +6,12 @@ is one instance (see docs/assets.md).
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import os
 import shutil
 import tempfile
-from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
 from typing import Mapping, Sequence
@@ -32,7 +32,7 @@ DEFAULT_COLOUR = (128, 128, 128)
 UP_NORMAL_Z = 0.99
 
 
-@dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True)
 class AssetInstance:
     """One model of a class, in its local frame: x/y centred on its bounding box, z = 0 at its
     lowest point, front towards -y. Arrays are read-only and shared, so `mesh_arrays` is free."""
@@ -43,9 +43,9 @@ class AssetInstance:
     size: tuple[float, float, float]
     top_z: float | None
     top_size: tuple[float, float] | None
-    vertices: np.ndarray = field(repr=False, compare=False)
-    triangles: np.ndarray = field(repr=False, compare=False)
-    colours: np.ndarray = field(repr=False, compare=False)
+    vertices: np.ndarray = dataclasses.field(repr=False, compare=False)
+    triangles: np.ndarray = dataclasses.field(repr=False, compare=False)
+    colours: np.ndarray = dataclasses.field(repr=False, compare=False)
 
     def mesh_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(vertices (V,3) float64 in the local frame, triangles (T,3) int32, face colours (T,3)
@@ -128,6 +128,23 @@ def build_library(out_dir: Path, instances_per_class: int = 12, seed: int = 0,
     return paths
 
 
+def instance_from_params(cls: str, variant: str, params: dict,
+                         name: str | None = None) -> AssetInstance:
+    """Build one procedural instance in bpy from explicit parameters (e.g. chosen YuMi joint
+    angles) and extract it exactly as `load_library` would, without writing a file."""
+    _check_classes([cls])
+    name = name or f'{cls}_{variant}'
+    collection = bpy.data.collections.new(f'{cls}.scratch')
+    try:
+        obj = GENERATORS[cls].build(variant, params).to_object(name, collection)
+        obj[ASSET_PROP] = f'{cls}/{variant}'
+        obj[PARAMS_PROP] = json.dumps(params, sort_keys=True)
+        instance = instance_from_object(obj, cls, Path('<memory>'))
+        return dataclasses.replace(instance, name=name)
+    finally:
+        _remove_collection(collection)
+
+
 def _bounds(obj: bpy.types.Object) -> tuple[np.ndarray, np.ndarray]:
     coords = np.empty(len(obj.data.vertices) * 3, np.float32)
     obj.data.vertices.foreach_get('co', coords)
@@ -185,13 +202,15 @@ def load_blend(path: Path, cls: str) -> list[AssetInstance]:
         bpy.data.libraries.remove(library)
 
 
-def _object_matrix(obj: bpy.types.Object) -> np.ndarray:
-    """World matrix from the object's own transform and its parents (no depsgraph needed)."""
+def _object_linear(obj: bpy.types.Object) -> np.ndarray:
+    """Rotation/scale (3x3) of the object's world transform, from its own transform and its
+    parents' (no depsgraph needed). Translations do not matter: instances are re-centred."""
     matrix = np.array(obj.matrix_basis, dtype=np.float64)
     if obj.parent is not None:
-        matrix = (_object_matrix(obj.parent) @ np.array(obj.matrix_parent_inverse, np.float64)
-                  @ matrix)
-    return matrix
+        parent = np.eye(4)
+        parent[:3, :3] = _object_linear(obj.parent)
+        matrix = parent @ np.array(obj.matrix_parent_inverse, np.float64) @ matrix
+    return matrix[:3, :3]
 
 
 def instance_from_object(obj: bpy.types.Object, cls: str, path: Path) -> AssetInstance:
@@ -208,8 +227,7 @@ def instance_from_object(obj: bpy.types.Object, cls: str, path: Path) -> AssetIn
     mesh.loop_triangles.foreach_get('material_index', material_index)
     coords = np.empty(len(mesh.vertices) * 3, np.float32)
     mesh.vertices.foreach_get('co', coords)
-    matrix = _object_matrix(obj)
-    vertices = coords.reshape(-1, 3).astype(np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
+    vertices = coords.reshape(-1, 3).astype(np.float64) @ _object_linear(obj).T
     used, triangles = np.unique(triangles, return_inverse=True)
     vertices = vertices[used]
     triangles = triangles.reshape(-1, 3).astype(np.int32)
@@ -234,8 +252,9 @@ def instance_from_object(obj: bpy.types.Object, cls: str, path: Path) -> AssetIn
     top_z = top_size = None
     if cls == 'table':
         top_z = size[2]
-        top_size = (tuple(float(v) for v in params['top_size']) if 'top_size' in params else
-                    _top_extent(vertices, triangles, top_z))
+        top_size = _top_extent(vertices, triangles, top_z)
+        if 'top_size' in params:  # a declared usable area (e.g. inside a round top) may shrink it
+            top_size = tuple(min(float(a), b) for a, b in zip(params['top_size'], top_size))
     for array in (vertices, triangles, colours):
         array.setflags(write=False)
     return AssetInstance(cls=cls, name=obj.name, asset=asset, params=params, size=size,

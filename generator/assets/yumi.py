@@ -46,6 +46,7 @@ HEIGHT = 0.571
 TORSO = ((BASE_SIZE[2], -0.22, 0.20, 0.18), (0.30, -0.18, 0.10, 0.14),
          (0.48, -0.15, 0.045, 0.085), (HEIGHT, -0.13, 0.0, 0.06))
 MIN_ARM_Z = 0.1  # arms stay above the base plate / the table under the robot
+MAX_ARM_Z = 0.8  # working poses: no arm raised far above the head
 MAX_REACH_XY = 0.55
 MAX_TRIES = 2000
 
@@ -108,14 +109,15 @@ def _inside_torso(points: np.ndarray, margin: np.ndarray) -> np.ndarray:
 
 
 def pose_is_valid(angles: dict[str, dict[str, float]]) -> bool:
-    """Within limits, arms above the base plate, out of the torso, apart, and within reach."""
+    """Within limits, arms between MIN_ARM_Z and MAX_ARM_Z, out of the torso, apart from each
+    other, and within reach."""
     samples = {}
     for side in SIDES:
         for joint, (lo, hi) in JOINT_LIMITS.items():
             if not lo <= angles[side][joint] <= hi:
                 return False
         points, radii = _arm_samples(arm_frames(side, angles[side]))
-        if np.any(points[:, 2] - radii < MIN_ARM_Z):
+        if np.any(points[:, 2] - radii < MIN_ARM_Z) or np.any(points[:, 2] > MAX_ARM_Z):
             return False
         if np.any(_inside_torso(points[2:], radii[2:])):
             return False
