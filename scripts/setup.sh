@@ -88,8 +88,12 @@ patch_minkowski() {
   local f
   for f in MinkowskiCommon.py MinkowskiCoordinateManager.py MinkowskiKernelGenerator.py \
            MinkowskiTensorField.py utils/quantization.py; do
-    sed -i 's/^from collections import Sequence/from collections.abc import Sequence/' "$pkg/$f"
+    sed -i -e 's/^from collections import Sequence, namedtuple$/from collections import namedtuple\nfrom collections.abc import Sequence/' \
+           -e 's/^from collections import Sequence$/from collections.abc import Sequence/' "$pkg/$f"
   done
+  if grep -rq '^from collections import .*Sequence' "$pkg"; then
+    die "MinkowskiEngine in $pkg still imports collections.Sequence after patching"
+  fi
 }
 
 verify() {

@@ -49,11 +49,10 @@ def test_minkowski_sparse_conv_forward_backward() -> None:
     out.F.pow(2).sum().backward()
     assert feats.grad.abs().sum() > 0 and conv.kernel.grad.abs().sum() > 0
     # Analytic gradients agree with finite differences.
-    function = ME.MinkowskiConvolutionFunction()
     kernel = conv.kernel.detach().clone().requires_grad_(True)
     sparse = ME.SparseTensor(feats.detach().clone().requires_grad_(True), coordinates=coords)
     assert torch.autograd.gradcheck(
-        lambda f, k: function.apply(f, k, conv.kernel_generator, conv.convolution_mode,
+        lambda f, k: ME.MinkowskiConvolutionFunction.apply(f, k, conv.kernel_generator, conv.convolution_mode,
                                     sparse.coordinate_map_key, None, sparse.coordinate_manager),
         (sparse.F, kernel))
 
