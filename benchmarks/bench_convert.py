@@ -1,0 +1,182 @@
+"""Convert one generated S3DIS-format area with synthdet's converter and with mmdet3d's code path.
+
+mmdet3d's path is its collect step (``data/s3dis/collect_indoor3d_data.py`` with
+``indoor3d_util.export``: pandas ``read_csv`` per annotation file, ``.npy`` files in
+``s3dis_data/``) followed by the installed ``S3DISData.get_infos`` from
+``mmdet3d/.mim/tools/dataset_converters/s3dis_data_utils.py`` (``.bin`` files and box
+extraction). The wheel does not ship ``data/s3dis/``, so the collect step is re-expressed
+below operation for operation; ``S3DISData`` is imported from the installed file and run
+unchanged. It accepts only ``Area_1``..``Area_6``, so the generated area is exposed to it as
+``Area_1`` through a symlink (the input is adapted, not its code).
+
+The area holds the five S3DIS detection classes, so that both converters can produce every box.
+Outputs are checked to be identical: points, semantic masks and boxes bit for bit, instance
+masks after matching instances by annotation file (mmdet3d numbers them in ``glob`` order,
+synthdet in natural file-name order). The last line prints the ratio of the wall times.
+
+    python benchmarks/bench_convert.py --rooms 20 --points-per-object 18000 --workers 2
+"""
+import argparse
+import contextlib
+import glob
+import importlib.util
+import io
+import os
+import pickle
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO_ROOT))
+
+from projects.synthdet.datasets.s3dis_converter import S3DIS_DIR, convert_s3dis  # noqa: E402
+from tests.s3dis_fixtures import write_synthetic_area  # noqa: E402
+
+S3DIS_CLASSES_13 = ('ceiling', 'floor', 'wall', 'beam', 'column', 'window', 'door', 'table',
+                    'chair', 'sofa', 'bookcase', 'board', 'clutter')
+BENCH_CLASSES = ('table', 'chair', 'sofa', 'bookcase', 'board')
+
+
+def load_mmdet3d_s3dis_data():
+    """The installed ``S3DISData`` class, imported from mmdet3d's shipped tools folder."""
+    spec = importlib.util.find_spec('mmdet3d')
+    path = Path(spec.origin).parent / '.mim' / 'tools' / 'dataset_converters' / 's3dis_data_utils.py'
+    module_spec = importlib.util.spec_from_file_location('mmdet3d_s3dis_data_utils', path)
+    module = importlib.util.module_from_spec(module_spec)
+    module_spec.loader.exec_module(module)
+    return module.S3DISData
+
+
+def mmdet3d_collect_room(anno_path: str, out_filename: str) -> list[str]:
+    """mmdet3d's ``indoor3d_util.export``: returns the annotation files in the order used."""
+    files = glob.glob(os.path.join(anno_path, '*.txt'))
+    points_list = []
+    for ins_idx, path in enumerate(files, start=1):
+        one_class = os.path.basename(path).split('_')[0]
+        if one_class not in S3DIS_CLASSES_13:
+            one_class = 'clutter'
+        points = pd.read_csv(path, header=None, sep=' ').to_numpy()
+        labels = np.ones((points.shape[0], 1)) * S3DIS_CLASSES_13.index(one_class)
+        ins_labels = np.ones((points.shape[0], 1)) * ins_idx
+        points_list.append(np.concatenate([points, labels, ins_labels], 1))
+    data_label = np.concatenate(points_list, 0)
+    data_label[:, 0:3] -= np.amin(data_label, axis=0)[0:3]
+    np.save(f'{out_filename}_point.npy', data_label[:, :6].astype(np.float32))
+    np.save(f'{out_filename}_sem_label.npy', data_label[:, 6].astype(np.int64))
+    np.save(f'{out_filename}_ins_label.npy', data_label[:, 7].astype(np.int64))
+    return files
+
+
+def run_mmdet3d(root: Path, workers: int) -> tuple[float, list, dict[str, list[str]]]:
+    s3dis_data_cls = load_mmdet3d_s3dis_data()
+    data_dir = root / S3DIS_DIR
+    output_folder = root / 's3dis_data'
+    output_folder.mkdir(exist_ok=True)
+    start = time.perf_counter()
+    file_orders = {}
+    for room in sorted(os.listdir(data_dir / 'Area_1')):
+        file_orders[room] = mmdet3d_collect_room(str(data_dir / 'Area_1' / room / 'Annotations'),
+                                                 str(output_folder / f'Area_1_{room}'))
+    with contextlib.redirect_stdout(io.StringIO()):
+        infos = s3dis_data_cls(root_path=str(root), split='Area_1').get_infos(num_workers=workers)
+    return time.perf_counter() - start, infos, file_orders
+
+
+def run_synthdet(root: Path, out_dir: Path, area: int, workers: int) -> float:
+    start = time.perf_counter()
+    convert_s3dis(root, out_dir, areas=[area], workers=workers)
+    return time.perf_counter() - start
+
+
+def natural_file_order(anno_path: Path) -> list[str]:
+    from projects.synthdet.datasets.s3dis_converter import _natural_key
+    return [str(p) for p in sorted(anno_path.glob('*.txt'), key=lambda p: _natural_key(p.name))]
+
+
+def check_identical(root: Path, area: int, out_dir: Path, mm_root: Path, mm_infos: list,
+                    mm_orders: dict[str, list[str]]) -> int:
+    """Compare every room; returns the number of boxes compared."""
+    with open(out_dir / f's3dis_infos_Area_{area}.pkl', 'rb') as f:
+        ours = {Path(i['lidar_points']['lidar_path']).stem: i for i in pickle.load(f)['data_list']}
+    n_boxes = 0
+    for mm_info in mm_infos:
+        room = mm_info['point_cloud']['lidar_idx'][len('Area_1_'):]
+        name = f'Area_{area}_{room}'
+        mm_points = np.fromfile(mm_root / mm_info['pts_path'], dtype=np.float32).reshape(-1, 6)
+        mm_ins = np.fromfile(mm_root / mm_info['pts_instance_mask_path'], dtype=np.int64)
+        mm_sem = np.fromfile(mm_root / mm_info['pts_semantic_mask_path'], dtype=np.int64)
+        points = np.fromfile(out_dir / 'points' / f'{name}.bin', dtype=np.float32).reshape(-1, 6)
+        ins = np.fromfile(out_dir / 'instance_mask' / f'{name}.bin', dtype=np.int64)
+        sem = np.fromfile(out_dir / 'semantic_mask' / f'{name}.bin', dtype=np.int64)
+        # instance id of each annotation file in each converter
+        mm_id = {Path(p).name: k for k, p in enumerate(mm_orders[room], start=1)}
+        our_id = {Path(p).name: k for k, p in enumerate(
+            natural_file_order(root / S3DIS_DIR / f'Area_{area}' / room / 'Annotations'), start=1)}
+        assert mm_id.keys() == our_id.keys(), room
+        renumber = np.zeros(len(mm_id) + 1, dtype=np.int64)  # mmdet3d id -> synthdet id
+        for file_name, k in mm_id.items():
+            renumber[k] = our_id[file_name]
+        order = np.argsort(renumber[mm_ins], kind='stable')  # rows in synthdet's order
+        assert np.array_equal(points, mm_points[order]), f'{room}: points differ'
+        assert np.array_equal(sem, mm_sem[order]), f'{room}: semantic masks differ'
+        assert np.array_equal(ins, renumber[mm_ins[order]]), f'{room}: instance masks differ'
+        # boxes: mmdet3d lists them by its instance id, synthdet by its own
+        mm_file = {k: f for f, k in mm_id.items()}
+        mm_ids = [k for k in sorted(mm_file) if mm_file[k].split('_')[0] in BENCH_CLASSES]
+        mm_by_file = {mm_file[k]: (int(label), box.tolist()) for k, label, box in zip(
+            mm_ids, mm_info['annos']['class'], mm_info['annos']['gt_boxes_upright_depth'])}
+        our_files = [f for f in sorted(our_id, key=our_id.get) if f.split('_')[0] in BENCH_CLASSES]
+        assert [mm_by_file[f] for f in our_files] == [
+            (inst['bbox_label_3d'], inst['bbox_3d']) for inst in ours[name]['instances']], \
+            f'{room}: boxes differ'
+        n_boxes += len(our_files)
+    return n_boxes
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--rooms', type=int, default=20)
+    parser.add_argument('--points-per-object', type=int, default=18000,
+                        help='18000 gives about 300k points per room')
+    parser.add_argument('--workers', type=int, default=2,
+                        help='synthdet processes; also mmdet3d S3DISData threads')
+    parser.add_argument('--work-dir', help='keep data here (default: a temporary folder)')
+    args = parser.parse_args()
+    area = 7
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(args.work_dir or tmp)
+        root, mm_root = work / 'synthetic', work / 'mmdet3d'
+        if not (root / S3DIS_DIR / f'Area_{area}').is_dir():
+            print(f'writing {args.rooms} rooms ...', flush=True)
+            write_synthetic_area(root, area, args.rooms, seed=0, classes=BENCH_CLASSES,
+                                 points_per_object=args.points_per_object,
+                                 room_size=(7.0, 6.0, 3.0))
+        (mm_root / S3DIS_DIR).mkdir(parents=True, exist_ok=True)
+        link = mm_root / S3DIS_DIR / 'Area_1'
+        if not link.exists():
+            link.symlink_to(root / S3DIS_DIR / f'Area_{area}', target_is_directory=True)
+        for path in (root / S3DIS_DIR).rglob('*.txt'):  # same warm page cache for both
+            path.read_bytes()
+        mm_seconds, mm_infos, mm_orders = run_mmdet3d(mm_root, args.workers)
+        ours_1 = run_synthdet(root, work / 'synthdet_w1', area, workers=1)
+        ours_n = run_synthdet(root, work / 'synthdet', area, workers=args.workers)
+        n_boxes = check_identical(root, area, work / 'synthdet', mm_root, mm_infos, mm_orders)
+        n_points = sum(len(np.fromfile(p, dtype=np.float32)) // 6
+                       for p in (work / 'synthdet' / 'points').glob('*.bin'))
+    print(f'{args.rooms} rooms, {n_points} points, {n_boxes} boxes: points, masks and boxes '
+          'identical')
+    print(f'{"converter":<42} {"seconds":>8} {"Mpoints/s":>10}')
+    for label, seconds in ((f'mmdet3d collect + S3DISData ({args.workers} threads)', mm_seconds),
+                           ('synthdet convert_s3dis (1 worker)', ours_1),
+                           (f'synthdet convert_s3dis ({args.workers} workers)', ours_n)):
+        print(f'{label:<42} {seconds:8.2f} {n_points / seconds / 1e6:10.2f}')
+    print(f'convert speedup vs mmdet3d converter: {mm_seconds / ours_n:.1f}x')
+
+
+if __name__ == '__main__':
+    main()
