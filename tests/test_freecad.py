@@ -45,8 +45,13 @@ def hostile_names(marker: Path) -> list[str]:
 
 
 def detection(class_name: str, score: float, center, size, yaw: float = 0.0) -> dict:
-    return {'class': class_name, 'score': score, 'center': list(center), 'size': list(size),
-            'yaw': yaw}
+    return {
+        'class': class_name,
+        'score': score,
+        'center': list(center),
+        'size': list(size),
+        'yaw': yaw
+    }
 
 
 MAIN_DETECTIONS = [
@@ -132,10 +137,60 @@ def configurator_main(argv: list[str]) -> int:
     return freecad_cli.run(parser.parse_args(argv[1:]))
 
 
+GUI_DRIVER = textwrap.dedent('''\
+    # Runs in the FreeCAD GUI: answers the macro's dialogs like a user would, then reports.
+    import json, os
+    import FreeCAD as App
+    from PySide import QtCore, QtGui
+
+    params = json.load(open(os.environ['SYNTHDET_TEST_PARAMS'], encoding='utf-8'))
+    answers, seen = list(params['answers']), {'dialogs': [], 'messages': []}
+
+    def answer():
+        widget = QtGui.QApplication.activeModalWidget()
+        if isinstance(widget, QtGui.QFileDialog) and answers:
+            seen['dialogs'].append(widget.windowTitle())
+            widget.findChild(QtGui.QLineEdit).setText(answers.pop(0))
+            widget.accept()
+        elif isinstance(widget, QtGui.QMessageBox):
+            seen['messages'].append(widget.text())
+            widget.accept()
+
+    timer = QtCore.QTimer()
+    timer.timeout.connect(answer)
+    timer.start(100)
+    with open(params['macro'], encoding='utf-8') as stream:
+        code = compile(stream.read(), params['macro'], 'exec')
+    exec(code, {'__file__': params['macro'], '__name__': '__main__'})
+    timer.stop()
+    doc = App.ActiveDocument
+    seen['gui'] = App.GuiUp
+    seen['classes'] = sorted(o.DetectedClass for o in doc.Objects if hasattr(o, 'DetectedClass'))
+    seen['floor_area'] = doc.getObject('Floor').Shape.Area if doc.getObject('Floor') else None
+    with open(params['report'], 'w', encoding='utf-8') as stream:
+        json.dump(seen, stream)
+    os._exit(0)  # the offscreen platform has no OpenGL context to tear the 3D view down
+''')
+
+# A user configuration that opens no Start page (its web view cannot start as root offscreen).
+GUI_USER_CONFIG = textwrap.dedent('''\
+    <?xml version="1.0" encoding="UTF-8" standalone="yes"?>
+    <FCParameters><FCParamGroup Name="Root"><FCParamGroup Name="BaseApp">
+    <FCParamGroup Name="Preferences"><FCParamGroup Name="General">
+    <FCText Name="AutoloadModule">NoneWorkbench</FCText>
+    </FCParamGroup></FCParamGroup></FCParamGroup></FCParamGroup></FCParameters>
+''')
+
+
 def run_freecad(script: Path, env: dict | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([FREECADCMD, str(script)], env=dict(os.environ, **(env or {})),
-                          cwd=script.parent, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                          text=True, errors='replace', timeout=300)
+    return subprocess.run([FREECADCMD, str(script)],
+                          env=dict(os.environ, **(env or {})),
+                          cwd=script.parent,
+                          stdout=subprocess.PIPE,
+                          stderr=subprocess.PIPE,
+                          text=True,
+                          errors='replace',
+                          timeout=300)
 
 
 def write_json(path: Path, data: object) -> Path:
@@ -144,13 +199,24 @@ def write_json(path: Path, data: object) -> Path:
 
 
 def predictions(detections: list[dict], scan: str = 'Area_9/lab_3/lab_3.txt') -> dict:
-    return {'format': 'synthdet.predictions/1', 'scan': scan, 'model': 'exp2',
-            'classes': ['table', 'chair', 'sofa', 'yumi', '3dprinter'], 'detections': detections}
+    return {
+        'format': 'synthdet.predictions/1',
+        'scan': scan,
+        'model': 'exp2',
+        'classes': ['table', 'chair', 'sofa', 'yumi', '3dprinter'],
+        'detections': detections
+    }
 
 
 def corners(points=L_ROOM, floor_z=FLOOR_Z, ceiling_z=CEILING_Z) -> dict:
-    return {'format': 'synthdet.corners/1', 'scan': 'Area_9/lab_3/lab_3.txt', 'corners': points,
-            'floor_z': floor_z, 'ceiling_z': ceiling_z, 'quality': {}}
+    return {
+        'format': 'synthdet.corners/1',
+        'scan': 'Area_9/lab_3/lab_3.txt',
+        'corners': points,
+        'floor_z': floor_z,
+        'ceiling_z': ceiling_z,
+        'quality': {}
+    }
 
 
 @pytest.fixture(scope='module')
@@ -169,18 +235,23 @@ def workspace(tmp_path_factory) -> dict:
     library = root / 'my library'
     library.mkdir()
     make_step = root / 'make_step_file.py'
-    make_step.write_text(textwrap.dedent(f'''\
+    make_step.write_text(
+        textwrap.dedent(f'''\
         import FreeCAD as App, Part
         cylinder = Part.makeCylinder(50, 200, App.Vector({STEP_CENTRE[0]}, {STEP_CENTRE[1]}, 0))
         cylinder.exportStep({str(library / 'sofa.step')!r})
-    '''), encoding='utf-8')
+    '''),
+        encoding='utf-8')
     run_freecad(make_step)
     assert (library / 'sofa.step').stat().st_size > 0
     return {
-        'root': root, 'marker': marker, 'scan': scan, 'hostile': hostile,
-        'hostile_scan': hostile_scan, 'library': library,
-        'predictions': write_json(root / 'lab_3.pred.json',
-                                  predictions(detections, hostile_scan)),
+        'root': root,
+        'marker': marker,
+        'scan': scan,
+        'hostile': hostile,
+        'hostile_scan': hostile_scan,
+        'library': library,
+        'predictions': write_json(root / 'lab_3.pred.json', predictions(detections, hostile_scan)),
         'corners': write_json(root / 'lab_3.corners.json', corners()),
         'out': root / 'out dir \'ü"' / 'room.FCStd',
     }
@@ -189,9 +260,14 @@ def workspace(tmp_path_factory) -> dict:
 @pytest.fixture(scope='module')
 def built(workspace) -> dict:
     """Run the CLI's document builder (real freecadcmd) on the main inputs."""
-    return build_document(workspace['scan'], workspace['predictions'], workspace['out'],
-                          workspace['corners'], workspace['library'], min_score=0.3,
-                          wall_thickness=0.15)
+    return build_document(
+        workspace['scan'],
+        workspace['predictions'],
+        workspace['out'],
+        workspace['corners'],
+        workspace['library'],
+        min_score=0.3,
+        wall_thickness=0.15)
 
 
 @pytest.fixture(scope='module')
@@ -200,9 +276,12 @@ def empty_build(workspace) -> tuple[int, Path]:
     root = workspace['root']
     out = root / 'empty.FCStd'
     code = configurator_main([
-        'freecad', '--scan', str(workspace['scan']), '--predictions',
+        'freecad', '--scan',
+        str(workspace['scan']), '--predictions',
         str(write_json(root / 'empty.pred.json', predictions([]))), '--corners',
-        str(workspace['corners']), '--out', str(out)])
+        str(workspace['corners']), '--out',
+        str(out)
+    ])
     return code, out
 
 
@@ -214,12 +293,17 @@ def scanned_build(workspace) -> dict:
     scan = root / 'room.bin'
     write_scan(scan, room.points)
     centre = room.polygon.mean(axis=0)
-    pred = write_json(root / 'room.pred.json', predictions(
-        [detection('table', 0.9, (centre[0], centre[1], room.floor_z + 0.4), (1.2, 0.6, 0.8))],
-        str(scan)))
+    pred = write_json(
+        root / 'room.pred.json',
+        predictions(
+            [detection('table', 0.9, (centre[0], centre[1], room.floor_z + 0.4), (1.2, 0.6, 0.8))],
+            str(scan)))
     out = root / 'scanned.FCStd'
-    code = configurator_main(['freecad', '--scan', str(scan), '--predictions', str(pred),
-                              '--out', str(out)])
+    code = configurator_main(
+        ['freecad', '--scan',
+         str(scan), '--predictions',
+         str(pred), '--out',
+         str(out)])
     return {'code': code, 'out': out, 'room': room}
 
 
@@ -230,9 +314,13 @@ def inspection(workspace, built, empty_build, scanned_build) -> dict:
     script = root / 'inspect_documents.py'
     script.write_text(INSPECT_SCRIPT, encoding='utf-8')
     report = root / 'inspection.json'
-    params = write_json(root / 'inspect_params.json', {
-        'main': built['document'], 'empty': str(empty_build[1]),
-        'scanned': str(scanned_build['out']), 'report': str(report)})
+    params = write_json(
+        root / 'inspect_params.json', {
+            'main': built['document'],
+            'empty': str(empty_build[1]),
+            'scanned': str(scanned_build['out']),
+            'report': str(report)
+        })
     process = run_freecad(script, {'SYNTHDET_TEST_PARAMS': str(params)})
     assert report.is_file(), (process.stdout + process.stderr)[-3000:]
     return json.loads(report.read_text(encoding='utf-8'))
@@ -312,8 +400,8 @@ def test_cli_rejects_bad_inputs_with_clear_errors(workspace, tmp_path, capsys):
     empty_scan = tmp_path / 'empty.txt'
     empty_scan.write_text('')
     nan = tmp_path / 'nan.pred.json'
-    nan.write_text(json.dumps(predictions([detection('chair', float('nan'), (1, 1, 1),
-                                                     (1, 1, 1))])))
+    nan.write_text(
+        json.dumps(predictions([detection('chair', float('nan'), (1, 1, 1), (1, 1, 1))])))
     future = write_json(tmp_path / 'future.pred.json',
                         dict(predictions([]), format='synthdet.predictions/9'))
     cases = [
@@ -322,13 +410,13 @@ def test_cli_rejects_bad_inputs_with_clear_errors(workspace, tmp_path, capsys):
         (cli('--scan', workspace['scan'], '--predictions', nan, '--corners', workspace['corners'],
              '--out', tmp_path / 'a.FCStd'), 'detections[0].score: expected a finite number'),
         (cli('--scan', workspace['scan'], '--predictions', future, '--corners',
-             workspace['corners'], '--out', tmp_path / 'a.FCStd'),
-         'unsupported format \'synthdet.predictions/9\''),
+             workspace['corners'], '--out',
+             tmp_path / 'a.FCStd'), 'unsupported format \'synthdet.predictions/9\''),
         (cli('--scan', workspace['scan'], '--predictions', workspace['predictions'], '--corners',
              workspace['corners'], '--out', tmp_path / 'a.step'), 'must end with .FCStd'),
         (cli('--scan', workspace['scan'], '--predictions', workspace['predictions'], '--corners',
-             workspace['corners'], '--library', root / 'missing', '--out', tmp_path / 'a.FCStd'),
-         'library folder not found'),
+             workspace['corners'], '--library', root / 'missing', '--out',
+             tmp_path / 'a.FCStd'), 'library folder not found'),
         (cli('--scan', workspace['scan'], '--predictions', workspace['predictions'], '--corners',
              workspace['corners'], '--out', tmp_path / 'a.FCStd', '--freecadcmd',
              tmp_path / 'no-freecad'), 'not found: install FreeCAD'),
@@ -344,11 +432,14 @@ def test_cli_rejects_bad_inputs_with_clear_errors(workspace, tmp_path, capsys):
 
 def test_macro_alone_validates_its_input_and_fails_headless(workspace, tmp_path):
     bad = tmp_path / 'bad.pred.json'
-    bad.write_text(json.dumps(predictions([detection('table', 0.9, (1, float('nan'), 0),
-                                                     (1, 1, 1))])))
+    bad.write_text(
+        json.dumps(predictions([detection('table', 0.9, (1, float('nan'), 0), (1, 1, 1))])))
     result, out = tmp_path / 'result.json', tmp_path / 'bad.FCStd'
-    process = run_freecad(MACRO, {'SYNTHDET_PREDICTIONS': str(bad), 'SYNTHDET_OUT': str(out),
-                                  'SYNTHDET_RESULT': str(result)})
+    process = run_freecad(MACRO, {
+        'SYNTHDET_PREDICTIONS': str(bad),
+        'SYNTHDET_OUT': str(out),
+        'SYNTHDET_RESULT': str(result)
+    })
     assert process.returncode == 1
     report = json.loads(result.read_text())
     assert report['format'] == 'synthdet.freecad-result/1' and report['status'] == 'error'
@@ -395,8 +486,8 @@ def test_reopened_document_has_groups_placements_and_properties(workspace, inspe
         signed = entry['angle'] * np.sign(entry['axis'][2]) if entry['angle'] else 0.0
         assert math.isclose(math.remainder(signed - yaw, 2 * math.pi), 0.0, abs_tol=1e-9)
         half = np.array(source['size']) * 500
-        np.testing.assert_allclose(entry['local'], np.concatenate([-half, half]), atol=1e-3,
-                                   err_msg=entry['class'])
+        np.testing.assert_allclose(
+            entry['local'], np.concatenate([-half, half]), atol=1e-3, err_msg=entry['class'])
         aabb = rotated_aabb(source['center'], source['size'], source['yaw'])
         if entry['class'] == 'yumi':  # round arm links do not reach the box's vertical edges
             assert np.all(entry['world'][:3] >= aabb[:3] - 0.5)
@@ -412,25 +503,29 @@ def test_room_floor_and_walls(inspection):
     assert objects['Floor']['area'] == pytest.approx(area * 1e6)
     assert objects['Floor']['world'][2] == pytest.approx(FLOOR_Z * 1000)
     thickness = 150.0
-    np.testing.assert_allclose(objects['Walls']['world'],
-                               [-thickness, -thickness, FLOOR_Z * 1000, 6000 + thickness,
-                                5000 + thickness, CEILING_Z * 1000], atol=1e-6)
+    np.testing.assert_allclose(
+        objects['Walls']['world'], [
+            -thickness, -thickness, FLOOR_Z * 1000, 6000 + thickness, 5000 + thickness,
+            CEILING_Z * 1000
+        ],
+        atol=1e-6)
     height = (CEILING_Z - FLOOR_Z) * 1000
     outer_area = (6000 + 2 * thickness) * (5000 + 2 * thickness) - (3000 - 0) * (2000 - 0)
-    assert objects['Walls']['volume'] == pytest.approx((outer_area - area * 1e6) * height,
-                                                       rel=1e-6)
+    assert objects['Walls']['volume'] == pytest.approx(
+        (outer_area - area * 1e6) * height, rel=1e-6)
 
 
 def test_editing_parameters_in_plain_freecad_recomputes_geometry(inspection):
     edited = inspection['edited']
     assert edited['invalid'] == []
     table_y, sofa_y = 400.0, 450.0
-    np.testing.assert_allclose(edited['table'], [-1000, -table_y, -375, 1000, table_y, 375],
-                               atol=1e-3)
-    np.testing.assert_allclose(edited['sofa'], [-1500, -sofa_y, -425, 1500, sofa_y, 425],
-                               atol=1e-3)
-    np.testing.assert_allclose(edited['walls'], [-300, -300, FLOOR_Z * 1000, 6300, 5300,
-                                                 FLOOR_Z * 1000 + 4000], atol=1e-6)
+    np.testing.assert_allclose(
+        edited['table'], [-1000, -table_y, -375, 1000, table_y, 375], atol=1e-3)
+    np.testing.assert_allclose(
+        edited['sofa'], [-1500, -sofa_y, -425, 1500, sofa_y, 425], atol=1e-3)
+    np.testing.assert_allclose(
+        edited['walls'], [-300, -300, FLOOR_Z * 1000, 6300, 5300, FLOOR_Z * 1000 + 4000],
+        atol=1e-6)
     before, after = inspection['arm_before'], edited['arm']
     # the right arm hung down beside the body; a 90 degree shoulder joint lifts it sideways
     assert after[2] - before[2] > 0.3 * 600
@@ -475,3 +570,34 @@ def test_freecad_failure_is_reported_not_hidden(workspace, tmp_path):
     with pytest.raises(FreecadFailed, match='FreeCAD import failed'):
         build_document(workspace['scan'], workspace['predictions'], out_dir / 'room.FCStd',
                        workspace['corners'])
+
+
+def test_macro_in_the_gui_asks_for_the_files_and_imports(workspace, tmp_path):
+    driver, config = tmp_path / 'drive_gui.py', tmp_path / 'user.cfg'
+    driver.write_text(GUI_DRIVER, encoding='utf-8')
+    config.write_text(GUI_USER_CONFIG, encoding='utf-8')
+    report = tmp_path / 'gui.json'
+    params = write_json(
+        tmp_path / 'gui_params.json', {
+            'macro': str(MACRO),
+            'report': str(report),
+            'answers': [str(workspace['predictions']),
+                        str(workspace['corners'])]
+        })
+    process = subprocess.run(
+        ['freecad', '-u', str(config), str(driver)],
+        env=dict(os.environ, QT_QPA_PLATFORM='offscreen', SYNTHDET_TEST_PARAMS=str(params)),
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        errors='replace',
+        timeout=300)
+    assert report.is_file(), process.stdout[-3000:]
+    seen = json.loads(report.read_text(encoding='utf-8'))
+    assert seen['gui'] and len(seen['dialogs']) == 2
+    assert 'predictions' in seen['dialogs'][0] and 'corners' in seen['dialogs'][1]
+    assert "no CAD model for class 'forklift'" in seen['messages'][0]
+    expected = [d['class'] for d in MAIN_DETECTIONS if d['score'] >= 0.3] + workspace['hostile']
+    assert seen['classes'] == sorted(expected)
+    assert seen['floor_area'] == pytest.approx(24e6)
