@@ -45,7 +45,8 @@ BENCH_CLASSES = ('table', 'chair', 'sofa', 'bookcase', 'board')
 def load_mmdet3d_s3dis_data():
     """The installed ``S3DISData`` class, imported from mmdet3d's shipped tools folder."""
     spec = importlib.util.find_spec('mmdet3d')
-    path = Path(spec.origin).parent / '.mim' / 'tools' / 'dataset_converters' / 's3dis_data_utils.py'
+    path = Path(
+        spec.origin).parent / '.mim' / 'tools' / 'dataset_converters' / 's3dis_data_utils.py'
     module_spec = importlib.util.spec_from_file_location('mmdet3d_s3dis_data_utils', path)
     module = importlib.util.module_from_spec(module_spec)
     module_spec.loader.exec_module(module)
@@ -80,8 +81,8 @@ def run_mmdet3d(root: Path, workers: int) -> tuple[float, list, dict[str, list[s
     start = time.perf_counter()
     file_orders = {}
     for room in sorted(os.listdir(data_dir / 'Area_1')):
-        file_orders[room] = mmdet3d_collect_room(str(data_dir / 'Area_1' / room / 'Annotations'),
-                                                 str(output_folder / f'Area_1_{room}'))
+        file_orders[room] = mmdet3d_collect_room(
+            str(data_dir / 'Area_1' / room / 'Annotations'), str(output_folder / f'Area_1_{room}'))
     with contextlib.redirect_stdout(io.StringIO()):
         infos = s3dis_data_cls(root_path=str(root), split='Area_1').get_infos(num_workers=workers)
     return time.perf_counter() - start, infos, file_orders
@@ -115,8 +116,12 @@ def check_identical(root: Path, area: int, out_dir: Path, mm_root: Path, mm_info
         sem = np.fromfile(out_dir / 'semantic_mask' / f'{name}.bin', dtype=np.int64)
         # instance id of each annotation file in each converter
         mm_id = {Path(p).name: k for k, p in enumerate(mm_orders[room], start=1)}
-        our_id = {Path(p).name: k for k, p in enumerate(
-            natural_file_order(root / S3DIS_DIR / f'Area_{area}' / room / 'Annotations'), start=1)}
+        our_id = {
+            Path(p).name: k
+            for k, p in enumerate(
+                natural_file_order(root / S3DIS_DIR / f'Area_{area}' / room / 'Annotations'),
+                start=1)
+        }
         assert mm_id.keys() == our_id.keys(), room
         renumber = np.zeros(len(mm_id) + 1, dtype=np.int64)  # mmdet3d id -> synthdet id
         for file_name, k in mm_id.items():
@@ -128,8 +133,11 @@ def check_identical(root: Path, area: int, out_dir: Path, mm_root: Path, mm_info
         # boxes: mmdet3d lists them by its instance id, synthdet by its own
         mm_file = {k: f for f, k in mm_id.items()}
         mm_ids = [k for k in sorted(mm_file) if mm_file[k].split('_')[0] in BENCH_CLASSES]
-        mm_by_file = {mm_file[k]: (int(label), box.tolist()) for k, label, box in zip(
-            mm_ids, mm_info['annos']['class'], mm_info['annos']['gt_boxes_upright_depth'])}
+        mm_by_file = {
+            mm_file[k]: (int(label), box.tolist())
+            for k, label, box in zip(mm_ids, mm_info['annos']['class'], mm_info['annos']
+                                     ['gt_boxes_upright_depth'])
+        }
         our_files = [f for f in sorted(our_id, key=our_id.get) if f.split('_')[0] in BENCH_CLASSES]
         assert [mm_by_file[f] for f in our_files] == [
             (inst['bbox_label_3d'], inst['bbox_3d']) for inst in ours[name]['instances']], \
@@ -141,10 +149,16 @@ def check_identical(root: Path, area: int, out_dir: Path, mm_root: Path, mm_info
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--rooms', type=int, default=20)
-    parser.add_argument('--points-per-object', type=int, default=18000,
-                        help='18000 gives about 300k points per room')
-    parser.add_argument('--workers', type=int, default=2,
-                        help='synthdet processes; also mmdet3d S3DISData threads')
+    parser.add_argument(
+        '--points-per-object',
+        type=int,
+        default=18000,
+        help='18000 gives about 300k points per room')
+    parser.add_argument(
+        '--workers',
+        type=int,
+        default=2,
+        help='synthdet processes; also mmdet3d S3DISData threads')
     parser.add_argument('--work-dir', help='keep data here (default: a temporary folder)')
     args = parser.parse_args()
     area = 7
@@ -153,9 +167,14 @@ def main() -> None:
         root, mm_root = work / 'synthetic', work / 'mmdet3d'
         if not (root / S3DIS_DIR / f'Area_{area}').is_dir():
             print(f'writing {args.rooms} rooms ...', flush=True)
-            write_synthetic_area(root, area, args.rooms, seed=0, classes=BENCH_CLASSES,
-                                 points_per_object=args.points_per_object,
-                                 room_size=(7.0, 6.0, 3.0))
+            write_synthetic_area(
+                root,
+                area,
+                args.rooms,
+                seed=0,
+                classes=BENCH_CLASSES,
+                points_per_object=args.points_per_object,
+                room_size=(7.0, 6.0, 3.0))
         (mm_root / S3DIS_DIR).mkdir(parents=True, exist_ok=True)
         link = mm_root / S3DIS_DIR / 'Area_1'
         if not link.exists():
@@ -166,13 +185,14 @@ def main() -> None:
         ours_1 = run_synthdet(root, work / 'synthdet_w1', area, workers=1)
         ours_n = run_synthdet(root, work / 'synthdet', area, workers=args.workers)
         n_boxes = check_identical(root, area, work / 'synthdet', mm_root, mm_infos, mm_orders)
-        n_points = sum(len(np.fromfile(p, dtype=np.float32)) // 6
-                       for p in (work / 'synthdet' / 'points').glob('*.bin'))
+        n_points = sum(
+            len(np.fromfile(p, dtype=np.float32)) // 6
+            for p in (work / 'synthdet' / 'points').glob('*.bin'))
     print(f'{args.rooms} rooms, {n_points} points, {n_boxes} boxes: points, masks and boxes '
           'identical')
     print(f'{"converter":<42} {"seconds":>8} {"Mpoints/s":>10}')
-    for label, seconds in ((f'mmdet3d collect + S3DISData ({args.workers} threads)', mm_seconds),
-                           ('synthdet convert_s3dis (1 worker)', ours_1),
+    for label, seconds in ((f'mmdet3d collect + S3DISData ({args.workers} threads)',
+                            mm_seconds), ('synthdet convert_s3dis (1 worker)', ours_1),
                            (f'synthdet convert_s3dis ({args.workers} workers)', ours_n)):
         print(f'{label:<42} {seconds:8.2f} {n_points / seconds / 1e6:10.2f}')
     print(f'convert speedup vs mmdet3d converter: {mm_seconds / ours_n:.1f}x')

@@ -28,10 +28,17 @@ OBJECT_PARTS = {
 GENERIC_PARTS = [(0.7, 0.7, 0.4, 0.0)]  # any other class name, e.g. 'stairs'
 
 CLASS_COLOURS = {
-    'ceiling': (225, 225, 215), 'floor': (95, 90, 85), 'wall': (180, 175, 160),
-    'table': (140, 90, 50), 'chair': (200, 40, 40), 'sofa': (40, 80, 200),
-    'bookcase': (120, 60, 160), 'board': (240, 240, 240), 'yumi': (250, 200, 0),
-    '3dprinter': (30, 30, 30), 'clutter': (60, 160, 60),
+    'ceiling': (225, 225, 215),
+    'floor': (95, 90, 85),
+    'wall': (180, 175, 160),
+    'table': (140, 90, 50),
+    'chair': (200, 40, 40),
+    'sofa': (40, 80, 200),
+    'bookcase': (120, 60, 160),
+    'board': (240, 240, 240),
+    'yumi': (250, 200, 0),
+    '3dprinter': (30, 30, 30),
+    'clutter': (60, 160, 60),
 }
 
 
@@ -59,11 +66,13 @@ def _sample_object(rng: np.random.Generator, parts: list, centre_xy: np.ndarray,
     boxes = []
     for size_x, size_y, size_z, z_bottom in parts:
         half = np.array([size_y, size_x] if swap_xy else [size_x, size_y]) / 2
-        boxes.append((np.r_[centre_xy - half, z_bottom], np.r_[centre_xy + half, z_bottom + size_z]))
-    areas = np.array([2 * (s[0] * s[1] + s[0] * s[2] + s[1] * s[2])
-                      for s in (hi - lo for lo, hi in boxes)])
+        boxes.append((np.r_[centre_xy - half, z_bottom], np.r_[centre_xy + half,
+                                                               z_bottom + size_z]))
+    areas = np.array(
+        [2 * (s[0] * s[1] + s[0] * s[2] + s[1] * s[2]) for s in (hi - lo for lo, hi in boxes)])
     counts = np.maximum(1, np.round(n * areas / areas.sum()).astype(int))
-    return np.concatenate([_sample_box_surface(rng, lo, hi, k) for (lo, hi), k in zip(boxes, counts)])
+    return np.concatenate(
+        [_sample_box_surface(rng, lo, hi, k) for (lo, hi), k in zip(boxes, counts)])
 
 
 def _footprint(parts: list, swap_xy: bool) -> np.ndarray:
@@ -71,7 +80,9 @@ def _footprint(parts: list, swap_xy: bool) -> np.ndarray:
     return extent[::-1] if swap_xy else extent
 
 
-def _place_objects(rng: np.random.Generator, classes: Sequence[str], room_xy: np.ndarray,
+def _place_objects(rng: np.random.Generator,
+                   classes: Sequence[str],
+                   room_xy: np.ndarray,
                    margin: float = 0.15) -> list[tuple[str, np.ndarray, bool]]:
     """One object per class plus up to three extra ones, without xy overlap (rejection)."""
     wanted = list(classes) + list(rng.choice(list(classes), size=3)) + ['clutter'] * 2
@@ -84,8 +95,9 @@ def _place_objects(rng: np.random.Generator, classes: Sequence[str], room_xy: np
             if np.any(room_xy - 2 * margin < 2 * half):
                 break
             centre = rng.uniform(half + margin, room_xy - half - margin)
-            if all(np.any(np.abs(centre - other) >= half + other_half + margin)
-                   for _, other, _, other_half in placed):
+            if all(
+                    np.any(np.abs(centre - other) >= half + other_half + margin)
+                    for _, other, _, other_half in placed):
                 placed.append((class_name, centre, swap_xy, half))
                 break
     return [(name, centre, swap) for name, centre, swap, _ in placed]
@@ -96,13 +108,19 @@ def _write_points(path: Path, points: np.ndarray) -> None:
     path.write_text(('%.3f %.3f %.3f %d %d %d\n' * len(rows)) % tuple(rows.ravel()))
 
 
-def write_synthetic_area(root_path: Path, area: int, n_rooms: int, seed: int,
-                         classes: Sequence[str] = ('table', 'chair', 'sofa', 'yumi', '3dprinter'),
-                         points_per_object: int = 800,
-                         room_size: tuple[float, float, float] = (4.0, 4.0, 3.0)
-                         ) -> dict[str, list[dict]]:
-    """Write S3DIS-format rooms under root_path/Stanford3dDataset_v1.2_Aligned_Version/Area_<area>/ and return
-    {room_name: [{'class': str, 'min': [x,y,z], 'max': [x,y,z]}, ...]} (the true axis-aligned boxes).
+def write_synthetic_area(
+    root_path: Path,
+    area: int,
+    n_rooms: int,
+    seed: int,
+    classes: Sequence[str] = ('table', 'chair', 'sofa', 'yumi', '3dprinter'),
+    points_per_object: int = 800,
+    room_size: tuple[float, float, float] = (4.0, 4.0, 3.0)
+) -> dict[str, list[dict]]:
+    """Write S3DIS-format rooms under
+    root_path/Stanford3dDataset_v1.2_Aligned_Version/Area_<area>/ and return
+    {room_name: [{'class': str, 'min': [x,y,z], 'max': [x,y,z]}, ...]}
+    (the true axis-aligned boxes).
 
     Boxes are listed for every object of ``classes`` (not for structure or clutter), in the
     room's own written frame (not shifted), and equal the min/max of the written points.
@@ -113,7 +131,8 @@ def write_synthetic_area(root_path: Path, area: int, n_rooms: int, seed: int,
     length, width, height = room_size
     truth: dict[str, list[dict]] = {}
     for room_index in range(n_rooms):
-        room_name = f'{ROOM_TYPES[room_index % len(ROOM_TYPES)]}_{room_index // len(ROOM_TYPES) + 1}'
+        room_type = ROOM_TYPES[room_index % len(ROOM_TYPES)]
+        room_name = f'{room_type}_{room_index // len(ROOM_TYPES) + 1}'
         ann_dir = area_dir / room_name / 'Annotations'
         ann_dir.mkdir(parents=True, exist_ok=True)
         origin = np.r_[rng.uniform(-20.0, 20.0, 2), rng.uniform(0.0, 1.0)]
@@ -133,7 +152,8 @@ def write_synthetic_area(root_path: Path, area: int, n_rooms: int, seed: int,
         for class_name, centre, swap_xy in _place_objects(rng, classes, np.array([length, width])):
             counters[class_name] = counters.get(class_name, 0) + 1
             n = points_per_object // 2 if class_name == 'clutter' else points_per_object
-            xyz = _sample_object(rng, OBJECT_PARTS.get(class_name, GENERIC_PARTS), centre, swap_xy, n)
+            xyz = _sample_object(rng, OBJECT_PARTS.get(class_name, GENERIC_PARTS), centre, swap_xy,
+                                 n)
             annotations.append((f'{class_name}_{counters[class_name]}', xyz))
         boxes, room_chunks = [], []
         for instance, xyz in annotations:
@@ -145,9 +165,11 @@ def write_synthetic_area(root_path: Path, area: int, n_rooms: int, seed: int,
             room_chunks.append(points)
             if class_name in classes:
                 # '%.3f' rounding is monotonic, so the rounded min/max are the written min/max.
-                boxes.append({'class': class_name,
-                              'min': [float(f'{v:.3f}') for v in xyz.min(axis=0)],
-                              'max': [float(f'{v:.3f}') for v in xyz.max(axis=0)]})
+                boxes.append({
+                    'class': class_name,
+                    'min': [float(f'{v:.3f}') for v in xyz.min(axis=0)],
+                    'max': [float(f'{v:.3f}') for v in xyz.max(axis=0)]
+                })
         _write_points(area_dir / room_name / f'{room_name}.txt', np.concatenate(room_chunks))
         truth[room_name] = boxes
     return truth

@@ -36,9 +36,12 @@ def _outputs(out_dir: Path) -> list[str]:
 @pytest.fixture(scope='module')
 def converted(tmp_path_factory):
     root = tmp_path_factory.mktemp('s3dis')
-    truth = {area: write_synthetic_area(root, area, n_rooms=3, seed=area, points_per_object=150,
-                                        classes=DETECTION_CLASSES)
-             for area in (2, 7)}
+    truth = {
+        area:
+        write_synthetic_area(
+            root, area, n_rooms=3, seed=area, points_per_object=150, classes=DETECTION_CLASSES)
+        for area in (2, 7)
+    }
     summary = convert_s3dis(root, root)
     return root, truth, summary
 
@@ -49,22 +52,32 @@ def test_round_trip_boxes_masks_and_info_format(converted):
     assert not summary.skipped and not summary.unknown_classes
     for area, rooms in truth.items():
         infos = pickle.loads((root / f's3dis_infos_Area_{area}.pkl').read_bytes())
-        assert infos['metainfo'] == {'categories': {c: i for i, c in enumerate(DETECTION_CLASSES)},
-                                     'dataset': 's3dis', 'info_version': '1.1'}
+        assert infos['metainfo'] == {
+            'categories': {
+                c: i
+                for i, c in enumerate(DETECTION_CLASSES)
+            },
+            'dataset': 's3dis',
+            'info_version': '1.1'
+        }
         assert [i['sample_idx'] for i in infos['data_list']] == list(range(len(rooms)))
         for info, room in zip(infos['data_list'], sorted(rooms)):
             name = f'Area_{area}_{room}'
             assert info['lidar_points'] == {'num_pts_feats': 6, 'lidar_path': f'{name}.bin'}
-            assert info['pts_instance_mask_path'] == info['pts_semantic_mask_path'] == f'{name}.bin'
+            assert info['pts_instance_mask_path'] == f'{name}.bin'
+            assert info['pts_semantic_mask_path'] == f'{name}.bin'
             room_dir = root / S3DIS_DIR / f'Area_{area}' / room
             points, instance, semantic = _load_room(root, name)
             # masks and points match the annotation files line for line
-            ann_files = sorted((room_dir / 'Annotations').glob('*.txt'),
-                               key=lambda p: (p.stem.split('_')[0], int(p.stem.split('_')[1])))
-            assert len(points) == len(instance) == len(semantic) == _line_count(room_dir / f'{room}.txt')
+            ann_files = sorted(
+                (room_dir / 'Annotations').glob('*.txt'),
+                key=lambda p: (p.stem.split('_')[0], int(p.stem.split('_')[1])))
+            assert len(points) == len(instance) == len(semantic) == _line_count(
+                room_dir / f'{room}.txt')
             assert np.array_equal(np.bincount(instance)[1:], [_line_count(p) for p in ann_files])
             for k, path in enumerate(ann_files, start=1):
-                assert set(semantic[instance == k]) == {SEMANTIC_CLASSES.index(path.stem.split('_')[0])}
+                assert set(
+                    semantic[instance == k]) == {SEMANTIC_CLASSES.index(path.stem.split('_')[0])}
             # the shift: room minimum at 0, colours kept
             raw = np.loadtxt(room_dir / f'{room}.txt')
             assert np.allclose(points[:, :3].min(axis=0), 0.0)
@@ -76,10 +89,13 @@ def test_round_trip_boxes_masks_and_info_format(converted):
             for box in rooms[room]:
                 centre = (np.add(box['min'], box['max']) / 2 - shift)
                 size = np.subtract(box['max'], box['min'])
-                assert (DETECTION_CLASSES.index(box['class']), True) in [
-                    (label, np.allclose(bbox, np.r_[centre, size], atol=1e-5)) for label, bbox in got]
-            detection_ids = [k for k, p in enumerate(ann_files, start=1)
-                             if p.stem.split('_')[0] in DETECTION_CLASSES]
+                assert (DETECTION_CLASSES.index(box['class']),
+                        True) in [(label, np.allclose(bbox, np.r_[centre, size], atol=1e-5))
+                                  for label, bbox in got]
+            detection_ids = [
+                k for k, p in enumerate(ann_files, start=1)
+                if p.stem.split('_')[0] in DETECTION_CLASSES
+            ]
             for inst, k in zip(info['instances'], detection_ids):
                 xyz = points[instance == k, :3]
                 lo, hi = xyz.min(axis=0), xyz.max(axis=0)
@@ -87,8 +103,10 @@ def test_round_trip_boxes_masks_and_info_format(converted):
     assert summary.num_points == sum(
         len(_load_room(root, f'Area_{a}_{r}')[0]) for a, rooms in truth.items() for r in rooms)
     assert summary.instances_per_class == {
-        c: n for c in DETECTION_CLASSES
-        if (n := sum(b['class'] == c for rooms in truth.values() for bs in rooms.values() for b in bs))}
+        c: n
+        for c in DETECTION_CLASSES if (n := sum(
+            b['class'] == c for rooms in truth.values() for bs in rooms.values() for b in bs))
+    }
 
 
 def test_workers_give_identical_outputs(converted, tmp_path):
@@ -96,7 +114,8 @@ def test_workers_give_identical_outputs(converted, tmp_path):
     convert_s3dis(root, tmp_path, areas=[7], workers=2)
     for path in (tmp_path / 'points').iterdir():
         for sub in ('points', 'instance_mask', 'semantic_mask'):
-            assert (tmp_path / sub / path.name).read_bytes() == (root / sub / path.name).read_bytes()
+            assert (tmp_path / sub / path.name).read_bytes() == (root / sub /
+                                                                 path.name).read_bytes()
     assert pickle.loads((tmp_path / 's3dis_infos_Area_7.pkl').read_bytes()) == \
         pickle.loads((root / 's3dis_infos_Area_7.pkl').read_bytes())
     assert not (tmp_path / 's3dis_infos_Area_2.pkl').exists()
@@ -113,8 +132,10 @@ def test_missing_area_and_layout_errors(converted, tmp_path):
 def _write_points(path: Path, formats: list[str], seed: int) -> list[str]:
     rng = np.random.default_rng(seed)
     xyz, rgb = rng.uniform(-50, 50, (300, 3)), rng.integers(0, 256, (300, 3))
-    lines = [' '.join([formats[k % len(formats)].format(v) for v in p] + [str(v) for v in c])
-             for k, (p, c) in enumerate(zip(xyz, rgb))]
+    lines = [
+        ' '.join([formats[k % len(formats)].format(v) for v in p] + [str(v) for v in c])
+        for k, (p, c) in enumerate(zip(xyz, rgb))
+    ]
     lines[3] = '  .5 5. -0.0\t1 2 3e0  \r'  # odd but valid spellings
     lines.insert(10, '')  # blank lines are ignored
     path.write_text('\n'.join(lines))
@@ -163,7 +184,8 @@ def test_bad_line_raises_naming_file_and_line(tmp_path, line, message):
         read_point_file(path)
     assert str(error.value) == f'{path}:3: {message}'
     points, bad = read_point_file(path, skip_bad_lines=True)
-    assert np.array_equal(points[:, 0], [0, 1, 2]) and [(b.line, b.reason) for b in bad] == [(3, message)]
+    assert np.array_equal(points[:, 0], [0, 1, 2]) and [(b.line, b.reason)
+                                                        for b in bad] == [(3, message)]
 
 
 def test_empty_file_raises(tmp_path):
@@ -213,8 +235,8 @@ def test_bad_input_skip_reports_and_converts_the_rest(tmp_path):
 
 
 def test_unknown_classes_become_clutter_with_one_warning(tmp_path):
-    write_synthetic_area(tmp_path, 3, n_rooms=2, seed=5, points_per_object=60,
-                         classes=('table', 'stairs', 'chair'))
+    write_synthetic_area(
+        tmp_path, 3, n_rooms=2, seed=5, points_per_object=60, classes=('table', 'stairs', 'chair'))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter('always')
         summary = convert_s3dis(tmp_path, tmp_path)
@@ -223,22 +245,31 @@ def test_unknown_classes_become_clutter_with_one_warning(tmp_path):
     assert len(summary.unknown_classes['stairs']) >= 2
     for room in ('office_1', 'lab_1'):
         _, instance, semantic = _load_room(tmp_path, f'Area_3_{room}')
-        ann_files = sorted((tmp_path / S3DIS_DIR / 'Area_3' / room / 'Annotations').glob('*.txt'),
-                           key=lambda p: (p.stem.split('_')[0], int(p.stem.split('_')[1])))
+        ann_files = sorted(
+            (tmp_path / S3DIS_DIR / 'Area_3' / room / 'Annotations').glob('*.txt'),
+            key=lambda p: (p.stem.split('_')[0], int(p.stem.split('_')[1])))
         stairs_ids = [k for k, p in enumerate(ann_files, 1) if p.stem.startswith('stairs')]
-        assert stairs_ids and all(set(semantic[instance == k]) == {SEMANTIC_CLASSES.index('clutter')}
-                                  for k in stairs_ids)
+        assert stairs_ids and all(
+            set(semantic[instance == k]) == {SEMANTIC_CLASSES.index('clutter')}
+            for k in stairs_ids)
 
 
 def test_cli_reports_errors_and_summaries(tmp_path):
     chair = _area_with_defects(tmp_path)
-    command = [sys.executable, str(REPO_ROOT / 'tools' / 'create_data.py'), 's3dis',
-               '--root-path', str(tmp_path), '--out-dir', str(tmp_path / 'out')]
+    command = [
+        sys.executable,
+        str(REPO_ROOT / 'tools' / 'create_data.py'), 's3dis', '--root-path',
+        str(tmp_path), '--out-dir',
+        str(tmp_path / 'out')
+    ]
     failed = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path)
     assert failed.returncode == 1, failed.stderr
     assert f'{chair.parent}/board_1.txt:1: file is empty' in failed.stderr
-    done = subprocess.run(command + ['--on-error', 'skip', '--areas', '1'], capture_output=True,
-                          text=True, cwd=tmp_path)
+    done = subprocess.run(
+        command + ['--on-error', 'skip', '--areas', '1'],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert 'converted 2 rooms (Area_1: 2)' in done.stdout and 'skipped 2 input(s)' in done.stdout
     assert (tmp_path / 'out' / 's3dis_infos_Area_1.pkl').is_file()

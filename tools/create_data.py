@@ -25,8 +25,8 @@ def import_datasets_module(module: str) -> ModuleType:
     """
     if str(REPO_ROOT) not in sys.path:
         sys.path.insert(0, str(REPO_ROOT))
-    for name, folder in (('projects.synthdet', DATASETS_DIR.parent),
-                         ('projects.synthdet.datasets', DATASETS_DIR)):
+    for name, folder in (('projects.synthdet', DATASETS_DIR.parent), ('projects.synthdet.datasets',
+                                                                      DATASETS_DIR)):
         if name not in sys.modules:
             spec = importlib.util.spec_from_file_location(
                 name, folder / '__init__.py', submodule_search_locations=[str(folder)])
@@ -38,13 +38,18 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest='dataset', required=True)
     s3dis = sub.add_parser('s3dis', help='S3DIS-format areas (real areas 1-6, synthetic 7-9)')
-    s3dis.add_argument('--root-path', required=True,
-                       help='folder holding Stanford3dDataset_v1.2_Aligned_Version/')
+    s3dis.add_argument(
+        '--root-path',
+        required=True,
+        help='folder holding Stanford3dDataset_v1.2_Aligned_Version/')
     s3dis.add_argument('--out-dir', required=True, help='output folder (e.g. the same data/s3dis)')
     s3dis.add_argument('--areas', type=int, nargs='+', help='area numbers (default: all found)')
     s3dis.add_argument('--workers', type=int, default=1, help='parallel processes over rooms')
-    s3dis.add_argument('--on-error', choices=('raise', 'skip'), default='raise',
-                       help='stop at the first bad input, or skip bad lines/files and report them')
+    s3dis.add_argument(
+        '--on-error',
+        choices=('raise', 'skip'),
+        default='raise',
+        help='stop at the first bad input, or skip bad lines/files and report them')
     return parser.parse_args(argv)
 
 
@@ -52,8 +57,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     converter = import_datasets_module('s3dis_converter')
     try:
-        summary = converter.convert_s3dis(args.root_path, args.out_dir, areas=args.areas,
-                                          workers=args.workers, on_error=args.on_error)
+        summary = converter.convert_s3dis(
+            args.root_path,
+            args.out_dir,
+            areas=args.areas,
+            workers=args.workers,
+            on_error=args.on_error)
     except (converter.PointFileError, converter.S3DISLayoutError) as error:
         print(f'create_data: error: {error}', file=sys.stderr)
         return 1

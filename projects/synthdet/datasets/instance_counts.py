@@ -15,13 +15,14 @@ def info_path(data_root: str | Path, area: int) -> Path:
 
 def find_info_areas(data_root: str | Path) -> list[int]:
     """Areas N with an ``s3dis_infos_Area_N.pkl`` in data_root, sorted."""
-    names = (p.name[len('s3dis_infos_Area_'):-len('.pkl')]
-             for p in Path(data_root).glob('s3dis_infos_Area_*.pkl'))
+    names = (
+        p.name[len('s3dis_infos_Area_'):-len('.pkl')]
+        for p in Path(data_root).glob('s3dis_infos_Area_*.pkl'))
     return sorted(int(n) for n in names if n.isdigit())
 
 
-def count_instances(data_root: str | Path, areas: Sequence[int] | None = None
-                    ) -> dict[int, Counter]:
+def count_instances(data_root: str | Path,
+                    areas: Sequence[int] | None = None) -> dict[int, Counter]:
     """Count detection instances per class name in each area's info pickle.
 
     Label ids are resolved through the pickle's own ``metainfo['categories']``; instances
@@ -43,10 +44,11 @@ def count_instances(data_root: str | Path, areas: Sequence[int] | None = None
     return counts
 
 
-def table1_rows(counts: dict[int, Counter], classes: Sequence[str] = TABLE1_CLASSES
-                ) -> list[tuple[str, list[float]]]:
+def table1_rows(counts: dict[int, Counter],
+                classes: Sequence[str] = TABLE1_CLASSES) -> list[tuple[str, list[float]]]:
     """Rows of Table 1: one per area, S3DIS total (areas 1-6), synthetic total (the other
     areas), total, and the synthetic share in % (NaN where a class has no instance)."""
+
     def total(areas):
         return [sum(counts[a][c] for a in areas) for c in classes]
 
@@ -61,6 +63,7 @@ def table1_rows(counts: dict[int, Counter], classes: Sequence[str] = TABLE1_CLAS
 
 def format_table1(counts: dict[int, Counter], classes: Sequence[str] = TABLE1_CLASSES) -> str:
     """Table 1 as aligned plain text; zero counts print as '-' like the paper."""
+
     def cell(value: float, is_share: bool) -> str:
         if is_share:
             return '-' if value != value else f'{value:.1f}'
@@ -72,6 +75,7 @@ def format_table1(counts: dict[int, Counter], classes: Sequence[str] = TABLE1_CL
     lines = [' ' * width + ' ' + ' '.join(c.rjust(w) for c, w in zip(classes, widths))]
     for label, values in rows:
         is_share = label.startswith('Synthetic share')
-        lines.append(label.ljust(width) + ' ' + ' '.join(
-            cell(v, is_share).rjust(w) for v, w in zip(values, widths)))
+        lines.append(
+            label.ljust(width) + ' ' +
+            ' '.join(cell(v, is_share).rjust(w) for v, w in zip(values, widths)))
     return '\n'.join(lines)

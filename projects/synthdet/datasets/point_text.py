@@ -141,8 +141,8 @@ def _check_row(values: list[float], tokens: list[bytes]) -> str | None:
     return None
 
 
-def _parse_reference(path: Path, data: bytes, skip_bad_lines: bool
-                     ) -> tuple[np.ndarray, list[BadLine]]:
+def _parse_reference(path: Path, data: bytes,
+                     skip_bad_lines: bool) -> tuple[np.ndarray, list[BadLine]]:
     """Line-by-line parser that defines what is valid; raises or records each bad line."""
     rows: list[list[float]] = []
     bad_lines: list[BadLine] = []
@@ -172,8 +172,8 @@ def compile_parser() -> None:
     _parse_fast(np.frombuffer(b'', dtype=np.uint8), np.empty((1, NUM_COLUMNS)), _POW10)
 
 
-def read_point_file(path: str | Path, skip_bad_lines: bool = False
-                    ) -> tuple[np.ndarray, list[BadLine]]:
+def read_point_file(path: str | Path,
+                    skip_bad_lines: bool = False) -> tuple[np.ndarray, list[BadLine]]:
     """Read an ``x y z r g b`` text file into a float64 (N, 6) array.
 
     Bad lines (wrong column count, unparsable or non-finite numbers, colours outside 0-255)

@@ -3,7 +3,8 @@
 Reads ``root/Stanford3dDataset_v1.2_Aligned_Version/Area_N/<room>/Annotations/<class>_<k>.txt``
 and writes, in ``out_dir``, for every room:
 
-- ``points/Area_N_<room>.bin``: float32 (N, 6), xyz shifted so the room's minimum is 0, colours 0-255;
+- ``points/Area_N_<room>.bin``: float32 (N, 6), xyz shifted so the room's minimum is 0,
+  colours 0-255;
 - ``semantic_mask/Area_N_<room>.bin``: int64 ids of :data:`SEMANTIC_CLASSES`;
 - ``instance_mask/Area_N_<room>.bin``: int64, annotation files numbered 1..K in natural file
   order (structural ones included; 0 means unannotated), like mmdet3d's collect step;
@@ -63,23 +64,27 @@ class ConversionSummary:
 
     def report(self) -> str:
         """Human-readable multi-line summary."""
-        lines = [f'converted {sum(self.rooms_per_area.values())} rooms '
-                 f'({", ".join(f"Area_{a}: {n}" for a, n in self.rooms_per_area.items())}), '
-                 f'{self.num_points} points',
-                 'detection instances: ' + ', '.join(
-                     f'{name} {self.instances_per_class[name]}' for name in DETECTION_CLASSES)]
+        lines = [
+            f'converted {sum(self.rooms_per_area.values())} rooms '
+            f'({", ".join(f"Area_{a}: {n}" for a, n in self.rooms_per_area.items())}), '
+            f'{self.num_points} points',
+            'detection instances: ' + ', '.join(f'{name} {self.instances_per_class[name]}'
+                                                for name in DETECTION_CLASSES)
+        ]
         for name, files in sorted(self.unknown_classes.items()):
             lines.append(f'unknown class {name!r} converted as {FALLBACK_CLASS}: {len(files)} '
                          f'file(s), e.g. {files[0]}')
         if self.skipped:
             lines.append(f'skipped {len(self.skipped)} input(s):')
-            lines += [f'  {s.path}' + (f':{s.line}' if s.line is not None else '') + f': {s.reason}'
-                      for s in self.skipped]
+            lines += [
+                f'  {s.path}' + (f':{s.line}' if s.line is not None else '') + f': {s.reason}'
+                for s in self.skipped
+            ]
         return '\n'.join(lines)
 
 
 @dataclass
-class _RoomResult:
+class RoomResult:
     name: str
     num_points: int
     instances: list[dict]
@@ -96,14 +101,16 @@ def find_areas(root_path: str | Path) -> list[int]:
     data_dir = Path(root_path) / S3DIS_DIR
     if not data_dir.is_dir():
         raise S3DISLayoutError(f'{data_dir}: S3DIS data folder not found')
-    return sorted(int(p.name[5:]) for p in data_dir.iterdir()
-                  if p.is_dir() and re.fullmatch(r'Area_\d+', p.name))
+    return sorted(
+        int(p.name[5:]) for p in data_dir.iterdir()
+        if p.is_dir() and re.fullmatch(r'Area_\d+', p.name))
 
 
 def list_rooms(area_dir: Path) -> list[str]:
     """Room folder names of an area in natural order (``office_2`` before ``office_10``)."""
-    return sorted((p.name for p in area_dir.iterdir() if p.is_dir() and not p.name.startswith('.')),
-                  key=_natural_key)
+    return sorted(
+        (p.name for p in area_dir.iterdir() if p.is_dir() and not p.name.startswith('.')),
+        key=_natural_key)
 
 
 def annotation_class(path: Path) -> str:
@@ -131,8 +138,9 @@ def _box(points: np.ndarray) -> list[float]:
     return np.concatenate([(lo + hi) / 2, hi - lo]).tolist()
 
 
-def _read_room(room_dir: Path, skip: bool
-               ) -> tuple[list[tuple[str, np.ndarray]], list[SkippedInput], dict[str, list[str]]]:
+def _read_room(
+        room_dir: Path, skip: bool
+) -> tuple[list[tuple[str, np.ndarray]], list[SkippedInput], dict[str, list[str]]]:
     ann_dir = room_dir / 'Annotations'
     files = sorted(ann_dir.glob('*.txt'), key=lambda p: _natural_key(p.name)) \
         if ann_dir.is_dir() else []
@@ -156,7 +164,7 @@ def _read_room(room_dir: Path, skip: bool
     return chunks, skipped, unknown
 
 
-def convert_room(room_dir: Path, name: str, out_dir: Path, skip: bool) -> _RoomResult:
+def convert_room(room_dir: Path, name: str, out_dir: Path, skip: bool) -> RoomResult:
     """Convert one room, writing its three .bin files under ``.partial`` names.
 
     Returns the room's detection instances (``bbox_3d``, ``bbox_label_3d``) in instance order.
@@ -166,10 +174,11 @@ def convert_room(room_dir: Path, name: str, out_dir: Path, skip: bool) -> _RoomR
     except S3DISLayoutError as error:
         if not skip:
             raise
-        return _RoomResult(name, 0, [], [SkippedInput(str(room_dir), None, str(error))], {})
+        return RoomResult(name, 0, [], [SkippedInput(str(room_dir), None, str(error))], {})
     if not chunks:
-        skipped.append(SkippedInput(str(room_dir), None, 'room left out: no valid annotation file'))
-        return _RoomResult(name, 0, [], skipped, unknown)
+        skipped.append(
+            SkippedInput(str(room_dir), None, 'room left out: no valid annotation file'))
+        return RoomResult(name, 0, [], skipped, unknown)
     counts = np.array([len(points) for _, points in chunks])
     points = np.concatenate([points for _, points in chunks])
     points[:, :3] -= _xyz_min_max(points)[0]
@@ -177,25 +186,31 @@ def convert_room(room_dir: Path, name: str, out_dir: Path, skip: bool) -> _RoomR
     semantic = np.repeat(np.array([_SEMANTIC_ID[c] for c, _ in chunks], dtype=np.int64), counts)
     instance = np.repeat(np.arange(1, len(chunks) + 1, dtype=np.int64), counts)
     starts = np.concatenate([[0], np.cumsum(counts)])
-    instances = [{'bbox_3d': _box(points[start:end]), 'bbox_label_3d': _DETECTION_LABEL[c]}
-                 for (c, _), start, end in zip(chunks, starts[:-1], starts[1:])
-                 if c in _DETECTION_LABEL]
+    instances = [{
+        'bbox_3d': _box(points[start:end]),
+        'bbox_label_3d': _DETECTION_LABEL[c]
+    } for (c, _), start, end in zip(chunks, starts[:-1], starts[1:]) if c in _DETECTION_LABEL]
     for array, path in zip((points, instance, semantic), _partial_paths(out_dir, name)):
         array.tofile(path)
-    return _RoomResult(name, len(points), instances, skipped, unknown)
+    return RoomResult(name, len(points), instances, skipped, unknown)
 
 
-def _convert_room_task(task: tuple[Path, str, Path, bool]) -> _RoomResult:
+def _convert_room_task(task: tuple[Path, str, Path, bool]) -> RoomResult:
     return convert_room(*task)
 
 
-def _info(sample_idx: int, result: _RoomResult) -> dict:
+def _info(sample_idx: int, result: RoomResult) -> dict:
     file_name = f'{result.name}.bin'
-    return {'sample_idx': sample_idx,
-            'lidar_points': {'num_pts_feats': 6, 'lidar_path': file_name},
-            'instances': result.instances,
-            'pts_semantic_mask_path': file_name,
-            'pts_instance_mask_path': file_name}
+    return {
+        'sample_idx': sample_idx,
+        'lidar_points': {
+            'num_pts_feats': 6,
+            'lidar_path': file_name
+        },
+        'instances': result.instances,
+        'pts_semantic_mask_path': file_name,
+        'pts_instance_mask_path': file_name
+    }
 
 
 def info_metainfo() -> dict:
@@ -210,14 +225,14 @@ def _write_pickle_atomic(obj: object, path: Path) -> None:
     os.replace(partial, path)
 
 
-def _run(tasks: list, pool: ProcessPoolExecutor | None) -> Iterator[_RoomResult]:
+def _run(tasks: list, pool: ProcessPoolExecutor | None) -> Iterator[RoomResult]:
     if pool is None:
         return map(_convert_room_task, tasks)
     return pool.map(_convert_room_task, tasks)
 
 
 def _convert_area(area: int, rooms: list[str], data_dir: Path, out_dir: Path, skip: bool,
-                  pool: ProcessPoolExecutor | None, progress: tqdm) -> list[_RoomResult]:
+                  pool: ProcessPoolExecutor | None, progress: tqdm) -> list[RoomResult]:
     names = [f'Area_{area}_{room}' for room in rooms]
     tasks = [(data_dir / f'Area_{area}' / room, name, out_dir, skip)
              for room, name in zip(rooms, names)]
@@ -236,8 +251,10 @@ def _convert_area(area: int, rooms: list[str], data_dir: Path, out_dir: Path, sk
         for partial in _partial_paths(out_dir, result.name):
             os.replace(partial, partial.with_name(partial.name[:-len(PARTIAL_SUFFIX)]))
     data_list = [_info(i, result) for i, result in enumerate(converted)]
-    _write_pickle_atomic({'metainfo': info_metainfo(), 'data_list': data_list},
-                         out_dir / f's3dis_infos_Area_{area}.pkl')
+    _write_pickle_atomic({
+        'metainfo': info_metainfo(),
+        'data_list': data_list
+    }, out_dir / f's3dis_infos_Area_{area}.pkl')
     return results
 
 
@@ -247,9 +264,12 @@ def _remove_partials(out_dir: Path, names: Iterable[str]) -> None:
             partial.unlink(missing_ok=True)
 
 
-def convert_s3dis(root_path: str | Path, out_dir: str | Path, areas: Sequence[int] | None = None,
-                  workers: int = 1, on_error: str = 'raise') -> ConversionSummary:
-    """Convert S3DIS-format areas under ``root_path`` into .bin files and info pickles in ``out_dir``.
+def convert_s3dis(root_path: str | Path,
+                  out_dir: str | Path,
+                  areas: Sequence[int] | None = None,
+                  workers: int = 1,
+                  on_error: str = 'raise') -> ConversionSummary:
+    """Convert S3DIS-format areas under ``root_path`` to .bin files and info pickles in ``out_dir``.
 
     Args:
         root_path: folder holding ``Stanford3dDataset_v1.2_Aligned_Version``.
@@ -282,16 +302,17 @@ def convert_s3dis(root_path: str | Path, out_dir: str | Path, areas: Sequence[in
     compile_parser()  # once here rather than in every worker
     pool = ProcessPoolExecutor(workers) if workers > 1 else None
     try:
-        with tqdm(total=sum(map(len, rooms.values())), desc='convert S3DIS rooms',
-                  unit='room') as progress:
+        with tqdm(
+                total=sum(map(len, rooms.values())), desc='convert S3DIS rooms',
+                unit='room') as progress:
             for area in areas:
-                results = _convert_area(area, rooms[area], data_dir, out_dir,
-                                        on_error == 'skip', pool, progress)
+                results = _convert_area(area, rooms[area], data_dir, out_dir, on_error == 'skip',
+                                        pool, progress)
                 summary.rooms_per_area[area] = sum(r.num_points > 0 for r in results)
                 for result in results:
                     summary.num_points += result.num_points
-                    summary.instances_per_class.update(
-                        DETECTION_CLASSES[inst['bbox_label_3d']] for inst in result.instances)
+                    summary.instances_per_class.update(DETECTION_CLASSES[inst['bbox_label_3d']]
+                                                       for inst in result.instances)
                     summary.skipped += result.skipped
                     for name, files in result.unknown.items():
                         summary.unknown_classes.setdefault(name, []).extend(files)
@@ -301,7 +322,9 @@ def convert_s3dis(root_path: str | Path, out_dir: str | Path, areas: Sequence[in
     if summary.unknown_classes:
         warnings.warn(
             'annotation files of unknown classes were converted as '
-            f'{FALLBACK_CLASS}: ' + ', '.join(f'{name} ({len(files)} files)' for name, files in
-                                            sorted(summary.unknown_classes.items())),
-            UnknownClassWarning, stacklevel=2)
+            f'{FALLBACK_CLASS}: ' +
+            ', '.join(f'{name} ({len(files)} files)'
+                      for name, files in sorted(summary.unknown_classes.items())),
+            UnknownClassWarning,
+            stacklevel=2)
     return summary
