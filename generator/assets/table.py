@@ -21,17 +21,17 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
                     'top_colour': list(pick(rng, palette.LAMINATE + palette.WOOD)),
                     'frame_colour': list(pick(rng, palette.METAL))}
     if variant == 'legs':
-        params.update(width=uniform(rng, 1.2, 2.0), depth=uniform(rng, 0.7, 0.9),
+        params.update(width=uniform(rng, 1.4, 2.0), depth=uniform(rng, 0.75, 0.9),
                       leg_profile=pick(rng, ('square', 'round')), apron=bool(rng.random() < 0.6))
     elif variant == 'round':
         params.update(diameter=uniform(rng, 1.0, 1.4), legs=int(rng.integers(3, 5)))
     elif variant == 'pedestal':
-        params.update(width=uniform(rng, 1.0, 1.6), depth=uniform(rng, 0.7, 0.9),
+        params.update(width=uniform(rng, 1.2, 1.8), depth=uniform(rng, 0.75, 0.9),
                       base=pick(rng, ('disc', 'cross')))
     elif variant == 'trestle':
-        params.update(width=uniform(rng, 1.4, 2.2), depth=uniform(rng, 0.7, 0.9))
+        params.update(width=uniform(rng, 1.6, 2.2), depth=uniform(rng, 0.75, 1.0))
     elif variant == 'workbench':
-        params.update(width=uniform(rng, 1.5, 2.4), depth=uniform(rng, 0.7, 0.9),
+        params.update(width=uniform(rng, 1.5, 2.4), depth=uniform(rng, 0.75, 1.0),
                       height=uniform(rng, 0.85, 0.95), top_thickness=uniform(rng, 0.04, 0.06),
                       drawers=bool(rng.random() < 0.5), shelf_colour=list(pick(rng, palette.WOOD)))
     if variant == 'round':

@@ -25,9 +25,10 @@ JOINT_LIMITS_DEG = {
     'j4': (-290.0, 290.0), 'j5': (-88.0, 138.0), 'j6': (-229.0, 229.0)}
 JOINT_LIMITS = {j: (math.radians(lo), math.radians(hi)) for j, (lo, hi) in
                 JOINT_LIMITS_DEG.items()}
-# A folded rest pose: elbows out, grippers in front of the body pointing down (right arm, in
-# degrees). The left arm mirrors it: joints 1, 7, 4 and 6 change sign, joints 2, 3 and 5 do not.
-REST_DEG = {'j1': 77.0, 'j2': -103.0, 'j7': -13.0, 'j3': 73.0, 'j4': -70.0, 'j5': 124.0, 'j6': 15.0}
+# A folded rest pose: elbows low beside the body, grippers in front of it pointing down (right
+# arm, in degrees). The left arm mirrors it: joints 1, 7, 4 and 6 change sign, joints 2, 3 and 5 do not.
+REST_DEG = {'j1': 88.0, 'j2': -129.0, 'j7': -69.0, 'j3': 76.0, 'j4': 193.0, 'j5': 118.0,
+            'j6': -115.0}
 MIRRORED = ('j1', 'j7', 'j4', 'j6')
 # (xyz, roll-pitch-yaw) of each joint in its parent frame; the shoulder differs per side.
 SHOULDER = {'right': ((0.05355, -0.0725, 0.41492), (-0.9795, -0.5682, -2.3155)),
@@ -48,6 +49,7 @@ TORSO = ((BASE_SIZE[2], -0.22, 0.20, 0.18), (0.30, -0.18, 0.10, 0.14),
 MIN_ARM_Z = 0.1  # arms stay above the base plate / the table under the robot
 MAX_ARM_Z = 0.8  # working poses: no arm raised far above the head
 MAX_REACH_XY = 0.55
+MAX_HALF_WIDTH = 0.36  # arms stay within 0.36 m of the robot's mid-plane
 MAX_TRIES = 2000
 
 
@@ -108,55 +110,75 @@ def _inside_torso(points: np.ndarray, margin: np.ndarray) -> np.ndarray:
             (points[:, 0] < front + margin) & (np.abs(points[:, 1]) < half + margin))
 
 
+def _arm_check(side: str, angles: dict[str, float]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The arm's centre-line samples and radii if the arm alone is valid, else None."""
+    for joint, (lo, hi) in JOINT_LIMITS.items():
+        if not lo <= angles[joint] <= hi:
+            return None
+    points, radii = _arm_samples(arm_frames(side, angles))
+    if np.any(points[:, 2] - radii < MIN_ARM_Z) or np.any(points[:, 2] > MAX_ARM_Z):
+        return None
+    if np.any(_inside_torso(points[2:], radii[2:])):
+        return None
+    if (np.any(np.hypot(points[:, 0], points[:, 1]) > MAX_REACH_XY) or
+            np.any(np.abs(points[:, 1]) + radii > MAX_HALF_WIDTH)):
+        return None
+    return points, radii
+
+
+def _arms_apart(right: tuple[np.ndarray, np.ndarray], left: tuple[np.ndarray, np.ndarray]) -> bool:
+    gaps = np.linalg.norm(right[0][:, None] - left[0][None], axis=2)
+    return bool(np.all(gaps > right[1][:, None] + left[1][None] + 0.01))
+
+
 def pose_is_valid(angles: dict[str, dict[str, float]]) -> bool:
-    """Within limits, arms between MIN_ARM_Z and MAX_ARM_Z, out of the torso, apart from each
-    other, and within reach."""
-    samples = {}
-    for side in SIDES:
-        for joint, (lo, hi) in JOINT_LIMITS.items():
-            if not lo <= angles[side][joint] <= hi:
-                return False
-        points, radii = _arm_samples(arm_frames(side, angles[side]))
-        if np.any(points[:, 2] - radii < MIN_ARM_Z) or np.any(points[:, 2] > MAX_ARM_Z):
-            return False
-        if np.any(_inside_torso(points[2:], radii[2:])):
-            return False
-        if np.any(np.hypot(points[:, 0], points[:, 1]) > MAX_REACH_XY):
-            return False
-        samples[side] = (points, radii)
-    (right, r_radii), (left, l_radii) = samples['right'], samples['left']
-    gaps = np.linalg.norm(right[:, None] - left[None], axis=2)
-    return bool(np.all(gaps > r_radii[:, None] + l_radii[None] + 0.01))
+    """Within limits, arms between MIN_ARM_Z and MAX_ARM_Z, out of the torso, within reach and
+    apart from each other."""
+    arms = [_arm_check(side, angles[side]) for side in SIDES]
+    return arms[0] is not None and arms[1] is not None and _arms_apart(*arms)
 
 
-def _draw_pose(rng: np.random.Generator, style: str) -> dict[str, dict[str, float]]:
+def _draw_arm(rng: np.random.Generator, side: str, style: str) -> dict[str, float]:
     angles = {}
-    for side in SIDES:
-        angles[side] = {}
-        for joint in JOINTS:
-            lo, hi = JOINT_LIMITS[joint]
-            rest = math.radians(REST_DEG[joint])
-            if side == 'left' and joint in MIRRORED:
-                rest = -rest
-            if style == 'rest':
-                value = rest + rng.normal(0.0, math.radians(5.0))
-            elif style == 'work':
-                value = rest + rng.normal(0.0, math.radians(30.0))
-            else:
-                value = rng.uniform(lo, hi)
-            angles[side][joint] = round(float(np.clip(value, lo, hi)), 4)
+    for joint in JOINTS:
+        lo, hi = JOINT_LIMITS[joint]
+        rest = math.radians(REST_DEG[joint])
+        if side == 'left' and joint in MIRRORED:
+            rest = -rest
+        if style == 'rest':
+            value = rest + rng.normal(0.0, math.radians(4.0))
+        elif style == 'work':
+            value = rest + rng.normal(0.0, math.radians(30.0))
+        else:
+            value = rng.uniform(lo, hi)
+        angles[joint] = round(float(np.clip(value, lo, hi)), 4)
     return angles
+
+
+def _draw_valid_arm(rng: np.random.Generator, side: str, style: str):
+    for _ in range(MAX_TRIES):
+        angles = _draw_arm(rng, side, style)
+        check = _arm_check(side, angles)
+        if check is not None:
+            return angles, check
+    raise RuntimeError(f'no valid YuMi {side} arm pose of style {style!r} in {MAX_TRIES} draws')
+
+
+def draw_pose(rng: np.random.Generator, style: str) -> dict[str, dict[str, float]]:
+    """Joint angles (radians) of both arms: each arm drawn until valid on its own, the pair
+    redrawn until the arms keep apart."""
+    for _ in range(MAX_TRIES):
+        (right, right_check), (left, left_check) = (_draw_valid_arm(rng, side, style)
+                                                    for side in SIDES)
+        if _arms_apart(right_check, left_check):
+            return {'right': right, 'left': left}
+    raise RuntimeError(f'no valid YuMi pose of style {style!r} in {MAX_TRIES} draws')
 
 
 def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
     """Draw joint angles (radians, within the joint limits) for a valid, collision-free pose."""
     style = POSES[index % len(POSES)]
-    for _ in range(MAX_TRIES):
-        angles = _draw_pose(rng, style)
-        if pose_is_valid(angles):
-            break
-    else:
-        raise RuntimeError(f'no valid YuMi pose of style {style!r} in {MAX_TRIES} draws')
+    angles = draw_pose(rng, style)
     params = {'pose': style, 'joints': angles, 'gripper_opening': uniform(rng, 0.0, 0.05),
               'body_colour': list(pick(rng, palette.ROBOT_BODY)),
               'joint_colour': list(pick(rng, palette.ROBOT_JOINT))}
