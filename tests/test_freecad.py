@@ -567,7 +567,8 @@ def test_corners_from_the_scan_when_not_given(scanned_build, inspection):
 def test_freecad_failure_is_reported_not_hidden(workspace, tmp_path):
     out_dir = tmp_path / 'not-a-folder'
     out_dir.write_text('a file where the output folder should be')
-    with pytest.raises(FreecadFailed, match='FreeCAD import failed'):
+    with pytest.raises(
+            FreecadFailed, match='FreeCAD import failed: cannot create the output folder'):
         build_document(workspace['scan'], workspace['predictions'], out_dir / 'room.FCStd',
                        workspace['corners'])
 

@@ -31,15 +31,15 @@ def build_room(doc, corners: dict, wall_thickness: float, group) -> None:
     sheet = doc.addObject('Spreadsheet::Sheet', 'RoomParameters')
     group.addObject(sheet)
     rows = (('height', corners['ceiling_z'] - corners['floor_z'], 'room height'),
-            ('wall_thickness', wall_thickness, 'wall thickness'),
-            ('floor_z', corners['floor_z'], 'floor level'))
+            ('wall_thickness', wall_thickness, 'wall thickness'), ('floor_z', corners['floor_z'],
+                                                                   'floor level'))
     for row, (alias, metres, description) in enumerate(rows, start=1):
         sheet.set(f'A{row}', description)
         sheet.set(f'B{row}', f'={1000.0 * metres:.3f} mm')
         sheet.setAlias(f'B{row}', alias)
-    for prop, type_name, value in (('SourceScan', 'App::PropertyString', corners['scan']),
-                                   ('CornerCount', 'App::PropertyInteger',
-                                    len(corners['corners']))):
+    for prop, type_name, value in (('SourceScan', 'App::PropertyString',
+                                    corners['scan']), ('CornerCount', 'App::PropertyInteger',
+                                                       len(corners['corners']))):
         group.addProperty(type_name, prop, 'Synthdet', 'from the corners file')
         setattr(group, prop, value)
 
@@ -139,14 +139,18 @@ def import_detections(doc, predictions: dict, corners: dict | None, library_dir:
                                                         library_group)
             library_object = step_objects[class_name]
         detection = dict(detection, scan=predictions['scan'], model=predictions['model'])
-        container, kind = library.add_detection(doc, detection, counts[class_name],
-                                                library_object)
+        container, kind = library.add_detection(doc, detection, counts[class_name], library_object)
         if kind == 'box' and counts[class_name] == 1:
             warnings.append(f'no CAD model for class {class_name!r}: placed labelled boxes')
         group = furniture if class_name in FURNITURE_CLASSES else equipment
         group.addObject(container)
-        objects.append({'name': container.Name, 'label': container.Label, 'class': class_name,
-                        'group': group.Name, 'model': kind})
+        objects.append({
+            'name': container.Name,
+            'label': container.Label,
+            'class': class_name,
+            'group': group.Name,
+            'model': kind
+        })
     doc.recompute()
     broken = [obj.Name for obj in doc.Objects if not obj.isValid()]
     if broken:

@@ -56,7 +56,14 @@ class ModelBuilder:
         for axis, template in zip('xyz', (x, y, z)):
             obj.setExpression(f'.Placement.Base.{axis}', self.expr(template))
 
-    def box(self, suffix: str, length: str, width: str, height: str, x: str, y: str, z: str,
+    def box(self,
+            suffix: str,
+            length: str,
+            width: str,
+            height: str,
+            x: str,
+            y: str,
+            z: str,
             parent=None):
         """A ``Part::Box`` with expression-bound size and lower-left-bottom corner."""
         obj = self._add('Part::Box', suffix, parent)
@@ -65,12 +72,11 @@ class ModelBuilder:
         self._place(obj, x, y, z)
         return obj
 
-    def cylinder(self, suffix: str, radius: str, height: str, z: str = '0 mm', parent=None):
-        """A ``Part::Cylinder`` along the local z axis of its parent."""
+    def cylinder(self, suffix: str, radius: str, height: str, parent=None):
+        """A ``Part::Cylinder`` from its parent's origin along the parent's local z axis."""
         obj = self._add('Part::Cylinder', suffix, parent)
         obj.setExpression('Radius', self.expr(radius))
         obj.setExpression('Height', self.expr(height))
-        self._place(obj, '0 mm', '0 mm', z)
         return obj
 
     def frame(self, suffix: str, placement: str, parent=None):
@@ -126,17 +132,18 @@ def build_sofa(model: ModelBuilder) -> None:
               '-{P}.length / 2 + {P}.arm', '-{P}.width / 2', '-{P}.height / 2')
     model.box('Backrest', '{P}.length', '{P}.back', '{P}.height', '-{P}.length / 2',
               '{P}.width / 2 - {P}.back', '-{P}.height / 2')
-    for suffix, x in (('ArmrestLeft', '-{P}.length / 2'),
-                      ('ArmrestRight', '{P}.length / 2 - {P}.arm')):
-        model.box(suffix, '{P}.arm', '{P}.width - {P}.back', '{P}.arm_height', x,
-                  '-{P}.width / 2', '-{P}.height / 2')
+    for suffix, x in (('ArmrestLeft', '-{P}.length / 2'), ('ArmrestRight',
+                                                           '{P}.length / 2 - {P}.arm')):
+        model.box(suffix, '{P}.arm', '{P}.width - {P}.back', '{P}.arm_height', x, '-{P}.width / 2',
+                  '-{P}.height / 2')
 
 
 def build_bookcase(model: ModelBuilder) -> None:
     """Bookcase: sides, top, bottom, back panel and three shelves."""
     model.parameter('board', '=min(length; width) * 0.06', 'board thickness')
     inner = '{P}.length - 2 * {P}.board'
-    for suffix, x in (('SideLeft', '-{P}.length / 2'), ('SideRight', '{P}.length / 2 - {P}.board')):
+    for suffix, x in (('SideLeft', '-{P}.length / 2'), ('SideRight',
+                                                        '{P}.length / 2 - {P}.board')):
         model.box(suffix, '{P}.board', '{P}.width', '{P}.height', x, '-{P}.width / 2',
                   '-{P}.height / 2')
     for suffix, z in (('Bottom', '-{P}.height / 2'), ('Top', '{P}.height / 2 - {P}.board')):
@@ -164,8 +171,8 @@ def build_printer(model: ModelBuilder) -> None:
                   '-{P}.height / 2 + {P}.base')
     model.box('TopFrame', '{P}.length', '{P}.width', '{P}.top', '-{P}.length / 2',
               '-{P}.width / 2', '{P}.height / 2 - {P}.top')
-    model.box('Bed', '{P}.length * 0.7', '{P}.width * 0.7', '{P}.base * 0.3',
-              '-{P}.length * 0.35', '-{P}.width * 0.35', '-{P}.height / 2 + {P}.bed_height')
+    model.box('Bed', '{P}.length * 0.7', '{P}.width * 0.7', '{P}.base * 0.3', '-{P}.length * 0.35',
+              '-{P}.width * 0.35', '-{P}.height / 2 + {P}.bed_height')
     model.box('Head', '{P}.head', '{P}.head', '{P}.head', '-{P}.head / 2', '-{P}.head / 2',
               '{P}.height / 2 - {P}.top - {P}.head')
 
@@ -173,33 +180,34 @@ def build_printer(model: ModelBuilder) -> None:
 def build_yumi(model: ModelBuilder) -> None:
     """ABB YuMi: body, head and two 7-joint arms; ``right_joint_N``/``left_joint_N`` in degrees.
 
-    The robot faces -y; the right arm hangs at +x. With all joints at 0 both arms hang straight
+    The robot faces +y, so its right arm hangs at +x. With all joints at 0 both arms hang straight
     down beside the body. Each joint is a nested ``App::Part`` rotated by its angle cell.
     """
     model.parameter('shoulder_z', '=height * 0.3', 'shoulder height above the box centre')
     model.parameter('radius', '=min(length; width) * 0.05', 'arm link radius')
-    model.parameter('shoulder_x', '=length / 2 - radius', 'shoulder distance from the centre plane')
+    model.parameter('shoulder_x', '=length / 2 - radius',
+                    'shoulder distance from the centre plane')
     model.parameter('short', '=height * 0.04', 'short link length')
     model.parameter('upper', '=height * 0.14', 'upper/fore arm link length')
     model.parameter('lower', '=height * 0.1', 'wrist link length')
     for side in ('right', 'left'):
         for joint in range(1, YUMI_JOINTS + 1):
             model.parameter(f'{side}_joint_{joint}', '=0 deg', f'{side} arm joint {joint} angle')
-    model.box('Body', '{P}.length * 0.45', '{P}.width', '{P}.height * 0.75',
-              '-{P}.length * 0.225', '-{P}.width / 2', '-{P}.height / 2')
+    model.box('Body', '{P}.length * 0.45', '{P}.width', '{P}.height * 0.75', '-{P}.length * 0.225',
+              '-{P}.width / 2', '-{P}.height / 2')
     model.box('Head', '{P}.length * 0.3', '{P}.width * 0.6', '{P}.height * 0.25',
               '-{P}.length * 0.15', '-{P}.width * 0.3', '{P}.height / 4')
     for side, sign in (('right', ''), ('left', '-')):
         title = side.capitalize()
-        parent = model.frame(f'{title}Shoulder',
-                             _placement(f'{sign}{{P}}.shoulder_x', '0 mm', '{P}.shoulder_z',
-                                        'x', '180 deg'))
+        parent = model.frame(
+            f'{title}Shoulder',
+            _placement(f'{sign}{{P}}.shoulder_x', '0 mm', '{P}.shoulder_z', 'x', '180 deg'))
         offset = '0 mm'
         for joint in range(1, YUMI_JOINTS + 1):
             axis, link = YUMI_JOINT_AXES[joint - 1], YUMI_LINKS[joint - 1]
-            parent = model.frame(f'{title}Joint{joint}',
-                                 _placement('0 mm', '0 mm', offset, axis,
-                                            f'{{P}}.{side}_joint_{joint}'), parent)
+            parent = model.frame(
+                f'{title}Joint{joint}',
+                _placement('0 mm', '0 mm', offset, axis, f'{{P}}.{side}_joint_{joint}'), parent)
             model.cylinder(f'{title}Link{joint}', '{P}.radius', f'{{P}}.{link}', parent=parent)
             offset = f'{{P}}.{link}'
         model.box(f'{title}Gripper', '{P}.radius * 2', '{P}.radius * 2', '{P}.short',
@@ -208,8 +216,8 @@ def build_yumi(model: ModelBuilder) -> None:
 
 def build_box(model: ModelBuilder) -> None:
     """Placeholder for a class without a model: the detection box itself."""
-    model.box('Box', '{P}.length', '{P}.width', '{P}.height', '-{P}.length / 2',
-              '-{P}.width / 2', '-{P}.height / 2')
+    model.box('Box', '{P}.length', '{P}.width', '{P}.height', '-{P}.length / 2', '-{P}.width / 2',
+              '-{P}.height / 2')
 
 
 def build_step(model: ModelBuilder, library_object) -> None:
@@ -227,7 +235,8 @@ def build_step(model: ModelBuilder, library_object) -> None:
     scale = ['{P}.%s / {P}.step_%s' % (name, name) for name in ('length', 'width', 'height')]
     link.setExpression('ScaleVector', model.expr(f'create(<<vector>>; {"; ".join(scale)})'))
     for axis, factor in zip('xyz', scale):
-        link.setExpression(f'.Placement.Base.{axis}', model.expr(f'-{factor} * {{P}}.step_centre_{axis}'))
+        link.setExpression(f'.Placement.Base.{axis}',
+                           model.expr(f'-{factor} * {{P}}.step_centre_{axis}'))
 
 
 BUILDERS = {
@@ -254,12 +263,15 @@ def add_detection(doc, detection: dict, index: int, library_object=None):
         kind = 'builtin' if builder else 'box'
     container = doc.addObject('App::Part', base_name)
     container.Label = f'{class_name} {index}'
-    for prop, type_name, doc_text in (
-            ('DetectedClass', 'App::PropertyString', 'class predicted by the detector'),
-            ('Score', 'App::PropertyFloat', 'detection confidence'),
-            ('SourceScan', 'App::PropertyString', 'scan the detection came from'),
-            ('SourceModel', 'App::PropertyString', 'detector that produced it'),
-            ('CadModel', 'App::PropertyString', 'builtin, step or box (no model for the class)')):
+    for prop, type_name, doc_text in (('DetectedClass', 'App::PropertyString',
+                                       'class predicted by the detector'),
+                                      ('Score', 'App::PropertyFloat', 'detection confidence'),
+                                      ('SourceScan', 'App::PropertyString',
+                                       'scan the detection came from'),
+                                      ('SourceModel', 'App::PropertyString',
+                                       'detector that produced it'),
+                                      ('CadModel', 'App::PropertyString',
+                                       'builtin, step or box (no model for the class)')):
         container.addProperty(type_name, prop, 'Synthdet', doc_text)
     container.DetectedClass = class_name
     container.Score = detection['score']

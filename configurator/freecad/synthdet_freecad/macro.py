@@ -85,7 +85,11 @@ def run_headless() -> None:
         doc = App.newDocument('SynthdetRoom')
         doc.Label = os.path.splitext(os.path.basename(out))[0]
         report = import_into(doc, options)
-        os.makedirs(os.path.dirname(out), exist_ok=True)
+        try:
+            os.makedirs(os.path.dirname(out), exist_ok=True)
+        except OSError as error:
+            raise OSError(f'cannot create the output folder {os.path.dirname(out)!r}: '
+                          f'{error.strerror}') from None
         if os.path.exists(out):
             os.remove(out)
         doc.saveAs(out)
@@ -109,15 +113,18 @@ def run_gui() -> None:
     from PySide import QtGui
 
     window = Gui.getMainWindow()
-    predictions, _ = QtGui.QFileDialog.getOpenFileName(
-        window, 'synthdet: predictions JSON', '', 'Predictions (*.json);;All files (*)')
+    predictions, _ = QtGui.QFileDialog.getOpenFileName(window, 'synthdet: predictions JSON', '',
+                                                       'Predictions (*.json);;All files (*)')
     if not predictions:
         return
     corners, _ = QtGui.QFileDialog.getOpenFileName(
         window, 'synthdet: room corners JSON (cancel for no room)', os.path.dirname(predictions),
         'Corners (*.json);;All files (*)')
     try:
-        options = options_from_environment({'predictions': predictions, 'corners': corners or None},
+        options = options_from_environment({
+            'predictions': predictions,
+            'corners': corners or None
+        },
                                            require_out=False)
         doc = App.ActiveDocument or App.newDocument('SynthdetRoom')
         report = import_into(doc, options)

@@ -133,8 +133,13 @@ def validate_predictions(data: object, source: str = '<predictions>') -> dict:
             'size': size,
             'yaw': _number(detection.get('yaw', 0.0), source, f'{where}.yaw'),
         })
-    return {'format': PREDICTIONS_FORMAT, 'scan': scan, 'model': model, 'classes': classes,
-            'detections': checked}
+    return {
+        'format': PREDICTIONS_FORMAT,
+        'scan': scan,
+        'model': model,
+        'classes': classes,
+        'detections': checked
+    }
 
 
 def _signed_area(points: list[list[float]]) -> float:
@@ -156,8 +161,9 @@ def _segments_cross(p: list[float], q: list[float], r: list[float], s: list[floa
         return (min(a[0], b[0]) - 1e-12 <= c[0] <= max(a[0], b[0]) + 1e-12
                 and min(a[1], b[1]) - 1e-12 <= c[1] <= max(a[1], b[1]) + 1e-12)
 
-    o1, o2, o3, o4 = orientation(p, q, r), orientation(p, q, s), orientation(r, s, p), orientation(
-        r, s, q)
+    o1, o2, o3, o4 = orientation(p, q, r), orientation(p, q,
+                                                       s), orientation(r, s,
+                                                                       p), orientation(r, s, q)
     if o1 != o2 and o3 != o4:
         return True
     return ((o1 == 0 and on_segment(p, q, r)) or (o2 == 0 and on_segment(p, q, s))
@@ -172,7 +178,9 @@ def validate_corners(data: object, source: str = '<corners>') -> dict:
     if not isinstance(corners, list) or not 3 <= len(corners) <= MAX_CORNERS:
         _fail(source, 'corners', f'expected a list of 3 to {MAX_CORNERS} [x, y] points, got '
               f'{_describe(corners)}')
-    points = [_vector(point, 2, source, f'corners[{index}]') for index, point in enumerate(corners)]
+    points = [
+        _vector(point, 2, source, f'corners[{index}]') for index, point in enumerate(corners)
+    ]
     count = len(points)
     for index in range(count):
         a, b = points[index], points[(index + 1) % count]
@@ -195,8 +203,13 @@ def validate_corners(data: object, source: str = '<corners>') -> dict:
     ceiling_z = _number(data['ceiling_z'], source, 'ceiling_z')
     if ceiling_z <= floor_z:
         _fail(source, 'ceiling_z', f'ceiling_z {ceiling_z} is not above floor_z {floor_z}')
-    return {'format': CORNERS_FORMAT, 'scan': _text(data.get('scan', ''), source, 'scan'),
-            'corners': points, 'floor_z': floor_z, 'ceiling_z': ceiling_z}
+    return {
+        'format': CORNERS_FORMAT,
+        'scan': _text(data.get('scan', ''), source, 'scan'),
+        'corners': points,
+        'floor_z': floor_z,
+        'ceiling_z': ceiling_z
+    }
 
 
 def validate_job(data: object, source: str = '<job>') -> dict:
