@@ -30,19 +30,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--scan', required=True, help='the scan (.txt, .bin or .ply)')
     parser.add_argument('--predictions', required=True, help='synthdet.predictions/1 JSON')
     parser.add_argument('--out', required=True, help='FreeCAD document to write (.FCStd)')
-    parser.add_argument('--corners', help='synthdet.corners/1 JSON; computed from the scan '
-                        'when omitted')
-    parser.add_argument('--library', help='folder of <class>.step files replacing the '
-                        'built-in models')
-    parser.add_argument('--min-score', type=float, default=0.3,
-                        help='skip detections scoring below this (default 0.3)')
-    parser.add_argument('--wall-thickness', type=float, default=0.1,
-                        help='wall thickness in metres (default 0.1)')
-    parser.add_argument('--freecadcmd', default=os.environ.get('SYNTHDET_FREECADCMD',
-                                                               'freecadcmd'),
-                        help='FreeCAD command-line executable (default: freecadcmd)')
-    parser.add_argument('--timeout', type=float, default=900.0,
-                        help='seconds to wait for FreeCAD (default 900)')
+    parser.add_argument('--corners', help='synthdet.corners/1 JSON (default: from the scan)')
+    parser.add_argument('--library', help='folder of <class>.step files replacing built-ins')
+    parser.add_argument(
+        '--min-score',
+        type=float,
+        default=0.3,
+        help='skip detections scoring below this (default 0.3)')
+    parser.add_argument(
+        '--wall-thickness', type=float, default=0.1, help='wall thickness in metres (default 0.1)')
+    parser.add_argument(
+        '--freecadcmd',
+        default=os.environ.get('SYNTHDET_FREECADCMD', 'freecadcmd'),
+        help='FreeCAD command-line executable (default: freecadcmd)')
+    parser.add_argument(
+        '--timeout', type=float, default=900.0, help='seconds to wait for FreeCAD (default 900)')
 
 
 def _check_scan(scan: Path) -> None:
@@ -63,8 +65,13 @@ def _run_freecad(job: dict, work_dir: Path, freecadcmd: str, timeout: float) -> 
     job_path.write_text(json.dumps(job, indent=1), encoding='utf-8')
     env = dict(os.environ, SYNTHDET_JOB=str(job_path), SYNTHDET_RESULT=str(result_path))
     try:
-        process = subprocess.run([freecadcmd, str(MACRO)], env=env, cwd=work_dir, timeout=timeout,
-                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        process = subprocess.run([freecadcmd, str(MACRO)],
+                                 env=env,
+                                 cwd=work_dir,
+                                 timeout=timeout,
+                                 stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE,
+                                 text=True,
                                  errors='replace')
     except FileNotFoundError:
         raise FreecadFailed(f'{freecadcmd!r} not found: install FreeCAD (apt-get install '
@@ -83,9 +90,14 @@ def _run_freecad(job: dict, work_dir: Path, freecadcmd: str, timeout: float) -> 
     return result
 
 
-def build_document(scan: Path, predictions: Path, out: Path, corners: Path | None = None,
-                   library: Path | None = None, min_score: float = 0.3,
-                   wall_thickness: float = 0.1, freecadcmd: str = 'freecadcmd',
+def build_document(scan: Path,
+                   predictions: Path,
+                   out: Path,
+                   corners: Path | None = None,
+                   library: Path | None = None,
+                   min_score: float = 0.3,
+                   wall_thickness: float = 0.1,
+                   freecadcmd: str = 'freecadcmd',
                    timeout: float = 900.0) -> dict:
     """Validate the inputs, run FreeCAD and return the macro's result (objects, warnings).
 
@@ -111,10 +123,15 @@ def build_document(scan: Path, predictions: Path, out: Path, corners: Path | Non
         else:
             corners_path = work_dir / 'corners.json'
             corners_path.write_text(json.dumps(_corners_from_scan(scan)), encoding='utf-8')
-        job = {'format': JOB_FORMAT, 'predictions': str(predictions.resolve()),
-               'corners': str(corners_path), 'out': str(out),
-               'library': str(Path(library).resolve()) if library is not None else None,
-               'min_score': min_score, 'wall_thickness': wall_thickness}
+        job = {
+            'format': JOB_FORMAT,
+            'predictions': str(predictions.resolve()),
+            'corners': str(corners_path),
+            'out': str(out),
+            'library': str(Path(library).resolve()) if library is not None else None,
+            'min_score': min_score,
+            'wall_thickness': wall_thickness
+        }
         result = _run_freecad(job, work_dir, freecadcmd, timeout)
     if not out.is_file():
         raise FreecadFailed(f'FreeCAD reported success but {out} was not written')
@@ -125,8 +142,7 @@ def run(args: argparse.Namespace) -> int:
     """Run the sub-command; prints warnings and a summary, returns the exit code."""
     try:
         result = build_document(args.scan, args.predictions, args.out, args.corners, args.library,
-                                args.min_score, args.wall_thickness, args.freecadcmd,
-                                args.timeout)
+                                args.min_score, args.wall_thickness, args.freecadcmd, args.timeout)
     except (ValueError, FreecadFailed) as error:
         print(f'error: {error}', file=sys.stderr)
         return 1
