@@ -26,6 +26,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if args.instances < 1:
         parser.error(f'--instances must be >= 1, got {args.instances}')
+    if args.seed < 0:
+        parser.error(f'--seed must be >= 0, got {args.seed}')
     return args
 
 

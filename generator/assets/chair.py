@@ -7,8 +7,8 @@ import math
 import numpy as np
 
 from generator.assets import palette
-from generator.assets.builder import (MeshBuilder, circle, pick, rot_x, rounded_rect,
-                                      translate, uniform)
+from generator.assets.builder import (MeshBuilder, pick, rot_x, rot_z, rounded_rect, translate,
+                                      uniform)
 
 VARIANTS = ('fourleg', 'pedestal', 'sled')
 BACKRESTS = ('panel', 'slats', 'frame', 'rounded')
@@ -95,7 +95,11 @@ def _pedestal(mb: MeshBuilder, params: dict, frame: int) -> None:
         angle = 2 * math.pi * k / params['spokes'] - math.pi / 2
         tip = (radius * math.cos(angle), radius * math.sin(angle))
         mb.bar((0.0, 0.0, 0.10), (tip[0], tip[1], 0.07), 0.04, 0.035, frame)
-        mb.cylinder(0.025, 0.06, frame, translate(tip[0], tip[1], 0.0))
+        # twin-wheel caster: a fork under the spoke tip and two wheels across it
+        mb.box((0.03, 0.03, 0.03), frame, translate(tip[0], tip[1], 0.055) @ rot_z(angle))
+        for side in (-1, 1):
+            mb.cylinder(0.025, 0.012, frame, translate(tip[0], tip[1], 0.025) @ rot_z(angle)
+                        @ translate(0, side * 0.008, 0) @ rot_x(side * math.pi / 2), segments=12)
     mb.cylinder(0.05, 0.08, frame, translate(0, 0, 0.06))
     mb.cylinder(0.028, top - 0.2, frame, translate(0, 0, 0.14), segments=12)
     mb.box_between((-0.11, -0.12, top - 0.06), (0.11, 0.12, top), frame)
@@ -111,8 +115,9 @@ def _sled(mb: MeshBuilder, params: dict, frame: int) -> None:
         mb.rod((x, front, radius), (x, back, radius), radius, frame)
         mb.rod((x, front + 0.04, radius), (x, -depth / 2 + 0.04, top), radius, frame)
         mb.rod((x, back, radius), (x, depth / 2 - 0.04, top), radius, frame)
-    mb.box_between((-width / 2 + 0.02, -depth / 2 + 0.04, top - 0.02),
-                   (width / 2 - 0.02, depth / 2 - 0.04, top), frame)
+    for y in (-depth / 2 + 0.04, depth / 2 - 0.04):  # cross tubes carrying the seat
+        mb.rod((-width / 2 + 0.02, y, top - radius), (width / 2 - 0.02, y, top - radius), radius,
+               frame)
 
 
 def _backrest(mb: MeshBuilder, variant: str, params: dict, frame: int, seat: int) -> None:
@@ -126,6 +131,10 @@ def _backrest(mb: MeshBuilder, variant: str, params: dict, frame: int, seat: int
         # spine from the seat mechanism to the back panel
         mb.bar((0, -depth / 2 + 0.1, 0.0), (0, 0.02, 0.0), 0.06, 0.02, frame, base)
         mb.bar((0, 0.02, -0.01), (0, 0.02, 0.22), 0.06, 0.02, frame, base)
+        if height > 0.58:  # executive chairs: a headrest above the tall back
+            mb.bar((0, 0.0, height - 0.05), (0, 0.0, height + 0.08), 0.04, 0.015, frame, base)
+            mb.prism(rounded_rect(0.26, 0.06, 0.025), 0.11, seat,
+                     base @ translate(0, -0.01, height + 0.06))
     else:
         for sx in (-1, 1):
             x = sx * (width / 2 - 0.03)

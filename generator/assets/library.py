@@ -99,6 +99,8 @@ def build_library(out_dir: Path, instances_per_class: int = 12, seed: int = 0,
     _check_classes(classes)
     if instances_per_class < 1:
         raise ValueError(f'instances_per_class must be >= 1, got {instances_per_class}')
+    if seed < 0:
+        raise ValueError(f'seed must be >= 0, got {seed}')
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = []
@@ -111,6 +113,9 @@ def build_library(out_dir: Path, instances_per_class: int = 12, seed: int = 0,
                     variant, params = procedural_params(cls, index, seed)
                     name = f'{cls}_{variant}_{index:02d}'
                     obj = GENERATORS[cls].build(variant, params).to_object(name, collection)
+                    if obj.name != name:
+                        raise RuntimeError(f'cannot build {name!r}: this Blender session already '
+                                           f'holds an object of that name')
                     obj[ASSET_PROP] = f'{cls}/{variant}'
                     obj[PARAMS_PROP] = json.dumps(params, sort_keys=True)
                     # side by side, so the file is pleasant to open in Blender

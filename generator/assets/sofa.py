@@ -22,6 +22,7 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
         'back_height': uniform(rng, 0.72, 0.92),
         'arms': bool(rng.random() < 0.75),
         'arm_width': uniform(rng, 0.10, 0.24),
+        'arm_style': pick(rng, ('rolled', 'square')),
         'arm_height': uniform(rng, 0.55, 0.66),
         'back_cushions': bool(rng.random() < 0.7),
         'base': pick(rng, ('feet', 'plinth')),
@@ -67,9 +68,10 @@ def build(variant: str, params: dict) -> MeshBuilder:
             x1 = sx * (width / 2)
             mb.box_between((min(x0, x1), -depth / 2, frame_top), (max(x0, x1), depth / 2,
                                                                    params['arm_height']), body)
-            mb.cylinder(arm_w / 2, depth, body,
-                        translate((x0 + x1) / 2, depth / 2, params['arm_height'])
-                        @ rot_x(0.5 * np.pi), segments=12)
+            if params['arm_style'] == 'rolled':
+                mb.cylinder(arm_w / 2, depth, body,
+                            translate((x0 + x1) / 2, depth / 2, params['arm_height'])
+                            @ rot_x(0.5 * np.pi), segments=12)
     # cushions, one per seat, with a small gap between them
     gap = 0.01
     seat_d = depth - back_depth - 0.02

@@ -22,7 +22,8 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
                     'frame_colour': list(pick(rng, palette.METAL))}
     if variant == 'legs':
         params.update(width=uniform(rng, 1.4, 2.0), depth=uniform(rng, 0.75, 0.9),
-                      leg_profile=pick(rng, ('square', 'round')), apron=bool(rng.random() < 0.6))
+                      leg_profile=pick(rng, ('square', 'round')), apron=bool(rng.random() < 0.6),
+                      modesty_panel=bool(rng.random() < 0.4))
     elif variant == 'round':
         params.update(diameter=uniform(rng, 1.0, 1.4), legs=int(rng.integers(3, 5)))
     elif variant == 'pedestal':
@@ -78,6 +79,9 @@ def _four_legs(mb: MeshBuilder, params: dict, frame: int, under: float) -> None:
                 mb.box_between((x - 0.025, y - 0.025, 0.0), (x + 0.025, y + 0.025, under), frame)
             else:
                 mb.cylinder(0.025, under, frame, translate(x, y, 0.0))
+    if params['modesty_panel']:  # office desk: a panel between the back legs
+        mb.box_between((-width / 2 + inset, depth / 2 - inset - 0.01, under - 0.40),
+                       (width / 2 - inset, depth / 2 - inset + 0.01, under - 0.02), frame)
     if params['apron']:
         mb.box_between((-width / 2 + inset, depth / 2 - inset - 0.01, under - 0.08),
                        (width / 2 - inset, depth / 2 - inset + 0.01, under), frame)
