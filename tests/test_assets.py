@@ -93,8 +93,9 @@ def test_local_frame_size_and_arrays(library):
 def test_meshes_are_closed_solids(library):
     for inst in all_instances(library):
         triangles = inst.mesh_arrays()[1]
-        edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]],
-                                        triangles[:, [2, 0]]]), axis=1)
+        edges = np.sort(
+            np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]),
+            axis=1)
         _, counts = np.unique(edges, axis=0, return_counts=True)
         assert np.all(counts == 2), inst.name
 
@@ -114,8 +115,9 @@ def test_table_tops_are_flat_usable_and_highest(library):
         normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
         up = (normals[:, 2] > 0) & np.all(np.isclose(corners[:, :, 2], inst.top_z), axis=1)
         # every point of the usable rectangle (1 cm in from its edge) lies on an upward top face
-        gx, gy = np.meshgrid(np.linspace(-0.5, 0.5, 9) * (inst.top_size[0] - 0.02),
-                             np.linspace(-0.5, 0.5, 9) * (inst.top_size[1] - 0.02))
+        gx, gy = np.meshgrid(
+            np.linspace(-0.5, 0.5, 9) * (inst.top_size[0] - 0.02),
+            np.linspace(-0.5, 0.5, 9) * (inst.top_size[1] - 0.02))
         points = np.stack([gx.ravel(), gy.ravel()], 1)
         a, b, c = (corners[up][:, k, None, :2] for k in range(3))
         cross = [np.cross(q - p, points[None] - p) for p, q in ((a, b), (b, c), (c, a))]
@@ -147,8 +149,8 @@ def test_yumi_joint_angle_moves_the_arm_geometry(library):
     rebuilt = instance_from_params('yumi', variant, params)
     assert np.array_equal(rebuilt.mesh_arrays()[0], base.mesh_arrays()[0])
     low, high = yumi.JOINT_LIMITS['j4']
-    params['joints']['right']['j4'] = float(np.clip(params['joints']['right']['j4'] + 0.6, low,
-                                                    high))
+    params['joints']['right']['j4'] = float(
+        np.clip(params['joints']['right']['j4'] + 0.6, low, high))
     params['joints']['right']['j2'] -= 0.2
     moved = instance_from_params('yumi', variant, params)
     before, after = base.mesh_arrays()[0], moved.mesh_arrays()[0]
@@ -163,8 +165,13 @@ def test_yumi_footprint_and_home_height():
     depth, width, _ = yumi.BASE_SIZE
     assert 0.39 <= min(depth, width) and max(depth, width) <= 0.5
     assert yumi.TORSO[-1][0] == pytest.approx(0.571)
-    home = {side: {j: math.radians(v) * (-1 if side == 'left' and j in yumi.MIRRORED else 1)
-                   for j, v in yumi.REST_DEG.items()} for side in yumi.SIDES}
+    home = {
+        side: {
+            j: math.radians(v) * (-1 if side == 'left' and j in yumi.MIRRORED else 1)
+            for j, v in yumi.REST_DEG.items()
+        }
+        for side in yumi.SIDES
+    }
     assert yumi.pose_is_valid(home)
     tips = [yumi.arm_frames(side, home[side])[-1][:3, 3] for side in yumi.SIDES]
     assert np.allclose(tips[0] * [1, -1, 1], tips[1], atol=2e-3)  # the arms mirror each other
@@ -182,15 +189,16 @@ def test_build_load_round_trip_is_exact(library):
 
 
 def test_same_seed_same_bytes_other_seed_differs(library, tmp_path):
-    again = load_library(build_library(tmp_path / 'a', 12, seed=0, classes=['yumi',
-                                                                             'chair'])[0].parent)
+    again = load_library(
+        build_library(tmp_path / 'a', 12, seed=0, classes=['yumi', 'chair'])[0].parent)
     other = load_library(build_library(tmp_path / 'b', 12, seed=1, classes=['yumi'])[0].parent)
     for cls in ('yumi', 'chair'):
-        assert ([mesh_digest(i) for i in again.instances(cls)] ==
-                [mesh_digest(i) for i in library.instances(cls)])
+        assert ([mesh_digest(i) for i in again.instances(cls)
+                 ] == [mesh_digest(i) for i in library.instances(cls)])
     assert other.classes() == ('yumi', )
-    assert ({mesh_digest(i) for i in other.instances('yumi')}.isdisjoint(
-        mesh_digest(i) for i in library.instances('yumi')))
+    assert ({mesh_digest(i)
+             for i in other.instances('yumi')
+             }.isdisjoint(mesh_digest(i) for i in library.instances('yumi')))
 
 
 def _user_object(name, verts, faces, materials, collection, material_index=None):
@@ -225,16 +233,16 @@ def _save_user_file(path, cls, build):
 
 def test_user_made_blend_without_custom_properties_loads(tmp_path):
     grey = bpy.data.materials.new('user_grey')  # Principled base colour: linear 0.214 = sRGB 128
-    grey.node_tree.nodes['Principled BSDF'].inputs['Base Color'].default_value = (
-        0.21404114, 1.0, 0.0, 1.0)
+    grey.node_tree.nodes['Principled BSDF'].inputs['Base Color'].default_value = (0.21404114, 1.0,
+                                                                                  0.0, 1.0)
     plain = bpy.data.materials.new('user_plain')  # no BSDF node: the viewport colour counts
     plain.node_tree.nodes.remove(plain.node_tree.nodes['Principled BSDF'])
     plain.diffuse_color = (0.0, 0.0, 1.0, 1.0)
 
     def chairs(collection):
         verts, faces = _box((-0.5, -0.5, -0.5), (0.5, 0.5, 0.5))
-        obj = _user_object('MyChair', verts, faces, [grey, plain], collection,
-                           material_index=[0, 0, 1, 1, 1, 1])
+        obj = _user_object(
+            'MyChair', verts, faces, [grey, plain], collection, material_index=[0, 0, 1, 1, 1, 1])
         obj.scale = (0.4, 0.6, 0.9)
         obj.rotation_euler = (0.0, 0.0, math.pi / 2)
         obj.location = (3.0, 4.0, 5.0)
@@ -294,25 +302,34 @@ def test_default_library_is_built_once_and_cached(tmp_path, library):
     second = default_library(tmp_path, seed=0)
     assert {p.name: p.stat().st_mtime_ns for p in folder.iterdir()} == stamps
     for cls in ASSET_CLASSES:
-        assert ([mesh_digest(i) for i in first.instances(cls)] ==
-                [mesh_digest(i) for i in second.instances(cls)] ==
-                [mesh_digest(i) for i in library.instances(cls)])
+        assert ([mesh_digest(i)
+                 for i in first.instances(cls)] == [mesh_digest(i) for i in second.instances(cls)]
+                == [mesh_digest(i) for i in library.instances(cls)])
     default_library(tmp_path, seed=3)
     assert len(list(tmp_path.iterdir())) == 2  # another seed, another cache entry
 
 
 def test_cli_builds_files_and_previews(tmp_path):
-    result = subprocess.run(
-        [sys.executable, '-m', 'generator.assets', '--out', str(tmp_path / 'lib'), '--instances',
-         '6', '--classes', 'chair', '3dprinter', '--preview', str(tmp_path / 'png')], cwd=REPO,
-        capture_output=True, text=True, timeout=300)
+    result = subprocess.run([
+        sys.executable, '-m', 'generator.assets', '--out',
+        str(tmp_path / 'lib'), '--instances', '6', '--classes', 'chair', '3dprinter', '--preview',
+        str(tmp_path / 'png')
+    ],
+                            cwd=REPO,
+                            capture_output=True,
+                            text=True,
+                            timeout=300)
     assert result.returncode == 0, result.stderr
-    assert sorted(p.name for p in (tmp_path / 'lib').iterdir()) == ['3dprinter.blend',
-                                                                    'chair.blend']
+    assert sorted(p.name
+                  for p in (tmp_path / 'lib').iterdir()) == ['3dprinter.blend', 'chair.blend']
     assert 'chair.blend: 6 instances' in result.stdout
     for name in ('chair.png', '3dprinter.png'):
         png = (tmp_path / 'png' / name).read_bytes()
         assert png[:8] == b'\x89PNG\r\n\x1a\n' and len(png) > 20_000
-    bad = subprocess.run([sys.executable, '-m', 'generator.assets', '--out', str(tmp_path),
-                          '--classes', 'robot'], cwd=REPO, capture_output=True, text=True)
+    bad = subprocess.run(
+        [sys.executable, '-m', 'generator.assets', '--out',
+         str(tmp_path), '--classes', 'robot'],
+        cwd=REPO,
+        capture_output=True,
+        text=True)
     assert bad.returncode == 2 and 'robot' in bad.stderr

@@ -3,5 +3,7 @@
 from generator.assets.library import (ASSET_CLASSES, AssetInstance, AssetLibrary, build_library,
                                       default_library, load_library)
 
-__all__ = ['ASSET_CLASSES', 'AssetInstance', 'AssetLibrary', 'build_library', 'default_library',
-           'load_library']
+__all__ = [
+    'ASSET_CLASSES', 'AssetInstance', 'AssetLibrary', 'build_library', 'default_library',
+    'load_library'
+]

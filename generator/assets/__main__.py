@@ -13,16 +13,26 @@ from generator.assets.library import ASSET_CLASSES, build_library, load_library
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog='python -m generator.assets', description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--out', type=Path, required=True, help='folder for the <class>.blend files')
+    parser = argparse.ArgumentParser(
+        prog='python -m generator.assets',
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument(
+        '--out', type=Path, required=True, help='folder for the <class>.blend files')
     parser.add_argument('--instances', type=int, default=12, help='instances per class')
     parser.add_argument('--seed', type=int, default=0)
-    parser.add_argument('--classes', nargs='+', default=list(ASSET_CLASSES),
-                        choices=ASSET_CLASSES, metavar='CLASS',
-                        help=f'classes to build (default: all of {" ".join(ASSET_CLASSES)})')
-    parser.add_argument('--preview', type=Path, default=None,
-                        help='also draw one PNG per class of the built library into this folder')
+    parser.add_argument(
+        '--classes',
+        nargs='+',
+        default=list(ASSET_CLASSES),
+        choices=ASSET_CLASSES,
+        metavar='CLASS',
+        help=f'classes to build (default: all of {" ".join(ASSET_CLASSES)})')
+    parser.add_argument(
+        '--preview',
+        type=Path,
+        default=None,
+        help='also draw one PNG per class of the built library into this folder')
     args = parser.parse_args(argv)
     if args.instances < 1:
         parser.error(f'--instances must be >= 1, got {args.instances}')

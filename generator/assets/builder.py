@@ -77,12 +77,15 @@ def circle(radius: float, segments: int, z: float = 0.0) -> list[tuple[float, fl
              radius * math.sin(2 * math.pi * i / segments), z) for i in range(segments)]
 
 
-def rounded_rect(width: float, depth: float, radius: float, corner_segments: int = 4,
+def rounded_rect(width: float,
+                 depth: float,
+                 radius: float,
+                 corner_segments: int = 4,
                  z: float = 0.0) -> list[tuple[float, float, float]]:
     """Counter-clockwise rectangle centred at the origin with rounded corners."""
     radius = min(radius, 0.5 * width - 1e-4, 0.5 * depth - 1e-4)
-    centres = [(0.5 * width - radius, 0.5 * depth - radius), (-0.5 * width + radius,
-                                                              0.5 * depth - radius),
+    centres = [(0.5 * width - radius, 0.5 * depth - radius),
+               (-0.5 * width + radius, 0.5 * depth - radius),
                (-0.5 * width + radius, -0.5 * depth + radius),
                (0.5 * width - radius, -0.5 * depth + radius)]
     points = []
@@ -135,34 +138,55 @@ class MeshBuilder:
         size = [abs(b - a) for a, b in zip(lo, hi)]
         self.box(size, material, at @ translate(*centre))
 
-    def cylinder(self, radius: float, height: float, material: int, at: Matrix = IDENTITY,
-                 radius_top: float | None = None, segments: int = 16) -> None:
+    def cylinder(self,
+                 radius: float,
+                 height: float,
+                 material: int,
+                 at: Matrix = IDENTITY,
+                 radius_top: float | None = None,
+                 segments: int = 16) -> None:
         """Closed cylinder (or frustum) along the frame's z axis, its base at the frame origin."""
         top = radius if radius_top is None else radius_top
-        result = bmesh.ops.create_cone(self.bm, cap_ends=True, cap_tris=False,
-                                       segments=segments, radius1=radius, radius2=top,
-                                       depth=height, matrix=at @ translate(0, 0, height / 2))
+        result = bmesh.ops.create_cone(
+            self.bm,
+            cap_ends=True,
+            cap_tris=False,
+            segments=segments,
+            radius1=radius,
+            radius2=top,
+            depth=height,
+            matrix=at @ translate(0, 0, height / 2))
         self._tag(result['verts'], material)
 
-    def rod(self, start: Point, end: Point, radius: float, material: int,
-            at: Matrix = IDENTITY, segments: int = 12) -> None:
+    def rod(self,
+            start: Point,
+            end: Point,
+            radius: float,
+            material: int,
+            at: Matrix = IDENTITY,
+            segments: int = 12) -> None:
         """Cylinder from point `start` to point `end` (in frame `at`)."""
         start_v, end_v = Vector(start), Vector(end)
         axis = end_v - start_v
         frame = translate(*start_v) @ axis.to_track_quat('Z', 'Y').to_matrix().to_4x4()
         self.cylinder(radius, axis.length, material, at @ frame, segments=segments)
 
-    def bar(self, start: Point, end: Point, width: float, thickness: float, material: int,
+    def bar(self,
+            start: Point,
+            end: Point,
+            width: float,
+            thickness: float,
+            material: int,
             at: Matrix = IDENTITY) -> None:
         """Square-section bar from `start` to `end`: width along the frame's x-ish side."""
         start_v, end_v = Vector(start), Vector(end)
         axis = end_v - start_v
-        frame = (translate(*((start_v + end_v) / 2)) @
-                 axis.to_track_quat('Z', 'Y').to_matrix().to_4x4())
+        frame = (
+            translate(*(
+                (start_v + end_v) / 2)) @ axis.to_track_quat('Z', 'Y').to_matrix().to_4x4())
         self.box((width, thickness, axis.length), material, at @ frame)
 
-    def loft(self, rings: Sequence[Sequence[Point]], material: int,
-             at: Matrix = IDENTITY) -> None:
+    def loft(self, rings: Sequence[Sequence[Point]], material: int, at: Matrix = IDENTITY) -> None:
         """Closed solid through rings of equally many points, capped at both ends."""
         count = len(rings[0])
         if any(len(ring) != count for ring in rings) or len(rings) < 2:
@@ -176,14 +200,19 @@ class MeshBuilder:
         self.bm.faces.new(vert_rings[-1])
         self._tag([v for ring in vert_rings for v in ring], material)
 
-    def prism(self, outline: Sequence[Point], height: float, material: int,
+    def prism(self,
+              outline: Sequence[Point],
+              height: float,
+              material: int,
               at: Matrix = IDENTITY) -> None:
         """Extrude a counter-clockwise x/y outline from z=0 to z=height in frame `at`."""
         bottom = [(p[0], p[1], 0.0) for p in outline]
         top = [(p[0], p[1], height) for p in outline]
         self.loft([bottom, top], material, at)
 
-    def to_object(self, name: str, collection: bpy.types.Collection,
+    def to_object(self,
+                  name: str,
+                  collection: bpy.types.Collection,
                   material_prefix: str | None = None) -> bpy.types.Object:
         """Triangulate and store as a new mesh object linked to `collection`."""
         faces = self.bm.faces[:]
@@ -212,8 +241,7 @@ def set_material_colour(material: bpy.types.Material, rgb: RGB) -> None:
                 node.inputs['Base Color'].default_value = rgba
 
 
-def material_colour(material: bpy.types.Material | None,
-                    default: RGB = (128, 128, 128)) -> RGB:
+def material_colour(material: bpy.types.Material | None, default: RGB = (128, 128, 128)) -> RGB:
     """uint8 sRGB colour of a material: an unlinked Principled BSDF base colour, else the
     viewport (diffuse) colour; `default` for an empty slot."""
     if material is None:

@@ -19,18 +19,28 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
     variant = VARIANTS[index % len(VARIANTS)]
     office = variant == 'pedestal'
     params = {
-        'seat_height': uniform(rng, 0.43, 0.52) if office else uniform(rng, 0.42, 0.48),
-        'seat_width': uniform(rng, 0.44, 0.52) if office else uniform(rng, 0.40, 0.48),
-        'seat_depth': uniform(rng, 0.42, 0.50) if office else uniform(rng, 0.38, 0.46),
-        'seat_thickness': uniform(rng, 0.05, 0.09) if office else uniform(rng, 0.02, 0.06),
-        'backrest': pick(rng, BACKRESTS),
-        'back_height': uniform(rng, 0.40, 0.68) if office else uniform(rng, 0.32, 0.48),
-        'back_tilt': uniform(rng, 0.05, 0.25),
-        'armrests': bool(rng.random() < (0.7 if office else 0.4)),
-        'arm_height': uniform(rng, 0.18, 0.26),
-        'frame_colour': list(pick(rng, palette.METAL if variant != 'fourleg' else
-                                  palette.METAL + palette.WOOD)),
-        'seat_colour': list(pick(rng, palette.FABRIC + palette.WOOD[:2])),
+        'seat_height':
+        uniform(rng, 0.43, 0.52) if office else uniform(rng, 0.42, 0.48),
+        'seat_width':
+        uniform(rng, 0.44, 0.52) if office else uniform(rng, 0.40, 0.48),
+        'seat_depth':
+        uniform(rng, 0.42, 0.50) if office else uniform(rng, 0.38, 0.46),
+        'seat_thickness':
+        uniform(rng, 0.05, 0.09) if office else uniform(rng, 0.02, 0.06),
+        'backrest':
+        pick(rng, BACKRESTS),
+        'back_height':
+        uniform(rng, 0.40, 0.68) if office else uniform(rng, 0.32, 0.48),
+        'back_tilt':
+        uniform(rng, 0.05, 0.25),
+        'armrests':
+        bool(rng.random() < (0.7 if office else 0.4)),
+        'arm_height':
+        uniform(rng, 0.18, 0.26),
+        'frame_colour':
+        list(pick(rng, palette.METAL if variant != 'fourleg' else palette.METAL + palette.WOOD)),
+        'seat_colour':
+        list(pick(rng, palette.FABRIC + palette.WOOD[:2])),
     }
     if variant == 'fourleg':
         params['leg_profile'] = pick(rng, ('square', 'round'))
@@ -98,8 +108,13 @@ def _pedestal(mb: MeshBuilder, params: dict, frame: int) -> None:
         # twin-wheel caster: a fork under the spoke tip and two wheels across it
         mb.box((0.03, 0.03, 0.03), frame, translate(tip[0], tip[1], 0.055) @ rot_z(angle))
         for side in (-1, 1):
-            mb.cylinder(0.025, 0.012, frame, translate(tip[0], tip[1], 0.025) @ rot_z(angle)
-                        @ translate(0, side * 0.008, 0) @ rot_x(side * math.pi / 2), segments=12)
+            mb.cylinder(
+                0.025,
+                0.012,
+                frame,
+                translate(tip[0], tip[1], 0.025) @ rot_z(angle) @ translate(0, side * 0.008, 0)
+                @ rot_x(side * math.pi / 2),
+                segments=12)
     mb.cylinder(0.05, 0.08, frame, translate(0, 0, 0.06))
     mb.cylinder(0.028, top - 0.2, frame, translate(0, 0, 0.14), segments=12)
     mb.box_between((-0.11, -0.12, top - 0.06), (0.11, 0.12, top), frame)
@@ -124,8 +139,9 @@ def _backrest(mb: MeshBuilder, variant: str, params: dict, frame: int, seat: int
     width, depth = params['seat_width'], params['seat_depth']
     height, style = params['back_height'], params['backrest']
     thick = 0.03 if variant != 'pedestal' else 0.06
-    base = (translate(0, depth / 2 - thick / 2, params['seat_height'] - params['seat_thickness'])
-            @ rot_x(-params['back_tilt']))
+    base = (
+        translate(0, depth / 2 - thick / 2, params['seat_height'] - params['seat_thickness'])
+        @ rot_x(-params['back_tilt']))
     panel_width = width - 0.02 if variant != 'pedestal' else width - 0.04
     if variant == 'pedestal':
         # spine from the seat mechanism to the back panel
@@ -133,8 +149,9 @@ def _backrest(mb: MeshBuilder, variant: str, params: dict, frame: int, seat: int
         mb.bar((0, 0.02, -0.01), (0, 0.02, 0.22), 0.06, 0.02, frame, base)
         if height > 0.58:  # executive chairs: a headrest above the tall back
             mb.bar((0, 0.0, height - 0.05), (0, 0.0, height + 0.08), 0.04, 0.015, frame, base)
-            mb.prism(rounded_rect(0.26, 0.06, 0.025), 0.11, seat,
-                     base @ translate(0, -0.01, height + 0.06))
+            mb.prism(
+                rounded_rect(0.26, 0.06, 0.025), 0.11, seat,
+                base @ translate(0, -0.01, height + 0.06))
     else:
         for sx in (-1, 1):
             x = sx * (width / 2 - 0.03)
@@ -148,21 +165,21 @@ def _backrest(mb: MeshBuilder, variant: str, params: dict, frame: int, seat: int
         slat = (height - lower) / (2 * count - 1)
         for k in range(count):
             z0 = lower + 2 * k * slat
-            mb.box_between((-panel_width / 2, -thick / 4, z0), (panel_width / 2, thick / 4,
-                                                                 z0 + slat), seat, base)
+            mb.box_between((-panel_width / 2, -thick / 4, z0),
+                           (panel_width / 2, thick / 4, z0 + slat), seat, base)
     elif style == 'frame':
         rail = 0.06
         mb.box_between((-panel_width / 2, -thick / 2, height - rail),
                        (panel_width / 2, thick / 2, height), seat, base)
-        mb.box_between((-panel_width / 2, -thick / 4, lower), (panel_width / 2, thick / 4,
-                                                               lower + rail / 2), frame, base)
+        mb.box_between((-panel_width / 2, -thick / 4, lower),
+                       (panel_width / 2, thick / 4, lower + rail / 2), frame, base)
         mb.box_between((-0.05, -thick / 4, lower), (0.05, thick / 4, height - rail), frame, base)
     elif style == 'rounded':
         # panel outline in the back's x/z plane: straight sides, an arched top
         arch = 0.25 * panel_width
-        outline = [(panel_width / 2, lower), *[
-            (panel_width / 2 * math.cos(a), height - arch + arch * math.sin(a))
-            for a in np.linspace(0.0, math.pi, 13)], (-panel_width / 2, lower)]
+        outline = [(panel_width / 2, lower),
+                   *[(panel_width / 2 * math.cos(a), height - arch + arch * math.sin(a))
+                     for a in np.linspace(0.0, math.pi, 13)], (-panel_width / 2, lower)]
         # extrude along -y: rot_x(+pi/2) maps the prism's z to -y and its y to z
         mb.prism(outline, thick, seat, base @ translate(0, thick / 2, 0) @ rot_x(math.pi / 2))
     else:
@@ -179,18 +196,18 @@ def _armrests(mb: MeshBuilder, variant: str, params: dict, frame: int, seat: int
             inner = sx * (width / 2 - 0.06)
             mb.bar((inner, 0.02, seat_top - params['seat_thickness'] - 0.01),
                    (x, 0.02, seat_top - params['seat_thickness'] - 0.01), 0.04, 0.02, frame)
-            mb.bar((x, 0.02, seat_top - params['seat_thickness'] - 0.02), (x, 0.02, arm_z),
-                   0.04, 0.025, frame)
+            mb.bar((x, 0.02, seat_top - params['seat_thickness'] - 0.02), (x, 0.02, arm_z), 0.04,
+                   0.025, frame)
             mb.box_between((x - 0.04, -0.12, arm_z), (x + 0.04, 0.14, arm_z + 0.03), seat)
         elif variant == 'sled':
             radius = 0.011
             mb.rod((x, -depth / 2 + 0.06, seat_top - params['seat_thickness']),
                    (x, -depth / 2 + 0.06, arm_z), radius, frame)
             mb.rod((x, -depth / 2 + 0.06, arm_z), (x, depth / 2 - 0.02, arm_z), radius, frame)
-            mb.box_between((x - 0.025, -depth / 2 + 0.04, arm_z), (x + 0.025, depth / 2 - 0.05,
-                                                                   arm_z + 0.02), seat)
+            mb.box_between((x - 0.025, -depth / 2 + 0.04, arm_z),
+                           (x + 0.025, depth / 2 - 0.05, arm_z + 0.02), seat)
         else:
             mb.bar((x, -depth / 2 + 0.06, seat_top - params['seat_thickness']),
                    (x, -depth / 2 + 0.06, arm_z), 0.03, 0.03, frame)
-            mb.box_between((x - 0.025, -depth / 2 + 0.03, arm_z), (x + 0.025, depth / 2,
-                                                                   arm_z + 0.025), frame)
+            mb.box_between((x - 0.025, -depth / 2 + 0.03, arm_z),
+                           (x + 0.025, depth / 2, arm_z + 0.025), frame)

@@ -25,7 +25,12 @@ from generator.assets.builder import material_colour
 
 ASSET_CLASSES = ('table', 'chair', 'sofa', 'yumi', '3dprinter')
 GENERATORS: dict[str, ModuleType] = {
-    'table': table, 'chair': chair, 'sofa': sofa, 'yumi': yumi, '3dprinter': printer3d}
+    'table': table,
+    'chair': chair,
+    'sofa': sofa,
+    'yumi': yumi,
+    '3dprinter': printer3d
+}
 ASSET_PROP = 'synthdet_asset'
 PARAMS_PROP = 'synthdet_params'
 DEFAULT_COLOUR = (128, 128, 128)
@@ -93,7 +98,9 @@ def procedural_params(cls: str, index: int, seed: int) -> tuple[str, dict]:
     return GENERATORS[cls].sample_params(rng, index)
 
 
-def build_library(out_dir: Path, instances_per_class: int = 12, seed: int = 0,
+def build_library(out_dir: Path,
+                  instances_per_class: int = 12,
+                  seed: int = 0,
                   classes: Sequence[str] = ASSET_CLASSES) -> list[Path]:
     """Build the procedural instances in bpy and save one `<class>.blend` per class in out_dir."""
     _check_classes(classes)
@@ -133,7 +140,9 @@ def build_library(out_dir: Path, instances_per_class: int = 12, seed: int = 0,
     return paths
 
 
-def instance_from_params(cls: str, variant: str, params: dict,
+def instance_from_params(cls: str,
+                         variant: str,
+                         params: dict,
                          name: str | None = None) -> AssetInstance:
     """Build one procedural instance in bpy from explicit parameters (e.g. chosen YuMi joint
     angles) and extract it exactly as `load_library` would, without writing a file."""
@@ -262,13 +271,20 @@ def instance_from_object(obj: bpy.types.Object, cls: str, path: Path) -> AssetIn
             top_size = tuple(min(float(a), b) for a, b in zip(params['top_size'], top_size))
     for array in (vertices, triangles, colours):
         array.setflags(write=False)
-    return AssetInstance(cls=cls, name=obj.name, asset=asset, params=params, size=size,
-                         top_z=top_z, top_size=top_size, vertices=vertices,
-                         triangles=triangles, colours=colours)
+    return AssetInstance(
+        cls=cls,
+        name=obj.name,
+        asset=asset,
+        params=params,
+        size=size,
+        top_z=top_z,
+        top_size=top_size,
+        vertices=vertices,
+        triangles=triangles,
+        colours=colours)
 
 
-def _top_extent(vertices: np.ndarray, triangles: np.ndarray,
-                top_z: float) -> tuple[float, float]:
+def _top_extent(vertices: np.ndarray, triangles: np.ndarray, top_z: float) -> tuple[float, float]:
     """x/y extent, centred at the origin, of the upward faces at the top height."""
     corners = vertices[triangles]
     normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])

@@ -30,8 +30,9 @@ def shaded_colours(instance: AssetInstance) -> np.ndarray:
 def draw_instance(ax, instance: AssetInstance) -> None:
     """Draw one instance on a 3D axis, viewed from its front-left, with true proportions."""
     vertices, triangles, _ = instance.mesh_arrays()
-    ax.add_collection3d(Poly3DCollection(vertices[triangles], facecolors=shaded_colours(instance),
-                                         edgecolors='none'))
+    ax.add_collection3d(
+        Poly3DCollection(
+            vertices[triangles], facecolors=shaded_colours(instance), edgecolors='none'))
     half = 0.5 * np.asarray(instance.size)
     ax.set_xlim(-half[0], half[0])
     ax.set_ylim(-half[1], half[1])
@@ -40,8 +41,7 @@ def draw_instance(ax, instance: AssetInstance) -> None:
     ax.set_proj_type('ortho')
     ax.view_init(elev=22, azim=-60)
     ax.set_axis_off()
-    ax.set_title(f'{instance.name}\n{" x ".join(f"{s:.2f}" for s in instance.size)} m',
-                 fontsize=7)
+    ax.set_title(f'{instance.name}\n{" x ".join(f"{s:.2f}" for s in instance.size)} m', fontsize=7)
 
 
 def render_previews(library: AssetLibrary, out_dir: Path, columns: int = 4) -> list[Path]:

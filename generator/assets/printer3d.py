@@ -8,8 +8,7 @@ import math
 import numpy as np
 
 from generator.assets import palette
-from generator.assets.builder import (MeshBuilder, circle, pick, rot_x, rot_y, rot_z, translate,
-                                      uniform)
+from generator.assets.builder import (MeshBuilder, pick, rot_x, rot_y, rot_z, translate, uniform)
 
 VARIANTS = ('enclosed', 'bedslinger', 'delta', 'largeformat')
 
@@ -17,36 +16,56 @@ VARIANTS = ('enclosed', 'bedslinger', 'delta', 'largeformat')
 def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
     """Draw a variant (cycled by index) and its dimensions in metres."""
     variant = VARIANTS[index % len(VARIANTS)]
-    params: dict = {'body_colour': list(pick(rng, palette.PRINTER_BODY)),
-                    'frame_colour': list(pick(rng, palette.METAL)),
-                    'bed_colour': list(pick(rng, ((30, 30, 30), (190, 190, 195), (170, 140, 60)))),
-                    'filament_colour': list(pick(rng, palette.FILAMENT)),
-                    'spool': pick(rng, ('top', 'side', 'back'))}
+    params: dict = {
+        'body_colour': list(pick(rng, palette.PRINTER_BODY)),
+        'frame_colour': list(pick(rng, palette.METAL)),
+        'bed_colour': list(pick(rng, ((30, 30, 30), (190, 190, 195), (170, 140, 60)))),
+        'filament_colour': list(pick(rng, palette.FILAMENT)),
+        'spool': pick(rng, ('top', 'side', 'back'))
+    }
     if variant == 'enclosed':
-        params.update(width=uniform(rng, 0.38, 0.55), depth=uniform(rng, 0.40, 0.60),
-                      height=uniform(rng, 0.45, 0.80), door=pick(rng, ('glass', 'open')),
-                      bed_level=uniform(rng, 0.2, 0.8))
+        params.update(
+            width=uniform(rng, 0.38, 0.55),
+            depth=uniform(rng, 0.40, 0.60),
+            height=uniform(rng, 0.45, 0.80),
+            door=pick(rng, ('glass', 'open')),
+            bed_level=uniform(rng, 0.2, 0.8))
     elif variant == 'bedslinger':
-        params.update(width=uniform(rng, 0.40, 0.52), depth=uniform(rng, 0.36, 0.46),
-                      height=uniform(rng, 0.42, 0.58), bed_size=uniform(rng, 0.22, 0.26),
-                      bed_travel=uniform(rng, -1.0, 1.0), gantry_level=uniform(rng, 0.1, 0.9),
-                      head_travel=uniform(rng, -1.0, 1.0))
+        params.update(
+            width=uniform(rng, 0.40, 0.52),
+            depth=uniform(rng, 0.36, 0.46),
+            height=uniform(rng, 0.42, 0.58),
+            bed_size=uniform(rng, 0.22, 0.26),
+            bed_travel=uniform(rng, -1.0, 1.0),
+            gantry_level=uniform(rng, 0.1, 0.9),
+            head_travel=uniform(rng, -1.0, 1.0))
     elif variant == 'delta':
-        params.update(side=uniform(rng, 0.30, 0.45), height=uniform(rng, 0.60, 0.90),
-                      effector=[uniform(rng, -0.6, 0.6), uniform(rng, -0.6, 0.6),
-                                uniform(rng, 0.05, 0.5)])
+        params.update(
+            side=uniform(rng, 0.30, 0.45),
+            height=uniform(rng, 0.60, 0.90),
+            effector=[uniform(rng, -0.6, 0.6),
+                      uniform(rng, -0.6, 0.6),
+                      uniform(rng, 0.05, 0.5)])
     elif variant == 'largeformat':
-        params.update(width=uniform(rng, 0.60, 0.80), depth=uniform(rng, 0.60, 0.80),
-                      height=uniform(rng, 0.60, 0.90), frame=pick(rng, ('open', 'cabinet')),
-                      bed_level=uniform(rng, 0.1, 0.8), head_travel=uniform(rng, -1.0, 1.0))
+        params.update(
+            width=uniform(rng, 0.60, 0.80),
+            depth=uniform(rng, 0.60, 0.80),
+            height=uniform(rng, 0.60, 0.90),
+            frame=pick(rng, ('open', 'cabinet')),
+            bed_level=uniform(rng, 0.1, 0.8),
+            head_travel=uniform(rng, -1.0, 1.0))
     return variant, params
 
 
 def build(variant: str, params: dict) -> MeshBuilder:
     """Build the printer's mesh from its parameters."""
     mb = MeshBuilder()
-    builders = {'enclosed': _enclosed, 'bedslinger': _bedslinger, 'delta': _delta,
-                'largeformat': _largeformat}
+    builders = {
+        'enclosed': _enclosed,
+        'bedslinger': _bedslinger,
+        'delta': _delta,
+        'largeformat': _largeformat
+    }
     if variant not in builders:
         raise ValueError(f'unknown 3dprinter variant {variant!r}')
     builders[variant](mb, params)
@@ -55,9 +74,9 @@ def build(variant: str, params: dict) -> MeshBuilder:
 
 def _materials(mb: MeshBuilder, params: dict) -> tuple[int, int, int, int]:
     return (mb.material('body', params['body_colour']), mb.material('frame',
-                                                                     params['frame_colour']),
-            mb.material('bed', params['bed_colour']), mb.material('filament',
-                                                                  params['filament_colour']))
+                                                                    params['frame_colour']),
+            mb.material('bed',
+                        params['bed_colour']), mb.material('filament', params['filament_colour']))
 
 
 def _spool(mb: MeshBuilder, centre, filament: int, frame: int, axis: str = 'x') -> None:
@@ -91,8 +110,8 @@ def _enclosed(mb: MeshBuilder, params: dict) -> None:
                        (sx * w / 2 + wall / 2, d / 2 - 0.03, h - top_h), body)
     mb.box_between((-w / 2 + 0.03, d / 2 - wall, base_h), (w / 2 - 0.03, d / 2, h - top_h), body)
     if params['door'] == 'glass':
-        mb.box_between((-w / 2 + 0.03, -d / 2, base_h), (w / 2 - 0.03, -d / 2 + wall,
-                                                         h - top_h), glass)
+        mb.box_between((-w / 2 + 0.03, -d / 2, base_h), (w / 2 - 0.03, -d / 2 + wall, h - top_h),
+                       glass)
         mb.box_between((w / 2 - 0.06, -d / 2 - 0.02, (base_h + h) / 2 - 0.05),
                        (w / 2 - 0.045, -d / 2, (base_h + h) / 2 + 0.05), frame)
     # display on the base front
@@ -101,8 +120,8 @@ def _enclosed(mb: MeshBuilder, params: dict) -> None:
     inner_w, inner_d = w - 0.08, d - 0.10
     bed_side = min(inner_w, inner_d) * 0.8
     bed_z = base_h + 0.02 + params['bed_level'] * (h - top_h - base_h - 0.2)
-    mb.box_between((-bed_side / 2, -bed_side / 2, bed_z), (bed_side / 2, bed_side / 2,
-                                                           bed_z + 0.01), bed)
+    mb.box_between((-bed_side / 2, -bed_side / 2, bed_z),
+                   (bed_side / 2, bed_side / 2, bed_z + 0.01), bed)
     mb.box_between((-0.03, d / 2 - 0.06, base_h), (0.03, d / 2 - 0.03, h - top_h), frame)
     mb.box_between((-0.02, -bed_side / 2, bed_z - 0.02), (0.02, d / 2 - 0.06, bed_z), frame)
     rail_z = h - top_h - 0.05
@@ -136,18 +155,17 @@ def _bedslinger(mb: MeshBuilder, params: dict) -> None:
     # sliding bed
     travel = 0.5 * (d - bed_size - 0.02)
     bed_y = params['bed_travel'] * travel
-    mb.box_between((-bed_size / 2, bed_y - bed_size / 2, 0.07), (bed_size / 2,
-                                                                 bed_y + bed_size / 2, 0.08), bed)
+    mb.box_between((-bed_size / 2, bed_y - bed_size / 2, 0.07),
+                   (bed_size / 2, bed_y + bed_size / 2, 0.08), bed)
     mb.box_between((-0.08, bed_y - 0.08, 0.06), (0.08, bed_y + 0.08, 0.07), frame)
     # z frame across x, gantry, head
     half = w / 2 - 0.06
     for sx in (-1, 1):
         mb.box_between((sx * half - 0.01, 0.02, 0.02), (sx * half + 0.01, 0.06, h - 0.02), frame)
         mb.box_between((sx * half - 0.05, 0.0, 0.0), (sx * half + 0.03 * sx, 0.08, 0.02), body)
-        mb.cylinder(0.004, h - 0.2, frame, translate(sx * (half - 0.035), 0.04, 0.1),
-                    segments=8)
-        mb.box_between((sx * (half + 0.02) - 0.03, 0.02, 0.02), (sx * (half + 0.02) + 0.03, 0.07,
-                                                                 0.08), body)
+        mb.cylinder(0.004, h - 0.2, frame, translate(sx * (half - 0.035), 0.04, 0.1), segments=8)
+        mb.box_between((sx * (half + 0.02) - 0.03, 0.02, 0.02),
+                       (sx * (half + 0.02) + 0.03, 0.07, 0.08), body)
     mb.box_between((-half - 0.01, 0.02, h - 0.02), (half + 0.01, 0.06, h), frame)
     gantry_z = 0.12 + params['gantry_level'] * (h - 0.25)
     mb.box_between((-half, 0.0, gantry_z), (half, 0.02, gantry_z + 0.04), body)
@@ -246,8 +264,12 @@ def _largeformat(mb: MeshBuilder, params: dict) -> None:
     for sx in (-1, 1):
         mb.box_between((sx * bed_w / 4 - 0.015, -bed_d / 2, bed_z - 0.03),
                        (sx * bed_w / 4 + 0.015, d / 2 - 2 * e, bed_z), frame)
-        mb.cylinder(0.006, h - base_h - 2 * e, frame, translate(sx * bed_w / 4, d / 2 - 3 * e,
-                                                                base_h + e), segments=8)
+        mb.cylinder(
+            0.006,
+            h - base_h - 2 * e,
+            frame,
+            translate(sx * bed_w / 4, d / 2 - 3 * e, base_h + e),
+            segments=8)
     gantry_z = h - 2 * e - 0.05
     for sx in (-1, 1):
         mb.box_between((sx * (w / 2 - 3 * e) - 0.015, ys[0], gantry_z),
@@ -256,8 +278,8 @@ def _largeformat(mb: MeshBuilder, params: dict) -> None:
     mb.box_between((xs[0] + e, -0.015, gantry_z), (xs[1] - e, 0.015, gantry_z + 0.03), body)
     _head(mb, head_x, -0.02, gantry_z - 0.08, body, frame)
     # control box with display on the front right post
-    mb.box_between((w / 2 - 0.2, -d / 2 - 0.04, base_h + 0.05), (w / 2 - 0.05, -d / 2,
-                                                                base_h + 0.15), body)
+    mb.box_between((w / 2 - 0.2, -d / 2 - 0.04, base_h + 0.05),
+                   (w / 2 - 0.05, -d / 2, base_h + 0.15), body)
     for k in range(2 if params['spool'] != 'top' else 1):
         if params['spool'] == 'top':
             mb.box_between((-0.01, -0.01, h), (0.01, 0.01, h + 0.11), frame)

@@ -48,9 +48,12 @@ def build(variant: str, params: dict) -> MeshBuilder:
     if params['base'] == 'feet':
         for sx in (-1, 1):
             for sy in (-1, 1):
-                mb.cylinder(0.025, lift, feet, translate(sx * (width / 2 - 0.06),
-                                                         sy * (depth / 2 - 0.06), 0.0),
-                            radius_top=0.02)
+                mb.cylinder(
+                    0.025,
+                    lift,
+                    feet,
+                    translate(sx * (width / 2 - 0.06), sy * (depth / 2 - 0.06), 0.0),
+                    radius_top=0.02)
     else:
         mb.box_between((-width / 2 + 0.03, -depth / 2 + 0.03, 0.0),
                        (width / 2 - 0.03, depth / 2 - 0.03, 0.04), feet)
@@ -66,23 +69,28 @@ def build(variant: str, params: dict) -> MeshBuilder:
         for sx in (-1, 1):
             x0 = sx * (inner / 2)
             x1 = sx * (width / 2)
-            mb.box_between((min(x0, x1), -depth / 2, frame_top), (max(x0, x1), depth / 2,
-                                                                   params['arm_height']), body)
+            mb.box_between((min(x0, x1), -depth / 2, frame_top),
+                           (max(x0, x1), depth / 2, params['arm_height']), body)
             if params['arm_style'] == 'rolled':
-                mb.cylinder(arm_w / 2, depth, body,
-                            translate((x0 + x1) / 2, depth / 2, params['arm_height'])
-                            @ rot_x(0.5 * np.pi), segments=12)
+                mb.cylinder(
+                    arm_w / 2,
+                    depth,
+                    body,
+                    translate((x0 + x1) / 2, depth / 2, params['arm_height']) @ rot_x(0.5 * np.pi),
+                    segments=12)
     # cushions, one per seat, with a small gap between them
     gap = 0.01
     seat_d = depth - back_depth - 0.02
     for k in range(seats):
         x_centre = -inner / 2 + (k + 0.5) * seat_w
-        mb.prism(rounded_rect(seat_w - gap, seat_d, 0.05), cushion_h, cushion,
-                 translate(x_centre, -depth / 2 + 0.02 + seat_d / 2, frame_top))
+        mb.prism(
+            rounded_rect(seat_w - gap, seat_d, 0.05), cushion_h, cushion,
+            translate(x_centre, -depth / 2 + 0.02 + seat_d / 2, frame_top))
         if params['back_cushions']:
             back_h = params['back_height'] - params['seat_height'] - 0.04
-            frame = (translate(x_centre, depth / 2 - back_depth, params['seat_height']) @
-                     rot_x(-params['back_tilt']))
+            frame = (
+                translate(x_centre, depth / 2 - back_depth, params['seat_height'])
+                @ rot_x(-params['back_tilt']))
             mb.box_between((-(seat_w - gap) / 2, -0.14, 0.0), ((seat_w - gap) / 2, 0.0, back_h),
                            cushion, frame)
     return mb

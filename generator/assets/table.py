@@ -8,8 +8,7 @@ import math
 import numpy as np
 
 from generator.assets import palette
-from generator.assets.builder import (MeshBuilder, circle, pick, rounded_rect, translate,
-                                      uniform)
+from generator.assets.builder import (MeshBuilder, circle, pick, rounded_rect, translate, uniform)
 
 VARIANTS = ('legs', 'round', 'pedestal', 'trestle', 'workbench')
 
@@ -17,24 +16,36 @@ VARIANTS = ('legs', 'round', 'pedestal', 'trestle', 'workbench')
 def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
     """Draw a variant (cycled by index) and its dimensions in metres."""
     variant = VARIANTS[index % len(VARIANTS)]
-    params: dict = {'height': uniform(rng, 0.72, 0.77), 'top_thickness': uniform(rng, 0.025, 0.04),
-                    'top_colour': list(pick(rng, palette.LAMINATE + palette.WOOD)),
-                    'frame_colour': list(pick(rng, palette.METAL))}
+    params: dict = {
+        'height': uniform(rng, 0.72, 0.77),
+        'top_thickness': uniform(rng, 0.025, 0.04),
+        'top_colour': list(pick(rng, palette.LAMINATE + palette.WOOD)),
+        'frame_colour': list(pick(rng, palette.METAL))
+    }
     if variant == 'legs':
-        params.update(width=uniform(rng, 1.4, 2.0), depth=uniform(rng, 0.75, 0.9),
-                      leg_profile=pick(rng, ('square', 'round')), apron=bool(rng.random() < 0.6),
-                      modesty_panel=bool(rng.random() < 0.4))
+        params.update(
+            width=uniform(rng, 1.4, 2.0),
+            depth=uniform(rng, 0.75, 0.9),
+            leg_profile=pick(rng, ('square', 'round')),
+            apron=bool(rng.random() < 0.6),
+            modesty_panel=bool(rng.random() < 0.4))
     elif variant == 'round':
         params.update(diameter=uniform(rng, 1.0, 1.4), legs=int(rng.integers(3, 5)))
     elif variant == 'pedestal':
-        params.update(width=uniform(rng, 1.2, 1.8), depth=uniform(rng, 0.75, 0.9),
-                      base=pick(rng, ('disc', 'cross')))
+        params.update(
+            width=uniform(rng, 1.2, 1.8),
+            depth=uniform(rng, 0.75, 0.9),
+            base=pick(rng, ('disc', 'cross')))
     elif variant == 'trestle':
         params.update(width=uniform(rng, 1.6, 2.2), depth=uniform(rng, 0.75, 1.0))
     elif variant == 'workbench':
-        params.update(width=uniform(rng, 1.5, 2.4), depth=uniform(rng, 0.75, 1.0),
-                      height=uniform(rng, 0.85, 0.95), top_thickness=uniform(rng, 0.04, 0.06),
-                      drawers=bool(rng.random() < 0.5), shelf_colour=list(pick(rng, palette.WOOD)))
+        params.update(
+            width=uniform(rng, 1.5, 2.4),
+            depth=uniform(rng, 0.75, 1.0),
+            height=uniform(rng, 0.85, 0.95),
+            top_thickness=uniform(rng, 0.04, 0.06),
+            drawers=bool(rng.random() < 0.5),
+            shelf_colour=list(pick(rng, palette.WOOD)))
     if variant == 'round':
         side = params['diameter'] / math.sqrt(2)  # the square inscribed in the round top
         params['top_size'] = [round(side, 4), round(side, 4)]

@@ -21,31 +21,48 @@ POSES = ('rest', 'work', 'free')
 SIDES = ('right', 'left')
 JOINTS = ('j1', 'j2', 'j7', 'j3', 'j4', 'j5', 'j6')
 JOINT_LIMITS_DEG = {
-    'j1': (-168.5, 168.5), 'j2': (-143.5, 43.5), 'j7': (-168.5, 168.5), 'j3': (-123.5, 80.0),
-    'j4': (-290.0, 290.0), 'j5': (-88.0, 138.0), 'j6': (-229.0, 229.0)}
-JOINT_LIMITS = {j: (math.radians(lo), math.radians(hi)) for j, (lo, hi) in
-                JOINT_LIMITS_DEG.items()}
+    'j1': (-168.5, 168.5),
+    'j2': (-143.5, 43.5),
+    'j7': (-168.5, 168.5),
+    'j3': (-123.5, 80.0),
+    'j4': (-290.0, 290.0),
+    'j5': (-88.0, 138.0),
+    'j6': (-229.0, 229.0)
+}
+JOINT_LIMITS = {
+    j: (math.radians(lo), math.radians(hi))
+    for j, (lo, hi) in JOINT_LIMITS_DEG.items()
+}
 # A folded rest pose: elbows low beside the body, grippers in front of it pointing down (right
 # arm, in degrees). The left arm mirrors it: joints 1, 7, 4 and 6 change sign, joints 2, 3 and 5 do not.
-REST_DEG = {'j1': 88.0, 'j2': -129.0, 'j7': -69.0, 'j3': 76.0, 'j4': 193.0, 'j5': 118.0,
-            'j6': -115.0}
+REST_DEG = {
+    'j1': 88.0,
+    'j2': -129.0,
+    'j7': -69.0,
+    'j3': 76.0,
+    'j4': 193.0,
+    'j5': 118.0,
+    'j6': -115.0
+}
 MIRRORED = ('j1', 'j7', 'j4', 'j6')
 # (xyz, roll-pitch-yaw) of each joint in its parent frame; the shoulder differs per side.
-SHOULDER = {'right': ((0.05355, -0.0725, 0.41492), (-0.9795, -0.5682, -2.3155)),
-            'left': ((0.05355, 0.0725, 0.41492), (0.9781, -0.5716, 2.3180))}
-CHAIN = (((0.03, 0.0, 0.1), (math.pi / 2, 0.0, 0.0)),
-         ((-0.03, 0.17283, 0.0), (-math.pi / 2, 0.0, 0.0)),
-         ((-0.04188, 0.0, 0.07873), (math.pi / 2, -math.pi / 2, 0.0)),
-         ((0.0405, 0.16461, 0.0), (-math.pi / 2, 0.0, 0.0)),
-         ((-0.027, 0.0, 0.10039), (math.pi / 2, 0.0, 0.0)),
-         ((0.027, 0.029, 0.0), (-math.pi / 2, 0.0, 0.0)))
+SHOULDER = {
+    'right': ((0.05355, -0.0725, 0.41492), (-0.9795, -0.5682, -2.3155)),
+    'left': ((0.05355, 0.0725, 0.41492), (0.9781, -0.5716, 2.3180))
+}
+CHAIN = (((0.03, 0.0, 0.1), (math.pi / 2, 0.0, 0.0)), ((-0.03, 0.17283, 0.0), (-math.pi / 2, 0.0,
+                                                                               0.0)),
+         ((-0.04188, 0.0, 0.07873), (math.pi / 2, -math.pi / 2, 0.0)), ((0.0405, 0.16461, 0.0),
+                                                                        (-math.pi / 2, 0.0, 0.0)),
+         ((-0.027, 0.0, 0.10039), (math.pi / 2, 0.0, 0.0)), ((0.027, 0.029, 0.0), (-math.pi / 2,
+                                                                                   0.0, 0.0)))
 LINK_RADII = (0.045, 0.042, 0.04, 0.038, 0.034, 0.03, 0.028)
 FLANGE_TO_TIP = 0.15  # flange + servo gripper with fingers
 BASE_SIZE = (0.497, 0.399, 0.08)  # robot x (depth) by y (width), plinth height
 HEIGHT = 0.571
 # torso cross-sections: (z, x_back, x_front, half_width)
-TORSO = ((BASE_SIZE[2], -0.22, 0.20, 0.18), (0.30, -0.18, 0.10, 0.14),
-         (0.48, -0.15, 0.045, 0.085), (HEIGHT, -0.13, 0.0, 0.06))
+TORSO = ((BASE_SIZE[2], -0.22, 0.20, 0.18), (0.30, -0.18, 0.10, 0.14), (0.48, -0.15, 0.045, 0.085),
+         (HEIGHT, -0.13, 0.0, 0.06))
 MIN_ARM_Z = 0.1  # arms stay above the base plate / the table under the robot
 MAX_ARM_Z = 0.8  # working poses: no arm raised far above the head
 MAX_REACH_XY = 0.55
@@ -120,8 +137,8 @@ def _arm_check(side: str, angles: dict[str, float]) -> tuple[np.ndarray, np.ndar
         return None
     if np.any(_inside_torso(points[2:], radii[2:])):
         return None
-    if (np.any(np.hypot(points[:, 0], points[:, 1]) > MAX_REACH_XY) or
-            np.any(np.abs(points[:, 1]) + radii > MAX_HALF_WIDTH)):
+    if (np.any(np.hypot(points[:, 0], points[:, 1]) > MAX_REACH_XY)
+            or np.any(np.abs(points[:, 1]) + radii > MAX_HALF_WIDTH)):
         return None
     return points, radii
 
@@ -168,8 +185,8 @@ def draw_pose(rng: np.random.Generator, style: str) -> dict[str, dict[str, float
     """Joint angles (radians) of both arms: each arm drawn until valid on its own, the pair
     redrawn until the arms keep apart."""
     for _ in range(MAX_TRIES):
-        (right, right_check), (left, left_check) = (_draw_valid_arm(rng, side, style)
-                                                    for side in SIDES)
+        (right, right_check), (left, left_check) = (
+            _draw_valid_arm(rng, side, style) for side in SIDES)
         if _arms_apart(right_check, left_check):
             return {'right': right, 'left': left}
     raise RuntimeError(f'no valid YuMi pose of style {style!r} in {MAX_TRIES} draws')
@@ -179,9 +196,13 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
     """Draw joint angles (radians, within the joint limits) for a valid, collision-free pose."""
     style = POSES[index % len(POSES)]
     angles = draw_pose(rng, style)
-    params = {'pose': style, 'joints': angles, 'gripper_opening': uniform(rng, 0.0, 0.05),
-              'body_colour': list(pick(rng, palette.ROBOT_BODY)),
-              'joint_colour': list(pick(rng, palette.ROBOT_JOINT))}
+    params = {
+        'pose': style,
+        'joints': angles,
+        'gripper_opening': uniform(rng, 0.0, 0.05),
+        'body_colour': list(pick(rng, palette.ROBOT_BODY)),
+        'joint_colour': list(pick(rng, palette.ROBOT_JOINT))
+    }
     return 'irb14000', params
 
 
