@@ -1,4 +1,4 @@
-"""Tests of the procedural asset library (generator/assets), with real bpy and real .blend files."""
+"""Tests of the procedural asset library (generator/assets) with real bpy and real .blend files."""
 import hashlib
 import json
 import math

@@ -116,6 +116,9 @@ def build_library(out_dir: Path,
             collection = bpy.data.collections.new(cls)
             x = 0.0
             try:
+                if collection.name != cls:
+                    raise RuntimeError(f'cannot build {cls}.blend: this Blender session already '
+                                       f'holds a collection named {cls!r}')
                 for index in range(instances_per_class):
                     variant, params = procedural_params(cls, index, seed)
                     name = f'{cls}_{variant}_{index:02d}'

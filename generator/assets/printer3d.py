@@ -1,6 +1,6 @@
-"""Procedural 3D printers (class `3dprinter`), strongly varied: enclosed box printers, bed-slingers,
-deltas and large-format machines, each with frame, bed, gantry / print head and a filament spool.
-The door or display faces -y."""
+"""Procedural 3D printers (class `3dprinter`), strongly varied: enclosed box printers,
+bed-slingers, deltas and large-format machines, each with frame, bed, gantry / print head and a
+filament spool. The door or display faces -y."""
 from __future__ import annotations
 
 import math

@@ -34,7 +34,7 @@ JOINT_LIMITS = {
     for j, (lo, hi) in JOINT_LIMITS_DEG.items()
 }
 # A folded rest pose: elbows low beside the body, grippers in front of it pointing down (right
-# arm, in degrees). The left arm mirrors it: joints 1, 7, 4 and 6 change sign, joints 2, 3 and 5 do not.
+# arm, in degrees). The left arm mirrors it: joints 1, 7, 4 and 6 change sign, 2, 3 and 5 do not.
 REST_DEG = {
     'j1': 88.0,
     'j2': -129.0,
@@ -50,12 +50,14 @@ SHOULDER = {
     'right': ((0.05355, -0.0725, 0.41492), (-0.9795, -0.5682, -2.3155)),
     'left': ((0.05355, 0.0725, 0.41492), (0.9781, -0.5716, 2.3180))
 }
-CHAIN = (((0.03, 0.0, 0.1), (math.pi / 2, 0.0, 0.0)), ((-0.03, 0.17283, 0.0), (-math.pi / 2, 0.0,
-                                                                               0.0)),
-         ((-0.04188, 0.0, 0.07873), (math.pi / 2, -math.pi / 2, 0.0)), ((0.0405, 0.16461, 0.0),
-                                                                        (-math.pi / 2, 0.0, 0.0)),
-         ((-0.027, 0.0, 0.10039), (math.pi / 2, 0.0, 0.0)), ((0.027, 0.029, 0.0), (-math.pi / 2,
-                                                                                   0.0, 0.0)))
+# yapf: disable
+CHAIN = (((0.03, 0.0, 0.1), (math.pi / 2, 0.0, 0.0)),            # joint 2
+         ((-0.03, 0.17283, 0.0), (-math.pi / 2, 0.0, 0.0)),      # joint 7
+         ((-0.04188, 0.0, 0.07873), (math.pi / 2, -math.pi / 2, 0.0)),  # joint 3
+         ((0.0405, 0.16461, 0.0), (-math.pi / 2, 0.0, 0.0)),     # joint 4
+         ((-0.027, 0.0, 0.10039), (math.pi / 2, 0.0, 0.0)),      # joint 5
+         ((0.027, 0.029, 0.0), (-math.pi / 2, 0.0, 0.0)))        # joint 6
+# yapf: enable
 LINK_RADII = (0.045, 0.042, 0.04, 0.038, 0.034, 0.03, 0.028)
 FLANGE_TO_TIP = 0.15  # flange + servo gripper with fingers
 BASE_SIZE = (0.497, 0.399, 0.08)  # robot x (depth) by y (width), plinth height
