@@ -255,6 +255,8 @@ def test_user_made_blend_without_custom_properties_loads(tmp_path):
 
     _save_user_file(tmp_path / 'chair.blend', 'chair', chairs)
     _save_user_file(tmp_path / 'table.blend', 'table', tables)
+    bpy.data.materials.remove(grey)
+    bpy.data.materials.remove(plain)
     library = load_library(tmp_path)
     assert library.classes() == ('table', 'chair')
     [user_chair] = library.instances('chair')
@@ -309,7 +311,7 @@ def test_default_library_is_built_once_and_cached(tmp_path, library):
     assert len(list(tmp_path.iterdir())) == 2  # another seed, another cache entry
 
 
-def test_cli_builds_files_and_previews(tmp_path):
+def test_cli_builds_files_and_previews(tmp_path, library):
     result = subprocess.run([
         sys.executable, '-m', 'generator.assets', '--out',
         str(tmp_path / 'lib'), '--instances', '6', '--classes', 'chair', '3dprinter', '--preview',
@@ -323,6 +325,11 @@ def test_cli_builds_files_and_previews(tmp_path):
     assert sorted(p.name
                   for p in (tmp_path / 'lib').iterdir()) == ['3dprinter.blend', 'chair.blend']
     assert 'chair.blend: 6 instances' in result.stdout
+    # another process, same seed: the same first 6 instances, byte for byte
+    built = load_library(tmp_path / 'lib')
+    for cls in ('chair', '3dprinter'):
+        assert ([mesh_digest(i) for i in built.instances(cls)
+                 ] == [mesh_digest(i) for i in library.instances(cls) if int(i.name[-2:]) < 6])
     for name in ('chair.png', '3dprinter.png'):
         png = (tmp_path / 'png' / name).read_bytes()
         assert png[:8] == b'\x89PNG\r\n\x1a\n' and len(png) > 20_000
