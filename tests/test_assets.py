@@ -19,7 +19,7 @@ REPO = Path(__file__).resolve().parents[1]
 MODULES = {'table': table, 'chair': chair, 'sofa': sofa, 'yumi': yumi, '3dprinter': printer3d}
 # plausible bounding boxes in metres: (min x, max x), (min y, max y), (min z, max z)
 SIZE_RANGES = {
-    'table': ((0.9, 2.5), (0.65, 1.45), (0.70, 0.96)),
+    'table': ((1.2, 2.5), (0.75, 1.55), (0.70, 0.96)),
     'chair': ((0.38, 0.75), (0.38, 0.75), (0.70, 1.35)),
     'sofa': ((0.60, 2.60), (0.78, 1.00), (0.65, 1.00)),
     'yumi': ((0.39, 1.20), (0.39, 1.20), (0.570, 0.90)),

@@ -11,11 +11,15 @@ from generator.assets import palette
 from generator.assets.builder import (MeshBuilder, circle, pick, rounded_rect, translate, uniform)
 
 VARIANTS = ('legs', 'round', 'pedestal', 'trestle', 'workbench')
+# Variant of instance i is CYCLE[i % 12]: mostly long tables that can carry a printer or a YuMi on
+# each half of the top, one round table per 12 (its inscribed square carries only small items).
+CYCLE = ('legs', 'workbench', 'trestle', 'pedestal', 'legs', 'round', 'workbench', 'trestle',
+         'legs', 'pedestal', 'workbench', 'trestle')
 
 
 def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
-    """Draw a variant (cycled by index) and its dimensions in metres."""
-    variant = VARIANTS[index % len(VARIANTS)]
+    """Draw a variant (from CYCLE by index) and its dimensions in metres."""
+    variant = CYCLE[index % len(CYCLE)]
     params: dict = {
         'height': uniform(rng, 0.72, 0.77),
         'top_thickness': uniform(rng, 0.025, 0.04),
@@ -30,7 +34,7 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
             apron=bool(rng.random() < 0.6),
             modesty_panel=bool(rng.random() < 0.4))
     elif variant == 'round':
-        params.update(diameter=uniform(rng, 1.0, 1.4), legs=int(rng.integers(3, 5)))
+        params.update(diameter=uniform(rng, 1.2, 1.5), legs=int(rng.integers(3, 5)))
     elif variant == 'pedestal':
         params.update(
             width=uniform(rng, 1.2, 1.8),
