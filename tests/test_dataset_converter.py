@@ -127,6 +127,8 @@ def test_missing_area_and_layout_errors(converted, tmp_path):
         convert_s3dis(root, tmp_path, areas=[5])
     with pytest.raises(S3DISLayoutError, match='S3DIS data folder not found'):
         convert_s3dis(tmp_path, tmp_path)
+    with pytest.raises(ValueError, match="on_error must be one of"):
+        convert_s3dis(root, tmp_path, on_error='ignore')
 
 
 def _write_points(path: Path, formats: list[str], seed: int) -> list[str]:
