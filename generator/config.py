@@ -52,6 +52,7 @@ DEFAULTS: dict[str, Any] = {
         'path_coverage': 0.8,      # the two crossing segments span 80 % of the room (paper)
         'sensor_height': 0.6667,   # fraction of the room height (paper: 2/3)
         'path_steps': 512,         # sensor positions along the path
+        'aim_at_objects': True,    # object rays towards random points of object bounds
         'batch_rays': 262144,      # rays per Embree call
         'max_object_rays': 200,    # give up on object points after this many batches
         'range_noise': 0.0,        # std of the range error, metres (0 = paper-faithful)
@@ -196,6 +197,8 @@ def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
             raise ConfigError(f'{source}: "scanner.{key}" = {value} is outside [0, 1]')
     if scanner['dropout'] >= 1.0:
         raise ConfigError(f'{source}: "scanner.dropout" must be below 1')
+    if not isinstance(scanner['aim_at_objects'], bool):
+        raise ConfigError(f'{source}: "scanner.aim_at_objects" must be true or false')
     for key in ('range_noise', 'angular_jitter'):
         if _number(config, 'scanner', key, source) < 0:
             raise ConfigError(f'{source}: "scanner.{key}" must not be negative')

@@ -1,0 +1,134 @@
+"""Triangle meshes of the room structure (floor, ceiling, walls, doors, windows) and of clutter.
+
+Pure numpy. Each structural part is one annotated element in the S3DIS output (``floor_1``,
+``ceiling_1``, ``wall_<i>`` for polygon edge i, ``door_<k>``, ``window_<k>``). Openings are cut out of
+their wall and filled by a panel in the wall plane, so the room stays closed for the scanner.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from generator.layout import AssetSpec, RoomLayout, points_in_polygon
+
+
+@dataclass
+class PartMesh:
+    """Triangles of one annotated element, in world coordinates (structure) or local (clutter)."""
+
+    instance: str
+    cls: str
+    vertices: np.ndarray   # (V, 3) float64
+    triangles: np.ndarray  # (T, 3) int32
+    colors: np.ndarray     # (T, 3) uint8
+
+
+def _quads_to_mesh(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Quads (Q, 4, 3), corners in order -> vertices (4Q, 3) and triangles (2Q, 3)."""
+    q = len(corners)
+    vertices = corners.reshape(-1, 3)
+    base = np.arange(q, dtype=np.int32)[:, None] * 4
+    triangles = np.concatenate([base + np.array([0, 1, 2], np.int32),
+                                base + np.array([0, 2, 3], np.int32)], axis=0)
+    return vertices, triangles
+
+
+def _floor_cells(polygon: np.ndarray) -> list[tuple[float, float, float, float]]:
+    """Split an axis-aligned polygon into grid cells (x0, y0, x1, y1) that lie inside it."""
+    xs, ys = np.unique(polygon[:, 0]), np.unique(polygon[:, 1])
+    cells = []
+    for x0, x1 in zip(xs[:-1], xs[1:]):
+        for y0, y1 in zip(ys[:-1], ys[1:]):
+            centre = np.array([[(x0 + x1) / 2, (y0 + y1) / 2]])
+            if points_in_polygon(centre, polygon)[0]:
+                cells.append((x0, y0, x1, y1))
+    return cells
+
+
+def _horizontal(polygon: np.ndarray, z: float) -> tuple[np.ndarray, np.ndarray]:
+    cells = _floor_cells(polygon)
+    corners = np.array([[[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]]
+                        for x0, y0, x1, y1 in cells], dtype=float)
+    return _quads_to_mesh(corners)
+
+
+def _wall_cells(length: float, height: float, openings) -> tuple[list, list]:
+    """Grid cells (u0, z0, u1, z1) of a wall: plain ones and, per opening index, the cut ones."""
+    us = sorted({0.0, length, *[v for o in openings for v in (o.u0, o.u1)]})
+    zs = sorted({0.0, height, *[v for o in openings for v in (o.z0, o.z1)]})
+    plain, cut = [], []
+    for u0, u1 in zip(us[:-1], us[1:]):
+        for z0, z1 in zip(zs[:-1], zs[1:]):
+            uc, zc = (u0 + u1) / 2, (z0 + z1) / 2
+            owner = next((k for k, o in enumerate(openings)
+                          if o.u0 < uc < o.u1 and o.z0 < zc < o.z1), None)
+            (plain if owner is None else cut).append((u0, z0, u1, z1, owner))
+    return plain, cut
+
+
+def structure_parts(layout: RoomLayout, rng: np.random.Generator) -> list[PartMesh]:
+    """Floor, ceiling, one part per wall, and one panel per door/window, with plain colours."""
+    polygon, height = layout.polygon, layout.height
+    grey = int(rng.integers(90, 150))
+    floor_rgb = np.array([grey, grey - int(rng.integers(0, 10)), grey - int(rng.integers(0, 20))])
+    wall_rgb = rng.integers(185, 235, size=3)
+    ceiling_rgb = rng.integers(215, 250, size=3)
+    parts = []
+    for name, z, rgb in (('floor_1', 0.0, floor_rgb), ('ceiling_1', height, ceiling_rgb)):
+        vertices, triangles = _horizontal(polygon, z)
+        colours = np.tile(rgb.astype(np.uint8), (len(triangles), 1))
+        parts.append(PartMesh(name, name.split('_')[0], vertices, triangles, colours))
+    counters = {'door': 0, 'window': 0}
+    for wall in range(len(polygon)):
+        p0, p1 = polygon[wall], polygon[(wall + 1) % len(polygon)]
+        length = float(np.linalg.norm(p1 - p0))
+        direction = (p1 - p0) / length
+        openings = [o for o in layout.openings if o.wall == wall]
+        plain, cut = _wall_cells(length, height, openings)
+
+        def corners(cells):
+            out = []
+            for u0, z0, u1, z1, _ in cells:
+                a, b = p0 + direction * u0, p0 + direction * u1
+                out.append([[a[0], a[1], z0], [b[0], b[1], z0], [b[0], b[1], z1], [a[0], a[1], z1]])
+            return np.array(out, dtype=float)
+
+        vertices, triangles = _quads_to_mesh(corners(plain))
+        parts.append(PartMesh(f'wall_{wall + 1}', 'wall', vertices, triangles,
+                              np.tile(wall_rgb.astype(np.uint8), (len(triangles), 1))))
+        for k, opening in enumerate(openings):
+            counters[opening.kind] += 1
+            rgb = (rng.integers(60, 140, size=3) if opening.kind == 'door'
+                   else np.array([150, 190, 215]) + rng.integers(-15, 15, size=3))
+            vertices, triangles = _quads_to_mesh(corners([c for c in cut if c[4] == k]))
+            parts.append(PartMesh(f'{opening.kind}_{counters[opening.kind]}', opening.kind,
+                                  vertices, triangles,
+                                  np.tile(rgb.astype(np.uint8), (len(triangles), 1))))
+    return parts
+
+
+def clutter_mesh(spec: AssetSpec, segments: int = 16) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Closed box or cylinder for a clutter spec, in the asset local frame (z = 0 at the bottom)."""
+    sx, sy, sz = spec.size
+    if spec.params['kind'] == 'box':
+        x, y = sx / 2, sy / 2
+        vertices = np.array([[-x, -y, 0], [x, -y, 0], [x, y, 0], [-x, y, 0],
+                             [-x, -y, sz], [x, -y, sz], [x, y, sz], [-x, y, sz]], dtype=float)
+        triangles = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4],
+                              [1, 2, 6], [1, 6, 5], [2, 3, 7], [2, 7, 6], [3, 0, 4], [3, 4, 7]],
+                             dtype=np.int32)
+    else:
+        # vertices at the angles that touch the box faces, so the bbox is exactly sx x sy
+        angles = np.arange(segments) * 2 * np.pi / segments
+        ring = np.stack([np.cos(angles) * sx / 2, np.sin(angles) * sy / 2], axis=1)
+        bottom = np.concatenate([ring, np.zeros((segments, 1))], axis=1)
+        top = np.concatenate([ring, np.full((segments, 1), sz)], axis=1)
+        vertices = np.concatenate([bottom, top, [[0, 0, 0], [0, 0, sz]]])
+        i = np.arange(segments)
+        j = (i + 1) % segments
+        cb, ct = 2 * segments, 2 * segments + 1
+        triangles = np.concatenate([
+            np.stack([i, j, j + segments], 1), np.stack([i, j + segments, i + segments], 1),
+            np.stack([np.full(segments, cb), j, i], 1),
+            np.stack([np.full(segments, ct), i + segments, j + segments], 1)]).astype(np.int32)
+    colours = np.tile(np.asarray(spec.params['color'], dtype=np.uint8), (len(triangles), 1))
+    return vertices, triangles, colours
