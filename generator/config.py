@@ -5,14 +5,15 @@ any subset of it; unknown keys, wrong types, negative counts, probabilities outs
 inverted ranges are rejected with an error that names the file and the key, before any work starts.
 
 Default probabilities reproduce the synthetic counts of the paper's Table 1 for 3 areas x 50
-rooms (chair 364, table 252, sofa 86, yumi 200, 3dprinter 192):
+rooms (chair 364, table 252, sofa 86, yumi 200, 3dprinter 192), with the procedural asset library:
 
-- 4 wall slots per room, each holding a table (p=0.42) or a sofa (p=0.145) or nothing:
-  600 slots -> 252 tables, 87 sofas.
-- 4 chair positions on the inner boundary, each used with p=0.62 (a few are dropped when they
-  would touch a wall item): 600 positions -> ~364 chairs.
-- 2 sides (local left/right) per table, each holding a yumi (p=0.40) or a 3D printer (p=0.39):
-  ~504 sides -> ~200 yumis, ~192 printers.
+- 4 wall slots per room, each holding a table (p=0.44) or a sofa (p=0.135) or nothing; some are
+  dropped when no free place is found: 600 slots -> ~252 tables, ~80-93 sofas.
+- 4 chair positions on the inner boundary, each used with p=0.61: 600 positions -> ~365 chairs.
+- 2 sides (local left/right) per table, each holding a yumi (p=0.41) or a 3D printer (p=0.365);
+  items that fit on no table of the library are dropped: ~504 sides -> ~197 yumis, ~192 printers.
+
+Counts are binomial: over 150 rooms the sofa count alone has a standard deviation of ~10 %.
 """
 import copy
 import json
@@ -33,11 +34,11 @@ DEFAULTS: dict[str, Any] = {
         'windows': [0, 3],      # inclusive range of window openings per room
     },
     'probabilities': {
-        'table': 0.42,       # per wall slot
-        'sofa': 0.145,       # per wall slot (table and sofa share the slot: sum <= 1)
-        'chair': 0.62,       # per chair position on the inner boundary
-        'yumi': 0.40,        # per table side (yumi and 3dprinter share the side: sum <= 1)
-        '3dprinter': 0.39,   # per table side
+        'table': 0.44,       # per wall slot
+        'sofa': 0.135,       # per wall slot (table and sofa share the slot: sum <= 1)
+        'chair': 0.61,       # per chair position on the inner boundary
+        'yumi': 0.41,        # per table side (yumi and 3dprinter share the side: sum <= 1)
+        '3dprinter': 0.365,  # per table side
     },
     'layout': {
         'wall_slots': 4,          # tables + sofas together, at most 4 (paper)
