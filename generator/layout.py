@@ -503,11 +503,20 @@ def generate_layout(rng: np.random.Generator, catalog: Catalog,
 
 
 def layout_meta(layout: RoomLayout) -> dict[str, Any]:
-    """The ``room`` and ``objects`` parts of ``meta.json``."""
+    """The ``room`` and ``objects`` parts of ``meta.json``.
+
+    ``room.openings`` (beyond the contract's polygon and height) lists doors and windows: their
+    annotation name, the wall (polygon edge i -> i+1), the span ``u`` along it and ``z``.
+    """
+    counters: dict[str, int] = {}
+    names = []
+    for opening in layout.openings:
+        counters[opening.kind] = counters.get(opening.kind, 0) + 1
+        names.append(f'{opening.kind}_{counters[opening.kind]}')
     room = {'polygon': [[round(float(x), 6), round(float(y), 6)] for x, y in layout.polygon],
             'height': round(float(layout.height), 6), 'shape': layout.shape,
-            'openings': [{'kind': o.kind, 'wall': o.wall, 'u': [o.u0, o.u1], 'z': [o.z0, o.z1]}
-                         for o in layout.openings]}
+            'openings': [{'instance': name, 'kind': o.kind, 'wall': o.wall, 'u': [o.u0, o.u1],
+                          'z': [o.z0, o.z1]} for name, o in zip(names, layout.openings)]}
     objects = [{'instance': o.instance, 'class': o.cls, 'asset': o.spec.asset,
                 'params': _jsonable(o.spec.params), 'box': o.box_dict(), 'on': o.on}
                for o in layout.objects]

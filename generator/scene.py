@@ -63,14 +63,10 @@ class RoomScene:
             if mesh is not None and mesh.name not in own and mesh.users == 0:
                 bpy.data.meshes.remove(mesh)
 
-    def _asset_mesh(self, cls: str, name: str, spec) -> bpy.types.Mesh:
+    def _asset_mesh(self, cls: str, name: str) -> bpy.types.Mesh:
         key = f'{cls}/{name}'
         if key not in self._asset_meshes:
-            if cls == 'clutter':
-                arrays = clutter_mesh(spec)
-            else:
-                arrays = self.mesh_source(cls, name)
-            self._asset_meshes[key] = mesh_from_arrays(f'asset:{key}', *arrays)
+            self._asset_meshes[key] = mesh_from_arrays(f'asset:{key}', *self.mesh_source(cls, name))
         return self._asset_meshes[key]
 
     def _add_object(self, name: str, cls: str, mesh: bpy.types.Mesh,
@@ -91,7 +87,10 @@ class RoomScene:
                                     part.colors)
             self._add_object(part.instance, part.cls, mesh)
         for placed in layout.objects:
-            mesh = self._asset_mesh(placed.cls, placed.spec.name, placed.spec)
+            if placed.cls == 'clutter':  # sized per room: a mesh of its own
+                mesh = mesh_from_arrays(f'room:{placed.instance}', *clutter_mesh(placed.spec))
+            else:
+                mesh = self._asset_mesh(placed.cls, placed.spec.name)
             self._add_object(placed.instance, placed.cls, mesh, placed.base, placed.yaw)
         bpy.context.view_layer.update()
 

@@ -65,6 +65,16 @@ def _wall_cells(length: float, height: float, openings) -> tuple[list, list]:
     return plain, cut
 
 
+def opening_names(layout: RoomLayout) -> list[str]:
+    """Annotation names of the openings, numbered per kind in layout order (door_1, window_1...)."""
+    counters: dict[str, int] = {}
+    names = []
+    for opening in layout.openings:
+        counters[opening.kind] = counters.get(opening.kind, 0) + 1
+        names.append(f'{opening.kind}_{counters[opening.kind]}')
+    return names
+
+
 def structure_parts(layout: RoomLayout, rng: np.random.Generator) -> list[PartMesh]:
     """Floor, ceiling, one part per wall, and one panel per door/window, with plain colours."""
     polygon, height = layout.polygon, layout.height
@@ -77,13 +87,13 @@ def structure_parts(layout: RoomLayout, rng: np.random.Generator) -> list[PartMe
         vertices, triangles = _horizontal(polygon, z)
         colours = np.tile(rgb.astype(np.uint8), (len(triangles), 1))
         parts.append(PartMesh(name, name.split('_')[0], vertices, triangles, colours))
-    counters = {'door': 0, 'window': 0}
+    names = opening_names(layout)
     for wall in range(len(polygon)):
         p0, p1 = polygon[wall], polygon[(wall + 1) % len(polygon)]
         length = float(np.linalg.norm(p1 - p0))
         direction = (p1 - p0) / length
-        openings = [o for o in layout.openings if o.wall == wall]
-        plain, cut = _wall_cells(length, height, openings)
+        openings = [(name, o) for name, o in zip(names, layout.openings) if o.wall == wall]
+        plain, cut = _wall_cells(length, height, [o for _, o in openings])
 
         def corners(cells):
             out = []
@@ -95,12 +105,11 @@ def structure_parts(layout: RoomLayout, rng: np.random.Generator) -> list[PartMe
         vertices, triangles = _quads_to_mesh(corners(plain))
         parts.append(PartMesh(f'wall_{wall + 1}', 'wall', vertices, triangles,
                               np.tile(wall_rgb.astype(np.uint8), (len(triangles), 1))))
-        for k, opening in enumerate(openings):
-            counters[opening.kind] += 1
+        for k, (name, opening) in enumerate(openings):
             rgb = (rng.integers(60, 140, size=3) if opening.kind == 'door'
                    else np.array([150, 190, 215]) + rng.integers(-15, 15, size=3))
             vertices, triangles = _quads_to_mesh(corners([c for c in cut if c[4] == k]))
-            parts.append(PartMesh(f'{opening.kind}_{counters[opening.kind]}', opening.kind,
+            parts.append(PartMesh(name, opening.kind,
                                   vertices, triangles,
                                   np.tile(rgb.astype(np.uint8), (len(triangles), 1))))
     return parts
