@@ -59,6 +59,14 @@ def check_arguments(args: argparse.Namespace, parser: argparse.ArgumentParser) -
     match = re.fullmatch(r'(\d+)/(\d+)', args.shard)
     if not match or not 1 <= int(match.group(1)) <= int(match.group(2)):
         parser.error(f'--shard must be K/N with 1 <= K <= N, got {args.shard!r}')
+    for area in args.areas:  # never mix generated rooms into a real S3DIS area
+        area_dir = args.out / f'Area_{area}'
+        foreign = sorted(p.name for p in area_dir.iterdir()
+                         if p.is_dir() and not p.name.startswith(('factory_', '.'))) \
+            if area_dir.is_dir() else []
+        if foreign:
+            parser.error(f'{area_dir} holds rooms the generator did not make (e.g. {foreign[0]}); '
+                         f'choose other --areas (the real S3DIS uses 1-6)')
     if args.library is not None and not args.library.is_dir():
         parser.error(f'--library {args.library}: folder not found')
     return int(match.group(1)), int(match.group(2))

@@ -125,8 +125,8 @@ class Scanner:
         area = 2 * (extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2]
                     + extent[:, 0] * extent[:, 2])
         self.target_weight = area / area.sum() if len(area) else area
-        self._full = self._embree(scene.triangles)
-        self._objects = self._embree(scene.triangles[self.object_tri]) if len(self.object_tri) else None
+        self.full_scene = self._embree(scene.triangles)
+        self.object_scene = self._embree(scene.triangles[self.object_tri]) if len(self.object_tri) else None
 
     def _embree(self, triangles: np.ndarray):
         o3d = self._o3d
@@ -149,7 +149,7 @@ class Scanner:
              config: Mapping[str, Any]) -> ScanResult:
         """Collect ``n_points`` labelled points, ``object_ratio`` of them on movable objects."""
         batch = int(config['batch_rays'])
-        target_objects = int(round(object_ratio * n_points)) if self._objects is not None else 0
+        target_objects = int(round(object_ratio * n_points)) if self.object_scene is not None else 0
         chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         state = {'rays': 0, 'step': 0}
 
@@ -196,11 +196,11 @@ class Scanner:
 
         got_objects = 0
         if target_objects > 0:
-            got_objects = collect(self._objects, self.object_tri, target_objects, True,
+            got_objects = collect(self.object_scene, self.object_tri, target_objects, True,
                                   int(config['max_object_rays']), aimed=aim)
         remaining = n_points - got_objects
         identity = np.arange(len(self.scene.triangles))
-        collect(self._full, identity, remaining, False, max(64, 8 * remaining // batch + 64))
+        collect(self.full_scene, identity, remaining, False, max(64, 8 * remaining // batch + 64))
         xyz = np.concatenate([c[0] for c in chunks]) if chunks else np.zeros((0, 3))
         tri = np.concatenate([c[1] for c in chunks]) if chunks else np.zeros(0, np.int64)
         return ScanResult(xyz=xyz, rgb=self.scene.colors[tri], part=self.scene.part[tri].astype(np.int32),

@@ -210,6 +210,12 @@ def test_cli_rejects_bad_input_before_any_work(tmp_path):
         assert result.returncode == 2, result.stderr
         assert message in result.stderr
         assert not out.exists()
+    real = tmp_path / 's3dis'
+    (real / 'Area_5' / 'office_1').mkdir(parents=True)
+    result = subprocess.run([sys.executable, '-m', 'generator', '--out', str(real), '--areas', '5'],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and 'did not make (e.g. office_1)' in result.stderr
+    assert [p.name for p in (real / 'Area_5').iterdir()] == ['office_1']
 
 
 def test_text_format_parses_back_exactly():
