@@ -1,0 +1,71 @@
+"""S3DIS detection dataset with the synthetic classes yumi and 3dprinter (areas 1-9)."""
+from typing import Optional
+
+import numpy as np
+import torch
+from mmdet3d.datasets import S3DISDataset
+from mmdet3d.registry import DATASETS
+
+from .s3dis_classes import DETECTION_CLASSES, DETECTION_SEMANTIC_IDS, SEMANTIC_CLASSES
+
+
+@DATASETS.register_module()
+class SynthdetS3DISDataset(S3DISDataset):
+    """mmdet3d's ``S3DISDataset`` with 7 detection classes, for the pickles of
+    ``tools/create_data.py``.
+
+    ``metainfo=dict(classes=...)`` selects a subset: labels are renumbered in the subset's
+    order and instances of the other classes are dropped (mmdet3d's parent keeps them with
+    label -1). The palette and the semantic-mask mapping used by ``PointSegClassMapping``
+    follow the subset too.
+    """
+    METAINFO = {
+        'classes':
+        DETECTION_CLASSES,
+        'seg_valid_class_ids':
+        DETECTION_SEMANTIC_IDS,
+        'seg_all_class_ids':
+        tuple(range(len(SEMANTIC_CLASSES))),
+        'palette': [(170, 120, 200), (255, 0, 0), (200, 100, 100), (10, 200, 100), (200, 200, 200),
+                    (255, 200, 0), (0, 120, 255)],
+    }
+
+    def __init__(self,
+                 data_root: str,
+                 ann_file: str,
+                 metainfo: Optional[dict] = None,
+                 **kwargs) -> None:
+        metainfo = dict(metainfo) if metainfo is not None else None
+        classes = tuple((metainfo or {}).get('classes', DETECTION_CLASSES))
+        unknown = [name for name in classes if name not in DETECTION_CLASSES]
+        if unknown:
+            raise ValueError(f'{type(self).__name__}: unknown classes {unknown} in metainfo; '
+                             f'known: {DETECTION_CLASSES}')
+        if metainfo is not None and 'palette' not in metainfo:
+            metainfo['palette'] = [
+                self.METAINFO['palette'][DETECTION_CLASSES.index(name)] for name in classes
+            ]
+        self.subset_seg_label_mapping = self._seg_label_mapping(classes)
+        super().__init__(data_root=data_root, ann_file=ann_file, metainfo=metainfo, **kwargs)
+        self.seg_label_mapping = self.subset_seg_label_mapping
+
+    @staticmethod
+    def _seg_label_mapping(classes: tuple[str, ...]) -> np.ndarray:
+        """Semantic id -> class index in ``classes``; every other id -> len(classes)."""
+        mapping = np.full(len(SEMANTIC_CLASSES) + 1, len(classes), dtype=np.int64)
+        for index, name in enumerate(classes):
+            mapping[SEMANTIC_CLASSES.index(name)] = index
+        return mapping
+
+    def parse_data_info(self, info: dict) -> dict:
+        info = super().parse_data_info(info)
+        info['seg_label_mapping'] = self.subset_seg_label_mapping
+        return info
+
+    def parse_ann_info(self, info: dict) -> dict:
+        """Annotations with labels in the selected classes only."""
+        ann_info = super().parse_ann_info(info)
+        keep = ann_info['gt_labels_3d'] > -1
+        ann_info['gt_bboxes_3d'] = ann_info['gt_bboxes_3d'][torch.from_numpy(keep)]
+        ann_info['gt_labels_3d'] = ann_info['gt_labels_3d'][keep]
+        return ann_info
