@@ -15,7 +15,8 @@ import numpy as np
 NUM_COLUMNS = 6
 _NUMBER = re.compile(rb'[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?')
 _POW10 = np.array([10.0**k for k in range(23)])  # exactly representable powers of ten
-_MAX_SIGNIFICANT_DIGITS = 15  # mantissas below 10**15 are exact in float64
+_MAX_DIGITS = 18  # a mantissa of up to 18 digits fits in int64 ...
+_MAX_EXACT_MANTISSA = 2**53  # ... and is exact in float64 up to 2**53
 
 
 class PointFileError(ValueError):
@@ -39,7 +40,7 @@ class BadLine:
 
 @numba.njit(cache=True, nogil=True)
 def _parse_fast(buf: np.ndarray, out: np.ndarray, pow10: np.ndarray) -> tuple[int, int]:
-    """Parse rows of 6 decimal numbers into ``out``.
+    """Parse rows of 6 decimal numbers (colours within 0-255) into ``out``.
 
     Returns (rows, 0) on success or (-1, line) at the first line it cannot handle.
     """
@@ -64,26 +65,20 @@ def _parse_fast(buf: np.ndarray, out: np.ndarray, pow10: np.ndarray) -> tuple[in
                 i += 1
             mantissa = 0
             digits = 0
-            significant = 0
             exponent = 0
             while i < n and 48 <= buf[i] <= 57:
-                d = buf[i] - 48
-                if significant > 0 or d > 0:
-                    significant += 1
-                mantissa = mantissa * 10 + d
+                mantissa = mantissa * 10 + (buf[i] - 48)
                 digits += 1
                 i += 1
             if i < n and buf[i] == 46:  # '.'
                 i += 1
+                start = i
                 while i < n and 48 <= buf[i] <= 57:
-                    d = buf[i] - 48
-                    if significant > 0 or d > 0:
-                        significant += 1
-                    mantissa = mantissa * 10 + d
-                    digits += 1
-                    exponent -= 1
+                    mantissa = mantissa * 10 + (buf[i] - 48)
                     i += 1
-            if digits == 0 or significant > _MAX_SIGNIFICANT_DIGITS:
+                digits += i - start
+                exponent = start - i
+            if digits == 0 or digits > _MAX_DIGITS or mantissa > _MAX_EXACT_MANTISSA:
                 return -1, line
             if i < n and (buf[i] == 101 or buf[i] == 69):  # 'e' or 'E'
                 i += 1
@@ -105,7 +100,11 @@ def _parse_fast(buf: np.ndarray, out: np.ndarray, pow10: np.ndarray) -> tuple[in
             # one correctly rounded operation on exact operands: nearest float64 of the text
             value = float(mantissa) * pow10[exponent] if exponent >= 0 else \
                 float(mantissa) / pow10[-exponent]
-            out[row, col] = -value if negative else value
+            if negative:
+                value = -value
+            if col >= 3 and not 0.0 <= value <= 255.0:
+                return -1, line
+            out[row, col] = value
             col += 1
             if i < n and not (buf[i] == 32 or buf[i] == 9 or buf[i] == 13 or buf[i] == 10):
                 return -1, line
@@ -183,15 +182,12 @@ def read_point_file(path: str | Path,
     """
     path = Path(path)
     data = path.read_bytes()
-    buf = np.frombuffer(data, dtype=np.uint8)
-    out = np.empty((data.count(b'\n') + 1, NUM_COLUMNS), dtype=np.float64)
-    rows, _ = _parse_fast(buf, out, _POW10)
+    # a row takes at least 12 bytes ("0 0 0 0 0 0\n"); np.empty does not touch unused pages
+    out = np.empty((len(data) // 12 + 1, NUM_COLUMNS), dtype=np.float64)
+    rows, _ = _parse_fast(np.frombuffer(data, dtype=np.uint8), out, _POW10)
     bad_lines: list[BadLine] = []
     if rows >= 0:
         points = out[:rows]
-        colours = points[:, 3:]
-        if not np.all((colours >= 0.0) & (colours <= 255.0)):
-            points, bad_lines = _parse_reference(path, data, skip_bad_lines)
     else:
         points, bad_lines = _parse_reference(path, data, skip_bad_lines)
     if len(points) == 0:

@@ -181,7 +181,7 @@ def convert_room(room_dir: Path, name: str, out_dir: Path, skip: bool) -> RoomRe
         return RoomResult(name, 0, [], skipped, unknown)
     counts = np.array([len(points) for _, points in chunks])
     points = np.concatenate([points for _, points in chunks])
-    points[:, :3] -= _xyz_min_max(points)[0]
+    points -= np.concatenate([_xyz_min_max(points)[0], np.zeros(3)])  # colours: c - 0 == c
     points = points.astype(np.float32)
     semantic = np.repeat(np.array([_SEMANTIC_ID[c] for c, _ in chunks], dtype=np.int64), counts)
     instance = np.repeat(np.arange(1, len(chunks) + 1, dtype=np.int64), counts)
