@@ -7,7 +7,7 @@ inverted ranges are rejected with an error that names the file and the key, befo
 Default probabilities reproduce the synthetic counts of the paper's Table 1 for 3 areas x 50
 rooms (chair 364, table 252, sofa 86, yumi 200, 3dprinter 192), with the procedural asset library:
 
-- 4 wall slots per room, each holding a table (p=0.44) or a sofa (p=0.135) or nothing; some are
+- 4 wall slots per room, each holding a table (p=0.44) or a sofa (p=0.14) or nothing; some are
   dropped when no free place is found: 600 slots -> ~252 tables, ~80-93 sofas.
 - 4 chair positions on the inner boundary, each used with p=0.61: 600 positions -> ~365 chairs.
 - 2 sides (local left/right) per table, each holding a yumi (p=0.41) or a 3D printer (p=0.365);
@@ -35,7 +35,7 @@ DEFAULTS: dict[str, Any] = {
     },
     'probabilities': {
         'table': 0.44,       # per wall slot
-        'sofa': 0.135,       # per wall slot (table and sofa share the slot: sum <= 1)
+        'sofa': 0.14,        # per wall slot (table and sofa share the slot: sum <= 1)
         'chair': 0.61,       # per chair position on the inner boundary
         'yumi': 0.41,        # per table side (yumi and 3dprinter share the side: sum <= 1)
         '3dprinter': 0.365,  # per table side

@@ -15,6 +15,7 @@ free position is found after a few tries.
 Frames: metres, z up, yaw in radians counter-clockwise from +x. An object's local frame has xy
 centred on its bounding box, z = 0 at its lowest point, and its front towards local -y.
 """
+import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
@@ -118,6 +119,11 @@ class RoomLayout:
 
 # ----------------------------------------------------------------------------- geometry helpers
 
+def _next(points: np.ndarray) -> np.ndarray:
+    """The cyclic successor of every row (a cheaper ``np.roll(points, -1, axis=0)``)."""
+    return np.concatenate([points[1:], points[:1]])
+
+
 def rotation2d(yaw: float) -> np.ndarray:
     c, s = np.cos(yaw), np.sin(yaw)
     return np.array([[c, -s], [s, c]])
@@ -145,31 +151,39 @@ def rectangles_overlap(a: np.ndarray, b: np.ndarray, clearance: float = 0.0) -> 
 
 def boxes_intersect(a: PlacedObject, b: PlacedObject, clearance: float = 0.0) -> bool:
     """True if the oriented boxes of ``a`` and ``b`` overlap (or are closer than ``clearance``)."""
-    az0, az1 = a.center[2] - a.size[2] / 2, a.center[2] + a.size[2] / 2
-    bz0, bz1 = b.center[2] - b.size[2] / 2, b.center[2] + b.size[2] / 2
+    sa, sb = a.spec.size, b.spec.size
+    az0, az1 = a.center[2] - sa[2] / 2, a.center[2] + sa[2] / 2
+    bz0, bz1 = b.center[2] - sb[2] / 2, b.center[2] + sb[2] / 2
     if az1 <= bz0 + EPS or bz1 <= az0 + EPS:
         return False
-    return rectangles_overlap(box_corners_xy(a.center, a.size, a.yaw),
-                              box_corners_xy(b.center, b.size, b.yaw), clearance)
+    reach = (math.hypot(sa[0], sa[1]) + math.hypot(sb[0], sb[1])) / 2 + clearance
+    if math.hypot(a.center[0] - b.center[0], a.center[1] - b.center[1]) >= reach:
+        return False  # bounding circles apart
+    return rectangles_overlap(box_corners_xy(a.center, sa, a.yaw),
+                              box_corners_xy(b.center, sb, b.yaw), clearance)
 
 
 def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
     """Even-odd test of points (M, 2) against a simple polygon (N, 2); boundary counts as either."""
     x, y = points[:, 0:1], points[:, 1:2]
     x0, y0 = polygon[:, 0], polygon[:, 1]
-    x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
+    x1, y1 = _next(x0), _next(y0)
     crosses = (y0 > y) != (y1 > y)
     with np.errstate(divide='ignore', invalid='ignore'):
         x_at = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
     return (crosses & (x < x_at)).sum(axis=1) % 2 == 1
 
 
-def _segments_cross(p0, p1, q0, q1) -> bool:
-    def orient(a, b, c):
-        return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+def _edges_cross(a: np.ndarray, b: np.ndarray) -> bool:
+    """True if any edge of closed polyline ``a`` properly crosses any edge of ``b``."""
+    p0, p1 = a[:, None, :], _next(a)[:, None, :]
+    q0, q1 = b[None, :, :], _next(b)[None, :, :]
+
+    def orient(u, v, w):
+        return (v[..., 0] - u[..., 0]) * (w[..., 1] - u[..., 1]) - (v[..., 1] - u[..., 1]) * (w[..., 0] - u[..., 0])
     d1, d2 = orient(q0, q1, p0), orient(q0, q1, p1)
     d3, d4 = orient(p0, p1, q0), orient(p0, p1, q1)
-    return d1 * d2 < -EPS and d3 * d4 < -EPS
+    return bool(np.any((d1 * d2 < -EPS) & (d3 * d4 < -EPS)))
 
 
 def quad_inside_polygon(quad: np.ndarray, polygon: np.ndarray) -> bool:
@@ -178,12 +192,7 @@ def quad_inside_polygon(quad: np.ndarray, polygon: np.ndarray) -> bool:
         return False
     if points_in_polygon(polygon, quad[::-1] if _area(quad) < 0 else quad).any():
         return False
-    for i in range(len(quad)):
-        for j in range(len(polygon)):
-            if _segments_cross(quad[i], quad[(i + 1) % 4], polygon[j],
-                               polygon[(j + 1) % len(polygon)]):
-                return False
-    return True
+    return not _edges_cross(quad, polygon)
 
 
 def _area(polygon: np.ndarray) -> float:
