@@ -9,7 +9,7 @@ import os
 import sys
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -48,7 +48,6 @@ class RunOptions:
     preview: bool = False
     save_blend: bool = False
     threads: int = 1
-    extra_meta: dict[str, Any] = field(default_factory=dict)
 
 
 def room_seed(seed: int, area: int, index: int) -> int:
@@ -134,7 +133,7 @@ class RoomGenerator:
                               'rays': int(scan.rays_cast),
                               'sensor_path': np.round(segments, 6).tolist(),
                               'sensor_height': round(scan_cfg['sensor_height'] * layout.height, 6),
-                              'config': options.config, **options.extra_meta},
+                              'config': options.config},
                 **layout_meta(layout)}
         write_room(area_dir, task.name, scan.xyz, scan.rgb, scan.part, names, meta,
                    ply=options.ply, preview=options.preview, extra_files=extra)

@@ -21,11 +21,6 @@ import numpy as np
 
 ROOM_FORMAT = 'synthdet.room/1'
 TMP_PREFIX = '.tmp.'
-CLASS_COLOURS = {
-    'table': (230, 159, 0), 'chair': (86, 180, 233), 'sofa': (0, 158, 115), 'yumi': (213, 94, 0),
-    '3dprinter': (204, 121, 167), 'clutter': (120, 120, 120), 'wall': (200, 200, 200),
-    'floor': (60, 60, 60), 'ceiling': (240, 240, 240), 'door': (140, 90, 40),
-    'window': (120, 200, 240)}
 
 
 def _digit_table(count: int, width: int) -> np.ndarray:
@@ -61,7 +56,7 @@ def format_lines(xyz: np.ndarray, rgb: np.ndarray, decimals: int = 3) -> tuple[b
     if n and (colours.min() < 0 or colours.max() > 255):
         raise ValueError('colours must be integers in 0..255')
     w = whole_digits.shape[1]
-    field = 1 + w + 1 + decimals + 1
+    field_width = 1 + w + 1 + decimals + 1
     whole_rows = np.ascontiguousarray(whole_digits.T)
     fraction_rows = np.ascontiguousarray(fraction_digits.T)
     colour_rows = np.ascontiguousarray(_COLOUR_DIGITS.T)
@@ -69,13 +64,13 @@ def format_lines(xyz: np.ndarray, rgb: np.ndarray, decimals: int = 3) -> tuple[b
     colour_len = (_COLOUR_DIGITS != 0).sum(axis=1)
     lengths = np.full(n, 3 * (2 + decimals) + 3 * 1, dtype=np.int64)  # '.', fraction, separators
     # built with one contiguous row per character position, transposed once at the end
-    table = np.zeros((3 * field + 12, n), dtype=np.uint8)
+    table = np.zeros((3 * field_width + 12, n), dtype=np.uint8)
     for axis in range(3):
         q = np.ascontiguousarray(quantised[:, axis])
         negative = q < 0
         m = np.abs(q)
         whole, fraction = np.divmod(m, scale)
-        col = axis * field
+        col = axis * field_width
         table[col] = negative * np.uint8(ord('-'))
         for r in range(w):
             table[col + 1 + r] = whole_rows[r][whole]
@@ -86,7 +81,7 @@ def format_lines(xyz: np.ndarray, rgb: np.ndarray, decimals: int = 3) -> tuple[b
         lengths += negative + whole_len[whole]
     for channel in range(3):
         c = np.ascontiguousarray(colours[:, channel])
-        col = 3 * field + 4 * channel
+        col = 3 * field_width + 4 * channel
         for r in range(3):
             table[col + r] = colour_rows[r][c]
         table[col + 3] = 32 if channel < 2 else 10
@@ -122,38 +117,6 @@ def write_ply(path: Path, xyz: np.ndarray, rgb: np.ndarray, class_index: np.ndar
     with open(path, 'wb') as f:
         f.write(header.encode('ascii'))
         f.write(vertex.tobytes())
-
-
-def write_preview(path: Path, xyz: np.ndarray, part: np.ndarray, part_classes: Sequence[str],
-                  meta: dict[str, Any], pixels_per_metre: int = 40) -> None:
-    """Top-down PNG: points coloured by class (higher points drawn last), boxes outlined."""
-    from PIL import Image, ImageDraw
-    polygon = np.asarray(meta['room']['polygon'], dtype=float)
-    lo = polygon.min(axis=0) - 0.3
-    hi = polygon.max(axis=0) + 0.3
-    size = np.ceil((hi - lo) * pixels_per_metre).astype(int) + 1
-    image = np.full((size[1], size[0], 3), 255, dtype=np.uint8)
-    part_palette = np.array([CLASS_COLOURS.get(c, (0, 0, 0)) for c in part_classes], np.uint8)
-    visible = np.array([c != 'ceiling' for c in part_classes])[part]
-    order = np.flatnonzero(visible)[np.argsort(xyz[visible, 2], kind='stable')]
-    pts, palette = xyz[order], part_palette[part[order]]
-    col = ((pts[:, 0] - lo[0]) * pixels_per_metre).astype(int)
-    row = (size[1] - 1 - (pts[:, 1] - lo[1]) * pixels_per_metre).astype(int)
-    image[row.clip(0, size[1] - 1), col.clip(0, size[0] - 1)] = palette
-    picture = Image.fromarray(image)
-    draw = ImageDraw.Draw(picture)
-
-    def to_pixels(xy):
-        return [(float((x - lo[0]) * pixels_per_metre),
-                 float(size[1] - 1 - (y - lo[1]) * pixels_per_metre)) for x, y in xy]
-
-    draw.polygon(to_pixels(polygon), outline=(0, 0, 0))
-    from generator.layout import box_corners_xy
-    for obj in meta['objects']:
-        box = obj['box']
-        corners = box_corners_xy(box['center'], box['size'], box['yaw'])
-        draw.polygon(to_pixels(corners), outline=CLASS_COLOURS.get(obj['class'], (0, 0, 0)))
-    picture.save(path)
 
 
 def write_room(area_dir: Path, room: str, xyz: np.ndarray, rgb: np.ndarray, part: np.ndarray,
@@ -199,6 +162,7 @@ def write_room(area_dir: Path, room: str, xyz: np.ndarray, rgb: np.ndarray, part
             json.dump({'format': 'synthdet.ply-labels/1', 'classes': class_names,
                        'instances': list(part_names)}, f, indent=1)
     if preview:
+        from generator.preview import write_preview
         write_preview(tmp / f'{room}.png', xyz, part, classes, meta)
     for name, path in (extra_files or {}).items():
         shutil.move(str(path), str(tmp / name))
@@ -211,4 +175,7 @@ def clean_stale(area_dir: Path, room: str) -> None:
     area_dir = Path(area_dir)
     if area_dir.is_dir():
         for path in area_dir.glob(f'{TMP_PREFIX}{room}.*'):
-            shutil.rmtree(path, ignore_errors=True)
+            if path.is_dir():
+                shutil.rmtree(path)
+            else:
+                path.unlink()

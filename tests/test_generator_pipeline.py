@@ -156,6 +156,7 @@ def test_resume_completes_an_interrupted_run(reference_run, tmp_path):
     partial = resumed / 'Area_8' / f'{TMP_PREFIX}factory_1.12345'
     shutil.move(str(resumed / 'Area_8' / 'factory_1'), str(partial))
     (partial / 'factory_1.txt').write_bytes(b'1.0 2.0\n')
+    (resumed / 'Area_8' / f'{TMP_PREFIX}factory_1.12345.blend').write_bytes(b'partial')
     finished = resumed / 'Area_7' / 'factory_1' / 'factory_1.txt'
     stamp = finished.stat().st_mtime_ns
     os.utime(finished, ns=(stamp - 10**9, stamp - 10**9))
