@@ -43,11 +43,12 @@ Catalog = Mapping[str, Sequence[AssetSpec]]
 
 
 def catalog_from_library(library: Any) -> dict[str, list[AssetSpec]]:
-    """Build a layout catalog from an asset library (``library.instances(cls)``)."""
+    """Build a layout catalog from an asset library; a class the library lacks never appears."""
     catalog = {}
+    present = set(library.classes())
     for cls in DETECTION_CLASSES:
         specs = []
-        for inst in library.instances(cls):
+        for inst in (library.instances(cls) if cls in present else []):
             top_size = None if inst.top_size is None else tuple(float(v) for v in inst.top_size)
             specs.append(AssetSpec(cls=inst.cls, name=inst.name, asset=inst.asset,
                                    params=dict(inst.params),

@@ -242,3 +242,21 @@ def test_scanner_on_a_hand_made_room():
     assert (uniform.part == 2).sum() == 2000
     cube = uniform.xyz[uniform.part == 2]
     assert np.all((cube >= np.array([2, 1, 0]) - 1e-4) & (cube <= np.array([3, 2, 1]) + 1e-4))
+
+
+def test_user_library_with_two_classes(tmp_path):
+    """--library DIR: only the classes of the user's <class>.blend files appear."""
+    from generator.assets import build_library
+    library = tmp_path / 'library'
+    build_library(library, instances_per_class=2, seed=4, classes=('table', 'yumi'))
+    out = tmp_path / 'out'
+    config = tmp_path / 'config.json'
+    config.write_text(json.dumps({'probabilities': {'table': 1.0, 'sofa': 0.0, 'yumi': 1.0,
+                                                    '3dprinter': 0.0}}))
+    assert main(['--out', str(out), '--areas', '9', '--rooms-per-area', '1', '--points', '3000',
+                 '--library', str(library), '--config', str(config), '--quiet']) == 0
+    meta = json.loads((out / 'Area_9' / 'factory_1' / 'meta.json').read_text())
+    classes = {o['class'] for o in meta['objects']}
+    assert {'table', 'yumi'} <= classes <= {'table', 'yumi', 'clutter'}
+    assert meta['generator']['library'] == 'user'
+    assert {o['asset'].split('/')[0] for o in meta['objects'] if o['class'] != 'clutter'} == {'table', 'yumi'}
