@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from projects.synthdet.datasets.point_text import (_POW10, PointFileError, _parse_fast,
+from projects.synthdet.datasets.point_text import (_POW10, PointFileError, _parse_fast, max_rows,
                                                    read_point_file)
 from projects.synthdet.datasets.s3dis_classes import DETECTION_CLASSES, SEMANTIC_CLASSES
 from projects.synthdet.datasets.s3dis_converter import (S3DIS_DIR, S3DISLayoutError,
@@ -188,6 +188,17 @@ def test_bad_line_raises_naming_file_and_line(tmp_path, line, message):
     points, bad = read_point_file(path, skip_bad_lines=True)
     assert np.array_equal(points[:, 0], [0, 1, 2]) and [(b.line, b.reason)
                                                         for b in bad] == [(3, message)]
+
+
+def test_reader_writes_into_a_given_array(tmp_path):
+    path = tmp_path / 'sofa_1.txt'
+    path.write_text('0 0 0 1 2 3\n1 1 1 4 5 6 7\n2 2 2 7 8 9\n')
+    out = np.full((max_rows(path.stat().st_size) + 5, 6), -1.0)
+    points, bad = read_point_file(path, skip_bad_lines=True, out=out[5:])  # reference path
+    assert np.shares_memory(points, out) and np.array_equal(out[5:7, 0], [0, 2])
+    assert [b.line for b in bad] == [2] and np.all(out[:5] == -1.0)
+    with pytest.raises(ValueError, match='too small'):
+        read_point_file(path, out=np.empty((2, 6)))
 
 
 def test_empty_file_raises(tmp_path):

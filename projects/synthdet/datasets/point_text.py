@@ -171,26 +171,37 @@ def compile_parser() -> None:
     _parse_fast(np.frombuffer(b'', dtype=np.uint8), np.empty((1, NUM_COLUMNS)), _POW10)
 
 
+def max_rows(num_bytes: int) -> int:
+    """Upper bound of the rows in a file of num_bytes: a row takes at least "0 0 0 0 0 0\\n"."""
+    return num_bytes // 12 + 1
+
+
 def read_point_file(path: str | Path,
-                    skip_bad_lines: bool = False) -> tuple[np.ndarray, list[BadLine]]:
+                    skip_bad_lines: bool = False,
+                    out: np.ndarray | None = None) -> tuple[np.ndarray, list[BadLine]]:
     """Read an ``x y z r g b`` text file into a float64 (N, 6) array.
 
     Bad lines (wrong column count, unparsable or non-finite numbers, colours outside 0-255)
     raise :class:`PointFileError` naming file and line, or are skipped and returned as
     :class:`BadLine` records when ``skip_bad_lines`` is set. Blank lines are ignored. A file
     without any point is an error in both modes, reported as line 1.
+
+    With ``out`` (C-contiguous float64, at least ``max_rows(file size)`` x 6), the points are
+    written to its first rows and the returned array is a view of them.
     """
     path = Path(path)
     data = path.read_bytes()
-    # a row takes at least 12 bytes ("0 0 0 0 0 0\n"); np.empty does not touch unused pages
-    out = np.empty((len(data) // 12 + 1, NUM_COLUMNS), dtype=np.float64)
+    if out is None:
+        out = np.empty((max_rows(len(data)), NUM_COLUMNS))  # untouched pages cost nothing
+    elif len(out) < max_rows(len(data)):
+        raise ValueError(f'{path}: output array of {len(out)} rows is too small')
     rows, _ = _parse_fast(np.frombuffer(data, dtype=np.uint8), out, _POW10)
     bad_lines: list[BadLine] = []
-    if rows >= 0:
-        points = out[:rows]
-    else:
+    if rows < 0:
         points, bad_lines = _parse_reference(path, data, skip_bad_lines)
-    if len(points) == 0:
+        rows = len(points)
+        out[:rows] = points
+    if rows == 0:
         reason = 'file is empty (no points)' if not bad_lines else 'no valid point line'
         raise PointFileError(path, 1, reason)
-    return np.ascontiguousarray(points), bad_lines
+    return out[:rows], bad_lines

@@ -26,7 +26,7 @@ from typing import Iterable, Iterator, Sequence
 import numpy as np
 from tqdm import tqdm
 
-from .point_text import PointFileError, compile_parser, read_point_file
+from .point_text import PointFileError, compile_parser, max_rows, read_point_file
 from .s3dis_classes import DETECTION_CLASSES, FALLBACK_CLASS, SEMANTIC_CLASSES
 
 S3DIS_DIR = 'Stanford3dDataset_v1.2_Aligned_Version'
@@ -138,30 +138,42 @@ def _box(points: np.ndarray) -> list[float]:
     return np.concatenate([(lo + hi) / 2, hi - lo]).tolist()
 
 
-def _read_room(
-        room_dir: Path, skip: bool
-) -> tuple[list[tuple[str, np.ndarray]], list[SkippedInput], dict[str, list[str]]]:
+@dataclass
+class _RoomPoints:
+    points: np.ndarray  # float64 (N, 6), the annotation files one after the other
+    classes: list[str]  # class of each annotation file kept
+    counts: list[int]  # its number of points
+    skipped: list[SkippedInput]
+    unknown: dict[str, list[str]]
+
+
+def _read_room(room_dir: Path, skip: bool) -> _RoomPoints:
     ann_dir = room_dir / 'Annotations'
     files = sorted(ann_dir.glob('*.txt'), key=lambda p: _natural_key(p.name)) \
         if ann_dir.is_dir() else []
     if not files:
         raise S3DISLayoutError(f'{ann_dir}: no Annotations/<class>_<k>.txt files')
-    chunks, skipped, unknown = [], [], {}
+    sizes = [path.stat().st_size for path in files]
+    buffer = np.empty((sum(max_rows(size) for size in sizes), 6))  # one array, no concatenation
+    room = _RoomPoints(buffer, [], [], [], {})
     for path in files:
         class_name = annotation_class(path)
         if class_name not in _SEMANTIC_ID:
-            unknown.setdefault(class_name, []).append(str(path))
+            room.unknown.setdefault(class_name, []).append(str(path))
             class_name = FALLBACK_CLASS
+        offset = sum(room.counts)
         try:
-            points, bad_lines = read_point_file(path, skip_bad_lines=skip)
+            points, bad_lines = read_point_file(path, skip_bad_lines=skip, out=buffer[offset:])
         except PointFileError as error:
             if not skip:
                 raise
-            skipped.append(SkippedInput(str(path), None, f'file left out: {error.reason}'))
+            room.skipped.append(SkippedInput(str(path), None, f'file left out: {error.reason}'))
             continue
-        skipped += [SkippedInput(str(b.path), b.line, b.reason) for b in bad_lines]
-        chunks.append((class_name, points))
-    return chunks, skipped, unknown
+        room.skipped += [SkippedInput(str(b.path), b.line, b.reason) for b in bad_lines]
+        room.classes.append(class_name)
+        room.counts.append(len(points))
+    room.points = buffer[:sum(room.counts)]
+    return room
 
 
 def convert_room(room_dir: Path, name: str, out_dir: Path, skip: bool) -> RoomResult:
@@ -170,29 +182,29 @@ def convert_room(room_dir: Path, name: str, out_dir: Path, skip: bool) -> RoomRe
     Returns the room's detection instances (``bbox_3d``, ``bbox_label_3d``) in instance order.
     """
     try:
-        chunks, skipped, unknown = _read_room(room_dir, skip)
+        room = _read_room(room_dir, skip)
     except S3DISLayoutError as error:
         if not skip:
             raise
         return RoomResult(name, 0, [], [SkippedInput(str(room_dir), None, str(error))], {})
-    if not chunks:
-        skipped.append(
+    if not room.counts:
+        room.skipped.append(
             SkippedInput(str(room_dir), None, 'room left out: no valid annotation file'))
-        return RoomResult(name, 0, [], skipped, unknown)
-    counts = np.array([len(points) for _, points in chunks])
-    points = np.concatenate([points for _, points in chunks])
+        return RoomResult(name, 0, [], room.skipped, room.unknown)
+    points = room.points
     points -= np.concatenate([_xyz_min_max(points)[0], np.zeros(3)])  # colours: c - 0 == c
     points = points.astype(np.float32)
-    semantic = np.repeat(np.array([_SEMANTIC_ID[c] for c, _ in chunks], dtype=np.int64), counts)
-    instance = np.repeat(np.arange(1, len(chunks) + 1, dtype=np.int64), counts)
-    starts = np.concatenate([[0], np.cumsum(counts)])
+    semantic = np.repeat(
+        np.array([_SEMANTIC_ID[c] for c in room.classes], dtype=np.int64), room.counts)
+    instance = np.repeat(np.arange(1, len(room.counts) + 1, dtype=np.int64), room.counts)
+    starts = np.concatenate([[0], np.cumsum(room.counts)])
     instances = [{
         'bbox_3d': _box(points[start:end]),
         'bbox_label_3d': _DETECTION_LABEL[c]
-    } for (c, _), start, end in zip(chunks, starts[:-1], starts[1:]) if c in _DETECTION_LABEL]
+    } for c, start, end in zip(room.classes, starts[:-1], starts[1:]) if c in _DETECTION_LABEL]
     for array, path in zip((points, instance, semantic), _partial_paths(out_dir, name)):
         array.tofile(path)
-    return RoomResult(name, len(points), instances, skipped, unknown)
+    return RoomResult(name, len(points), instances, room.skipped, room.unknown)
 
 
 def _convert_room_task(task: tuple[Path, str, Path, bool]) -> RoomResult:
