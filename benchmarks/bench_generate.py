@@ -21,9 +21,14 @@ PAPER_ROOMS = 150
 
 
 def timed_run(out: Path, args: argparse.Namespace, workers: int, cache: Path) -> float:
-    command = [sys.executable, '-m', 'generator', '--out', str(out), '--areas', '7', '8', '9',
-               '--rooms-per-area', str(args.rooms_per_area), '--points', str(args.points),
-               '--workers', str(workers), '--seed', '0', '--asset-cache', str(cache), '--quiet']
+    command = [
+        sys.executable, '-m', 'generator', '--out',
+        str(out), '--areas', '7', '8', '9', '--rooms-per-area',
+        str(args.rooms_per_area), '--points',
+        str(args.points), '--workers',
+        str(workers), '--seed', '0', '--asset-cache',
+        str(cache), '--quiet'
+    ]
     start = time.perf_counter()
     subprocess.run(command, check=True)
     return time.perf_counter() - start
@@ -41,8 +46,12 @@ def main() -> None:
     cache = work / 'assets'
     try:
         # build the asset library once, outside the timed runs
-        subprocess.run([sys.executable, '-c', 'import sys; from generator.assets import '
-                        'default_library; default_library(sys.argv[1])', str(cache)], check=True)
+        subprocess.run([
+            sys.executable, '-c', 'import sys; from generator.assets import '
+            'default_library; default_library(sys.argv[1])',
+            str(cache)
+        ],
+                       check=True)
         rooms = 3 * args.rooms_per_area
         results = {args.workers: timed_run(work / 'out', args, args.workers, cache)}
         if args.compare_workers:

@@ -30,7 +30,8 @@ def bpy_loop(origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, f
     distances = np.full(len(origins), np.inf)
     start = time.perf_counter()
     for i, (o, d) in enumerate(zip(origins.tolist(), directions.tolist())):
-        hit, location, _normal, _index, _obj, _matrix = scene.ray_cast(depsgraph, Vector(o), Vector(d))
+        hit, location, _normal, _index, _obj, _matrix = scene.ray_cast(
+            depsgraph, Vector(o), Vector(d))
         if hit:
             distances[i] = (location - Vector(o)).length
     return distances, time.perf_counter() - start
@@ -46,11 +47,12 @@ def main() -> None:
 
     config = load_config()
     cache = args.asset_cache or Path(tempfile.mkdtemp(prefix='synthdet-bench-assets-'))
-    options = RunOptions(out='', points=1, object_ratio=0.5, seed=0, config=config,
-                         asset_cache=str(cache))
+    options = RunOptions(
+        out='', points=1, object_ratio=0.5, seed=0, config=config, asset_cache=str(cache))
     library = open_library(options)
     by_name = {i.name: i for c in library.classes() for i in library.instances(c)}
-    layout = generate_layout(np.random.default_rng(args.seed), catalog_from_library(library), config)
+    layout = generate_layout(
+        np.random.default_rng(args.seed), catalog_from_library(library), config)
     room = RoomScene(lambda cls, name: by_name[name].mesh_arrays())
     room.build(layout, np.random.default_rng(0))
     triangles, names, _ = export_triangles()
@@ -92,9 +94,11 @@ def main() -> None:
           f'{bpy_rate:>14,.0f}')
     for threads, label in ((1, '1 thread'), (0, f'{os.cpu_count()} threads')):
         seconds, rate = rates[threads]
-        print(f'{"Embree batch, " + label:<34}{args.embree_rays:>10}{seconds:>10.2f}{rate:>14,.0f}')
-    print(f'full scan of 1M labelled points (object ratio 0.5, all threads): {scan_seconds:.2f} s, '
-          f'{scan.rays_cast:,} rays')
+        print(
+            f'{"Embree batch, " + label:<34}{args.embree_rays:>10}{seconds:>10.2f}{rate:>14,.0f}')
+    print(
+        f'full scan of 1M labelled points (object ratio 0.5, all threads): {scan_seconds:.2f} s, '
+        f'{scan.rays_cast:,} rays')
     print(f'all-thread Embree vs bpy loop: {rates[0][1] / bpy_rate:.1f}x; the line below is '
           f'single-thread vs single-thread')
     print(f'scan speedup vs bpy ray_cast loop: {rates[1][1] / bpy_rate:.1f}x')

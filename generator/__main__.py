@@ -11,31 +11,52 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='python -m generator',
         description='Generate synthetic factory rooms (Blender scenes + simulated LiDAR) as S3DIS '
-                    'areas: OUT/Area_N/factory_<k>/{factory_<k>.txt, Annotations/, meta.json}.')
-    parser.add_argument('--out', required=True, type=Path,
-                        help='output root, e.g. data/s3dis/Stanford3dDataset_v1.2_Aligned_Version')
-    parser.add_argument('--areas', type=int, nargs='+', default=[7, 8, 9],
-                        help='area numbers to write (default: 7 8 9)')
+        'areas: OUT/Area_N/factory_<k>/{factory_<k>.txt, Annotations/, meta.json}.')
+    parser.add_argument(
+        '--out',
+        required=True,
+        type=Path,
+        help='output root, e.g. data/s3dis/Stanford3dDataset_v1.2_Aligned_Version')
+    parser.add_argument(
+        '--areas',
+        type=int,
+        nargs='+',
+        default=[7, 8, 9],
+        help='area numbers to write (default: 7 8 9)')
     parser.add_argument('--rooms-per-area', type=int, default=50)
     parser.add_argument('--points', type=int, default=1_000_000, help='points per room')
-    parser.add_argument('--object-ratio', type=float, default=0.5,
-                        help='share of the points on movable objects (default 0.5)')
+    parser.add_argument(
+        '--object-ratio',
+        type=float,
+        default=0.5,
+        help='share of the points on movable objects (default 0.5)')
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--workers', type=int, default=1, help="worker processes ('spawn')")
-    parser.add_argument('--shard', default='1/1',
-                        help='K/N: generate only every N-th room starting at the K-th (1-based)')
-    parser.add_argument('--config', type=Path, help='JSON or YAML file overriding the defaults '
-                                                    '(probabilities, sizes, scanner noise)')
-    parser.add_argument('--library', type=Path,
-                        help='folder of <class>.blend asset files instead of the procedural library')
-    parser.add_argument('--asset-cache', type=Path,
-                        help='cache folder of the procedural library (default ~/.cache/synthdet/assets)')
+    parser.add_argument(
+        '--shard',
+        default='1/1',
+        help='K/N: generate only every N-th room starting at the K-th (1-based)')
+    parser.add_argument(
+        '--config',
+        type=Path,
+        help='JSON or YAML file overriding the defaults '
+        '(probabilities, sizes, scanner noise)')
+    parser.add_argument(
+        '--library',
+        type=Path,
+        help='folder of <class>.blend asset files instead of the procedural library')
+    parser.add_argument(
+        '--asset-cache',
+        type=Path,
+        help='cache folder of the procedural library (default ~/.cache/synthdet/assets)')
     parser.add_argument('--asset-seed', type=int, default=0, help='seed of the procedural library')
     parser.add_argument('--ply', action='store_true', help='also write <room>.ply (CloudCompare)')
-    parser.add_argument('--preview', action='store_true',
-                        help='also write a top-down <room>.png coloured by class')
-    parser.add_argument('--save-blend', action='store_true',
-                        help='also save the Blender scene as <room>.blend')
+    parser.add_argument(
+        '--preview',
+        action='store_true',
+        help='also write a top-down <room>.png coloured by class')
+    parser.add_argument(
+        '--save-blend', action='store_true', help='also save the Blender scene as <room>.blend')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     return parser
 
@@ -83,19 +104,28 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(err))
     from generator.pipeline import RunOptions, plan_tasks, run
     threads = max(1, (os.cpu_count() or 1) // args.workers)
-    options = RunOptions(out=str(args.out), points=args.points, object_ratio=args.object_ratio,
-                         seed=args.seed, config=config,
-                         library=str(args.library) if args.library else None,
-                         asset_cache=str(args.asset_cache) if args.asset_cache else None,
-                         asset_seed=args.asset_seed, ply=args.ply, preview=args.preview,
-                         save_blend=args.save_blend, threads=threads)
+    options = RunOptions(
+        out=str(args.out),
+        points=args.points,
+        object_ratio=args.object_ratio,
+        seed=args.seed,
+        config=config,
+        library=str(args.library) if args.library else None,
+        asset_cache=str(args.asset_cache) if args.asset_cache else None,
+        asset_seed=args.asset_seed,
+        ply=args.ply,
+        preview=args.preview,
+        save_blend=args.save_blend,
+        threads=threads)
     tasks = plan_tasks(args.areas, args.rooms_per_area, args.seed, shard)
     start = time.perf_counter()
     written = 0
     for _, status, _ in run(tasks, options, workers=args.workers, progress=not args.quiet):
         written += status == 'written'
-    print(f'generator: {written} room(s) written, {len(tasks) - written} already present, '
-          f'{time.perf_counter() - start:.1f} s, output in {args.out}', file=sys.stderr)
+    print(
+        f'generator: {written} room(s) written, {len(tasks) - written} already present, '
+        f'{time.perf_counter() - start:.1f} s, output in {args.out}',
+        file=sys.stderr)
     return 0
 
 

@@ -26,39 +26,43 @@ STRUCTURE_CLASSES = ('ceiling', 'floor', 'wall', 'door', 'window', 'clutter')
 DEFAULTS: dict[str, Any] = {
     'room': {
         # probability of each floor shape; they must sum to 1
-        'shapes': {'box': 0.8, 'L': 0.15, 'U': 0.05},
-        'width': [6.0, 11.0],   # x extent of the bounding box, metres
-        'depth': [5.0, 9.0],    # y extent of the bounding box, metres
+        'shapes': {
+            'box': 0.8,
+            'L': 0.15,
+            'U': 0.05
+        },
+        'width': [6.0, 11.0],  # x extent of the bounding box, metres
+        'depth': [5.0, 9.0],  # y extent of the bounding box, metres
         'height': [2.8, 4.0],
-        'doors': [1, 2],        # inclusive range of door openings per room
-        'windows': [0, 3],      # inclusive range of window openings per room
+        'doors': [1, 2],  # inclusive range of door openings per room
+        'windows': [0, 3],  # inclusive range of window openings per room
     },
     'probabilities': {
-        'table': 0.44,       # per wall slot
-        'sofa': 0.14,        # per wall slot (table and sofa share the slot: sum <= 1)
-        'chair': 0.61,       # per chair position on the inner boundary
-        'yumi': 0.41,        # per table side (yumi and 3dprinter share the side: sum <= 1)
+        'table': 0.44,  # per wall slot
+        'sofa': 0.14,  # per wall slot (table and sofa share the slot: sum <= 1)
+        'chair': 0.61,  # per chair position on the inner boundary
+        'yumi': 0.41,  # per table side (yumi and 3dprinter share the side: sum <= 1)
         '3dprinter': 0.365,  # per table side
     },
     'layout': {
-        'wall_slots': 4,          # tables + sofas together, at most 4 (paper)
-        'chair_positions': 4,     # chair positions on the inner boundary (paper)
-        'chair_margin': 1.7,      # distance of the inner boundary from the walls, metres
-        'wall_gap': [0.02, 0.12], # gap between a wall item's back and its wall
-        'clearance': 0.05,        # minimum free distance between any two objects
-        'clutter': [0, 4],        # inclusive range of clutter objects per room
+        'wall_slots': 4,  # tables + sofas together, at most 4 (paper)
+        'chair_positions': 4,  # chair positions on the inner boundary (paper)
+        'chair_margin': 1.7,  # distance of the inner boundary from the walls, metres
+        'wall_gap': [0.02, 0.12],  # gap between a wall item's back and its wall
+        'clearance': 0.05,  # minimum free distance between any two objects
+        'clutter': [0, 4],  # inclusive range of clutter objects per room
         'clutter_size': [0.2, 0.8],
     },
     'scanner': {
-        'path_coverage': 0.8,      # the two crossing segments span 80 % of the room (paper)
-        'sensor_height': 0.6667,   # fraction of the room height (paper: 2/3)
-        'path_steps': 512,         # sensor positions along the path
-        'aim_at_objects': True,    # object rays towards random points of object bounds
-        'batch_rays': 262144,      # rays per Embree call
-        'max_object_rays': 200,    # give up on object points after this many batches
-        'range_noise': 0.0,        # std of the range error, metres (0 = paper-faithful)
-        'angular_jitter': 0.0,     # std of the beam direction error, radians
-        'dropout': 0.0,            # probability that a return is lost
+        'path_coverage': 0.8,  # the two crossing segments span 80 % of the room (paper)
+        'sensor_height': 0.6667,  # fraction of the room height (paper: 2/3)
+        'path_steps': 512,  # sensor positions along the path
+        'aim_at_objects': True,  # object rays towards random points of object bounds
+        'batch_rays': 262144,  # rays per Embree call
+        'max_object_rays': 200,  # give up on object points after this many batches
+        'range_noise': 0.0,  # std of the range error, metres (0 = paper-faithful)
+        'angular_jitter': 0.0,  # std of the beam direction error, radians
+        'dropout': 0.0,  # probability that a return is lost
     },
 }
 
@@ -152,20 +156,23 @@ def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
                               f'(classes: {", ".join(DETECTION_CLASSES)})')
         p = _number(config, 'probabilities', cls, source)
         if not 0.0 <= p <= 1.0:
-            raise ConfigError(f'{source}: probability "probabilities.{cls}" = {p} is outside [0, 1]')
+            raise ConfigError(
+                f'{source}: probability "probabilities.{cls}" = {p} is outside [0, 1]')
     for section, keys in _SUM_GROUPS:
         total = sum(float(config[section][k]) for k in keys)
         if total > 1.0 + 1e-9:
-            raise ConfigError(f'{source}: "{section}.{keys[0]}" + "{section}.{keys[1]}" = {total:g} '
-                              f'> 1; they share one slot')
+            raise ConfigError(
+                f'{source}: "{section}.{keys[0]}" + "{section}.{keys[1]}" = {total:g} '
+                f'> 1; they share one slot')
     shapes = config['room']['shapes']
     for shape, p in shapes.items():
         if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0.0 <= p <= 1.0:
             raise ConfigError(f'{source}: "room.shapes.{shape}" must be a probability in [0, 1], '
                               f'got {p!r}')
     if abs(sum(shapes.values()) - 1.0) > 1e-6:
-        raise ConfigError(f'{source}: "room.shapes" probabilities sum to {sum(shapes.values()):g}, '
-                          f'not 1')
+        raise ConfigError(
+            f'{source}: "room.shapes" probabilities sum to {sum(shapes.values()):g}, '
+            f'not 1')
     for key in ('width', 'depth', 'height'):
         _range(config, 'room', key, source)
         if config['room'][key][0] <= 0:

@@ -6,7 +6,8 @@ A layout decides what goes where; it knows nothing of Blender. The rules (paper,
 - each class has an appearance probability;
 - tables and sofas stand along the walls and share that space, at most 4 together;
 - chairs go at 4 positions on an inner boundary, each with a random rotation;
-- yumis and 3D printers stand only on tables, at most one on each local side (left = -x, right = +x).
+- yumis and 3D printers stand only on tables, at most one on each local side
+  (left = -x, right = +x).
 
 Beyond the paper: L/U rooms, clutter objects (class ``clutter``) and door/window openings.
 No two objects intersect: every placement is checked with oriented-box tests and dropped when no
@@ -50,11 +51,15 @@ def catalog_from_library(library: Any) -> dict[str, list[AssetSpec]]:
         specs = []
         for inst in (library.instances(cls) if cls in present else []):
             top_size = None if inst.top_size is None else tuple(float(v) for v in inst.top_size)
-            specs.append(AssetSpec(cls=inst.cls, name=inst.name, asset=inst.asset,
-                                   params=dict(inst.params),
-                                   size=tuple(float(v) for v in inst.size),
-                                   top_z=None if inst.top_z is None else float(inst.top_z),
-                                   top_size=top_size))
+            specs.append(
+                AssetSpec(
+                    cls=inst.cls,
+                    name=inst.name,
+                    asset=inst.asset,
+                    params=dict(inst.params),
+                    size=tuple(float(v) for v in inst.size),
+                    top_z=None if inst.top_z is None else float(inst.top_z),
+                    top_size=top_size))
         catalog[cls] = specs
     return catalog
 
@@ -83,9 +88,11 @@ class PlacedObject:
         return np.array([self.center[0], self.center[1], self.center[2] - self.size[2] / 2])
 
     def box_dict(self) -> dict[str, Any]:
-        return {'center': [round(float(v), 6) for v in self.center],
-                'size': [round(float(v), 6) for v in self.size],
-                'yaw': round(float(self.yaw), 6)}
+        return {
+            'center': [round(float(v), 6) for v in self.center],
+            'size': [round(float(v), 6) for v in self.size],
+            'yaw': round(float(self.yaw), 6)
+        }
 
 
 @dataclass
@@ -119,6 +126,7 @@ class RoomLayout:
 
 
 # ----------------------------------------------------------------------------- geometry helpers
+
 
 def _next(points: np.ndarray) -> np.ndarray:
     """The cyclic successor of every row (a cheaper ``np.roll(points, -1, axis=0)``)."""
@@ -160,12 +168,12 @@ def boxes_intersect(a: PlacedObject, b: PlacedObject, clearance: float = 0.0) ->
     reach = (math.hypot(sa[0], sa[1]) + math.hypot(sb[0], sb[1])) / 2 + clearance
     if math.hypot(a.center[0] - b.center[0], a.center[1] - b.center[1]) >= reach:
         return False  # bounding circles apart
-    return rectangles_overlap(box_corners_xy(a.center, sa, a.yaw),
-                              box_corners_xy(b.center, sb, b.yaw), clearance)
+    return rectangles_overlap(
+        box_corners_xy(a.center, sa, a.yaw), box_corners_xy(b.center, sb, b.yaw), clearance)
 
 
 def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
-    """Even-odd test of points (M, 2) against a simple polygon (N, 2); boundary counts as either."""
+    """Even-odd test of points (M, 2) in a simple polygon (N, 2); boundary counts as either."""
     x, y = points[:, 0:1], points[:, 1:2]
     x0, y0 = polygon[:, 0], polygon[:, 1]
     x1, y1 = _next(x0), _next(y0)
@@ -181,7 +189,9 @@ def _edges_cross(a: np.ndarray, b: np.ndarray) -> bool:
     q0, q1 = b[None, :, :], _next(b)[None, :, :]
 
     def orient(u, v, w):
-        return (v[..., 0] - u[..., 0]) * (w[..., 1] - u[..., 1]) - (v[..., 1] - u[..., 1]) * (w[..., 0] - u[..., 0])
+        return (v[..., 0] - u[..., 0]) * (w[..., 1] - u[..., 1]) - (v[..., 1] - u[..., 1]) * (
+            w[..., 0] - u[..., 0])
+
     d1, d2 = orient(q0, q1, p0), orient(q0, q1, p1)
     d3, d4 = orient(p0, p1, q0), orient(p0, p1, q1)
     return bool(np.any((d1 * d2 < -EPS) & (d3 * d4 < -EPS)))
@@ -229,8 +239,10 @@ def min_leg_width(polygon: np.ndarray) -> float:
                 d = polygon[(i + 1) % len(polygon)] - polygon[i]
                 d = d / np.linalg.norm(d)
                 a = sorted([0.0, float(np.dot(polygon[(i + 1) % len(polygon)] - polygon[i], d))])
-                b = sorted([float(np.dot(polygon[j] - polygon[i], d)),
-                            float(np.dot(polygon[(j + 1) % len(polygon)] - polygon[i], d))])
+                b = sorted([
+                    float(np.dot(polygon[j] - polygon[i], d)),
+                    float(np.dot(polygon[(j + 1) % len(polygon)] - polygon[i], d))
+                ])
                 if gap > 0 and min(a[1], b[1]) - max(a[0], b[0]) > EPS:
                     best = min(best, gap)
     return best
@@ -238,7 +250,9 @@ def min_leg_width(polygon: np.ndarray) -> float:
 
 # ----------------------------------------------------------------------------- room shapes
 
-def sample_room(rng: np.random.Generator, room_cfg: Mapping[str, Any]) -> tuple[str, np.ndarray, float]:
+
+def sample_room(rng: np.random.Generator, room_cfg: Mapping[str,
+                                                            Any]) -> tuple[str, np.ndarray, float]:
     """Sample a room shape, its clockwise floor polygon (min corner at the origin) and height."""
     shapes = list(room_cfg['shapes'])
     probs = np.array([room_cfg['shapes'][s] for s in shapes], dtype=float)
@@ -271,6 +285,7 @@ def sample_room(rng: np.random.Generator, room_cfg: Mapping[str, Any]) -> tuple[
 
 # ----------------------------------------------------------------------------- placement
 
+
 class _Placer:
     """Keeps the placed objects and answers 'is this box free?'."""
 
@@ -295,7 +310,11 @@ class _Placer:
                 return False
         return True
 
-    def add(self, spec: AssetSpec, center: np.ndarray, yaw: float, on: str | None = None) -> PlacedObject:
+    def add(self,
+            spec: AssetSpec,
+            center: np.ndarray,
+            yaw: float,
+            on: str | None = None) -> PlacedObject:
         self.counters[spec.cls] = self.counters.get(spec.cls, 0) + 1
         obj = PlacedObject(f'{spec.cls}_{self.counters[spec.cls]}', spec, center, yaw, on)
         self.objects.append(obj)
@@ -306,7 +325,8 @@ def _wrap_angle(yaw: float) -> float:
     return float((yaw + np.pi) % (2 * np.pi) - np.pi)
 
 
-def _pick(rng: np.random.Generator, probs: Mapping[str, float], classes: Sequence[str]) -> str | None:
+def _pick(rng: np.random.Generator, probs: Mapping[str, float],
+          classes: Sequence[str]) -> str | None:
     """Draw one of ``classes`` with their probabilities, or None with the remaining mass."""
     r = rng.random()
     acc = 0.0
@@ -337,7 +357,11 @@ def _turns_for(item: AssetSpec, table: AssetSpec) -> list[int]:
     return turns
 
 
-def _place_wall_item(rng, placer: _Placer, spec: AssetSpec, wall: int, gap_range,
+def _place_wall_item(rng,
+                     placer: _Placer,
+                     spec: AssetSpec,
+                     wall: int,
+                     gap_range,
                      tries: int = 12) -> PlacedObject | None:
     polygon = placer.polygon
     p0, p1 = polygon[wall], polygon[(wall + 1) % len(polygon)]
@@ -368,8 +392,10 @@ def _place_on_table(rng, placer: _Placer, table: PlacedObject, side: int, item: 
     top_w, top_d = table.spec.top_size
     slack_x = max(0.0, top_w / 2 - 0.03 - sx) / 2
     slack_y = max(0.0, top_d - 0.06 - sy) / 2
-    local = np.array([side * top_w / 4 + rng.uniform(-slack_x, slack_x) * 0.8,
-                      rng.uniform(-slack_y, slack_y) * 0.8])
+    local = np.array([
+        side * top_w / 4 + rng.uniform(-slack_x, slack_x) * 0.8,
+        rng.uniform(-slack_y, slack_y) * 0.8
+    ])
     xy = table.center[:2] + rotation2d(table.yaw) @ local
     z0 = table.base[2] + table.spec.top_z
     yaw = _wrap_angle(table.yaw + k * np.pi / 2)
@@ -405,15 +431,16 @@ def _place_openings(rng, placer: _Placer, room_cfg, layout: RoomLayout) -> None:
             if any(u0 < b + 0.3 and a < u1 + 0.3 for a, b in per_wall.get(wall, [])):
                 continue
             per_wall.setdefault(wall, []).append((u0, u1))
-            layout.openings.append(Opening(kind, wall, round(u0, 3), round(u1, 3),
-                                           round(z0, 3), round(z1, 3)))
+            layout.openings.append(
+                Opening(kind, wall, round(u0, 3), round(u1, 3), round(z0, 3), round(z1, 3)))
             if kind == 'door':  # keep the door's swing free
                 direction = (polygon[(wall + 1) % len(polygon)] - polygon[wall]) / lengths[wall]
                 xy = polygon[wall] + direction * (u0 + u1) / 2 + normals[wall] * 0.5
                 yaw = float(np.arctan2(direction[1], direction[0]))
                 spec = AssetSpec('keepout', 'door_swing', 'keepout', {}, (width + 0.2, 1.0, z1))
-                placer.blockers.append(PlacedObject(f'door_swing_{len(placer.blockers)}', spec,
-                                                    np.array([xy[0], xy[1], z1 / 2]), yaw))
+                placer.blockers.append(
+                    PlacedObject(f'door_swing_{len(placer.blockers)}', spec,
+                                 np.array([xy[0], xy[1], z1 / 2]), yaw))
             break
 
 
@@ -423,11 +450,14 @@ def _place_clutter(rng, placer: _Placer, layout_cfg) -> None:
     for _ in range(int(rng.integers(low, high + 1))):
         kind = 'box' if rng.random() < 0.6 else 'cylinder'
         sx = round(float(rng.uniform(*layout_cfg['clutter_size'])), 3)
-        sy = sx if kind == 'cylinder' else round(float(rng.uniform(*layout_cfg['clutter_size'])), 3)
+        sy = sx if kind == 'cylinder' else round(
+            float(rng.uniform(*layout_cfg['clutter_size'])), 3)
         sz = round(float(rng.uniform(0.2, 1.2)), 3)
         colour = [int(v) for v in rng.integers(40, 220, size=3)]
-        spec = AssetSpec('clutter', f'clutter/{kind}', f'clutter/{kind}',
-                         {'kind': kind, 'color': colour}, (sx, sy, sz))
+        spec = AssetSpec('clutter', f'clutter/{kind}', f'clutter/{kind}', {
+            'kind': kind,
+            'color': colour
+        }, (sx, sy, sz))
         for _ in range(20):
             xy = rng.uniform(lo_xy, hi_xy)
             yaw = float(rng.uniform(-np.pi, np.pi))
@@ -463,8 +493,10 @@ def generate_layout(rng: np.random.Generator, catalog: Catalog,
         items = []
         for side in (-1, 1):
             item_cls = _pick(rng, probs, ('yumi', '3dprinter'))
-            pool = [s for s in catalog.get(item_cls, ())
-                    if any(_turns_for(s, t) for t in catalog['table'])]
+            pool = [
+                s for s in catalog.get(item_cls, ()) if any(
+                    _turns_for(s, t) for t in catalog['table'])
+            ]
             if pool:
                 items.append((side, pool[int(rng.integers(len(pool)))]))
         tables = list(catalog['table'])
@@ -523,13 +555,28 @@ def layout_meta(layout: RoomLayout) -> dict[str, Any]:
     for opening in layout.openings:
         counters[opening.kind] = counters.get(opening.kind, 0) + 1
         names.append(f'{opening.kind}_{counters[opening.kind]}')
-    room = {'polygon': [[round(float(x), 6), round(float(y), 6)] for x, y in layout.polygon],
-            'height': round(float(layout.height), 6), 'shape': layout.shape,
-            'openings': [{'instance': name, 'kind': o.kind, 'wall': o.wall, 'u': [o.u0, o.u1],
-                          'z': [o.z0, o.z1]} for name, o in zip(names, layout.openings)]}
-    objects = [{'instance': o.instance, 'class': o.cls, 'asset': o.spec.asset,
-                'params': _jsonable(o.spec.params), 'box': o.box_dict(), 'on': o.on}
-               for o in layout.objects]
+    room = {
+        'polygon': [[round(float(x), 6), round(float(y), 6)] for x, y in layout.polygon],
+        'height':
+        round(float(layout.height), 6),
+        'shape':
+        layout.shape,
+        'openings': [{
+            'instance': name,
+            'kind': o.kind,
+            'wall': o.wall,
+            'u': [o.u0, o.u1],
+            'z': [o.z0, o.z1]
+        } for name, o in zip(names, layout.openings)]
+    }
+    objects = [{
+        'instance': o.instance,
+        'class': o.cls,
+        'asset': o.spec.asset,
+        'params': _jsonable(o.spec.params),
+        'box': o.box_dict(),
+        'on': o.on
+    } for o in layout.objects]
     return {'room': room, 'objects': objects}
 
 

@@ -1,9 +1,10 @@
 """Generation runs: room tasks, per-room seeds, workers, resume and sharding.
 
-A run is a list of rooms ``(area, index)``. Each room's seed is derived from ``(seed, area, index)``
-only, so the files do not depend on the worker count, the shard or the order of work. Finished
-rooms are skipped (a room folder appears only complete, by rename), temporary folders of
-interrupted rooms are removed, so a killed run restarted completes the areas without duplicates.
+A run is a list of rooms ``(area, index)``. Each room's seed is derived from
+``(seed, area, index)`` only, so the files do not depend on the worker count, the shard or the
+order of work. Finished rooms are skipped (a room folder appears only complete, by rename),
+temporary folders of interrupted rooms are removed, so a killed run restarted completes the areas
+without duplicates.
 """
 import os
 import sys
@@ -41,7 +42,7 @@ class RunOptions:
     object_ratio: float
     seed: int
     config: dict[str, Any]
-    library: str | None = None      # directory of user <class>.blend files, or None
+    library: str | None = None  # directory of user <class>.blend files, or None
     asset_cache: str | None = None  # cache of the procedural library
     asset_seed: int = 0
     ply: bool = False
@@ -53,15 +54,17 @@ class RunOptions:
 def room_seed(seed: int, area: int, index: int) -> int:
     """The 63-bit seed of room ``index`` of ``area`` for run seed ``seed``."""
     state = np.random.SeedSequence([seed, area, index]).generate_state(2, dtype=np.uint32)
-    return int((int(state[0]) << 31) ^ int(state[1])) & (2 ** 63 - 1)
+    return int((int(state[0]) << 31) ^ int(state[1])) & (2**63 - 1)
 
 
 def plan_tasks(areas: list[int], rooms_per_area: int, seed: int,
                shard: tuple[int, int] = (1, 1)) -> list[RoomTask]:
-    """All rooms of the run in a fixed order; shard K/N (1-based) keeps every N-th from the K-th."""
+    """All rooms of the run in a fixed order; shard K/N (1-based) keeps every N-th from K."""
     k, n = shard
-    tasks = [RoomTask(area, index, room_seed(seed, area, index))
-             for area in areas for index in range(1, rooms_per_area + 1)]
+    tasks = [
+        RoomTask(area, index, room_seed(seed, area, index)) for area in areas
+        for index in range(1, rooms_per_area + 1)
+    ]
     return tasks[k - 1::n]
 
 
@@ -89,8 +92,11 @@ class RoomGenerator:
         self.options = options
         self.library = open_library(options)
         self.catalog = catalog_from_library(self.library)
-        by_name = {(inst.cls, inst.name): inst for cls in self.library.classes()
-                   for inst in self.library.instances(cls)}
+        by_name = {
+            (inst.cls, inst.name): inst
+            for cls in self.library.classes()
+            for inst in self.library.instances(cls)
+        }
         self.scene = RoomScene(lambda cls, name: by_name[(cls, name)].mesh_arrays())
         import open3d  # noqa: F401
 
@@ -106,8 +112,8 @@ class RoomGenerator:
         if (area_dir / task.name).exists():
             return task, 'skipped', 0.0
         clean_stale(area_dir, task.name)
-        rng_layout, rng_scene, rng_scan = (np.random.default_rng([task.seed, stream])
-                                           for stream in range(3))
+        rng_layout, rng_scene, rng_scan = (
+            np.random.default_rng([task.seed, stream]) for stream in range(3))
         layout = generate_layout(rng_layout, self.catalog, options.config)
         self.scene.build(layout, rng_scene)
         extra = {}
@@ -121,22 +127,40 @@ class RoomGenerator:
         path, segments = sensor_path(layout.polygon, layout.height, rng_scan,
                                      scan_cfg['path_coverage'], scan_cfg['sensor_height'],
                                      scan_cfg['path_steps'])
-        scan = Scanner(triangles, threads=options.threads).scan(
-            path, options.points, options.object_ratio, rng_scan, scan_cfg)
-        meta = {'format': ROOM_FORMAT, 'seed': task.seed,
-                'generator': {'points': options.points, 'object_ratio': options.object_ratio,
-                              'run_seed': options.seed, 'area': task.area, 'room_index': task.index,
-                              'asset_seed': options.asset_seed,
-                              'library': 'procedural' if not options.library else 'user',
-                              'version': META_VERSION,
-                              'object_points': int(scan.object_points),
-                              'rays': int(scan.rays_cast),
-                              'sensor_path': np.round(segments, 6).tolist(),
-                              'sensor_height': round(scan_cfg['sensor_height'] * layout.height, 6),
-                              'config': options.config},
-                **layout_meta(layout)}
-        write_room(area_dir, task.name, scan.xyz, scan.rgb, scan.part, names, meta,
-                   ply=options.ply, preview=options.preview, extra_files=extra)
+        scan = Scanner(
+            triangles, threads=options.threads).scan(path, options.points, options.object_ratio,
+                                                     rng_scan, scan_cfg)
+        meta = {
+            'format': ROOM_FORMAT,
+            'seed': task.seed,
+            'generator': {
+                'points': options.points,
+                'object_ratio': options.object_ratio,
+                'run_seed': options.seed,
+                'area': task.area,
+                'room_index': task.index,
+                'asset_seed': options.asset_seed,
+                'library': 'procedural' if not options.library else 'user',
+                'version': META_VERSION,
+                'object_points': int(scan.object_points),
+                'rays': int(scan.rays_cast),
+                'sensor_path': np.round(segments, 6).tolist(),
+                'sensor_height': round(scan_cfg['sensor_height'] * layout.height, 6),
+                'config': options.config
+            },
+            **layout_meta(layout)
+        }
+        write_room(
+            area_dir,
+            task.name,
+            scan.xyz,
+            scan.rgb,
+            scan.part,
+            names,
+            meta,
+            ply=options.ply,
+            preview=options.preview,
+            extra_files=extra)
         return task, 'written', time.perf_counter() - start
 
 
@@ -155,7 +179,8 @@ def _init_worker(options: RunOptions) -> None:
 
 def _run_task(task: RoomTask) -> tuple[RoomTask, str, float]:
     if _WORKER is None:
-        raise RuntimeError(f'generator worker failed to start: {_WORKER_ERROR!r}') from _WORKER_ERROR
+        raise RuntimeError(
+            f'generator worker failed to start: {_WORKER_ERROR!r}') from _WORKER_ERROR
     return _WORKER.generate(task)
 
 
@@ -167,21 +192,26 @@ def _spawn_safe_sys_path() -> Iterator[None]:
     that path and would then import the inner pure-Python ``bpy`` package instead of the module.
     """
     saved = list(sys.path)
-    sys.path[:] = [p for p in sys.path
-                   if not {'bpy', 'scripts'} <= set(Path(p).parts)]
+    sys.path[:] = [p for p in sys.path if not {'bpy', 'scripts'} <= set(Path(p).parts)]
     try:
         yield
     finally:
         sys.path[:] = saved
 
 
-def run(tasks: list[RoomTask], options: RunOptions, workers: int = 1,
+def run(tasks: list[RoomTask],
+        options: RunOptions,
+        workers: int = 1,
         progress: bool = True) -> Iterator[tuple[RoomTask, str, float]]:
     """Generate ``tasks`` with ``workers`` processes ('spawn'); yield results as rooms finish."""
     from tqdm import tqdm
     todo = [t for t in tasks if not (Path(options.out) / f'Area_{t.area}' / t.name).exists()]
-    bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), unit='room',
-               disable=not progress, desc='rooms')
+    bar = tqdm(
+        total=len(tasks),
+        initial=len(tasks) - len(todo),
+        unit='room',
+        disable=not progress,
+        desc='rooms')
     # build (or check) the asset library once, before workers race to the cache
     open_library(options)
     if workers <= 1 or len(todo) <= 1:
@@ -194,10 +224,9 @@ def run(tasks: list[RoomTask], options: RunOptions, workers: int = 1,
         import multiprocessing
         context = multiprocessing.get_context('spawn')
         with _spawn_safe_sys_path():
-            pool = context.Pool(workers, initializer=_init_worker, initargs=(options,))
+            pool = context.Pool(workers, initializer=_init_worker, initargs=(options, ))
         with pool:
             for result in pool.imap_unordered(_run_task, todo):
                 bar.update(1)
                 yield result
     bar.close()
-

@@ -7,14 +7,26 @@ import numpy as np
 from generator.layout import box_corners_xy
 
 CLASS_COLOURS = {
-    'table': (230, 159, 0), 'chair': (86, 180, 233), 'sofa': (0, 158, 115), 'yumi': (213, 94, 0),
-    '3dprinter': (204, 121, 167), 'clutter': (120, 120, 120), 'wall': (200, 200, 200),
-    'floor': (60, 60, 60), 'ceiling': (240, 240, 240), 'door': (140, 90, 40),
-    'window': (120, 200, 240)}
+    'table': (230, 159, 0),
+    'chair': (86, 180, 233),
+    'sofa': (0, 158, 115),
+    'yumi': (213, 94, 0),
+    '3dprinter': (204, 121, 167),
+    'clutter': (120, 120, 120),
+    'wall': (200, 200, 200),
+    'floor': (60, 60, 60),
+    'ceiling': (240, 240, 240),
+    'door': (140, 90, 40),
+    'window': (120, 200, 240)
+}
 
 
-def write_preview(path: Path, xyz: np.ndarray, part: np.ndarray, part_classes: Sequence[str],
-                  meta: dict[str, Any], pixels_per_metre: int = 40) -> None:
+def write_preview(path: Path,
+                  xyz: np.ndarray,
+                  part: np.ndarray,
+                  part_classes: Sequence[str],
+                  meta: dict[str, Any],
+                  pixels_per_metre: int = 40) -> None:
     """Top-down PNG: points coloured by class (higher points drawn last), boxes outlined."""
     from PIL import Image, ImageDraw
     polygon = np.asarray(meta['room']['polygon'], dtype=float)
@@ -33,8 +45,9 @@ def write_preview(path: Path, xyz: np.ndarray, part: np.ndarray, part_classes: S
     draw = ImageDraw.Draw(picture)
 
     def to_pixels(xy):
-        return [(float((x - lo[0]) * pixels_per_metre),
-                 float(size[1] - 1 - (y - lo[1]) * pixels_per_metre)) for x, y in xy]
+        return [(float(
+            (x - lo[0]) * pixels_per_metre), float(size[1] - 1 - (y - lo[1]) * pixels_per_metre))
+                for x, y in xy]
 
     draw.polygon(to_pixels(polygon), outline=(0, 0, 0))
     for obj in meta['objects']:

@@ -25,20 +25,20 @@ import numpy as np
 class TriangleScene:
     """Triangles of a room: world vertices, per-triangle colour and part index."""
 
-    vertices: np.ndarray   # (V, 3) float64
+    vertices: np.ndarray  # (V, 3) float64
     triangles: np.ndarray  # (T, 3) int32
-    colors: np.ndarray     # (T, 3) uint8
-    part: np.ndarray       # (T,) int32, index into the caller's part list
-    movable: np.ndarray    # (P,) bool per part: True for detection objects
+    colors: np.ndarray  # (T, 3) uint8
+    part: np.ndarray  # (T,) int32, index into the caller's part list
+    movable: np.ndarray  # (P,) bool per part: True for detection objects
 
 
 @dataclass
 class ScanResult:
     """Labelled points, in ray order: first the object points, then the structure points."""
 
-    xyz: np.ndarray      # (N, 3) float64
-    rgb: np.ndarray      # (N, 3) uint8
-    part: np.ndarray     # (N,) int32
+    xyz: np.ndarray  # (N, 3) float64
+    rgb: np.ndarray  # (N, 3) uint8
+    part: np.ndarray  # (N,) int32
     rays_cast: int
     object_points: int
 
@@ -73,10 +73,13 @@ def _chord(polygon: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> tu
     return float(t[t < 0].max()), float(t[t > 0].min())
 
 
-def sensor_path(polygon: np.ndarray, height: float, rng: np.random.Generator,
-                coverage: float = 0.8, height_fraction: float = 2 / 3,
+def sensor_path(polygon: np.ndarray,
+                height: float,
+                rng: np.random.Generator,
+                coverage: float = 0.8,
+                height_fraction: float = 2 / 3,
                 steps: int = 512) -> tuple[np.ndarray, np.ndarray]:
-    """Sensor positions (steps, 3) on two crossing segments, and the segments' end points (2, 2, 2).
+    """Sensor positions (steps, 3) on two crossing segments, and their end points (2, 2, 2).
 
     The segments cross at an interior point, at a random angle and at right angles to each other;
     each spans ``coverage`` of the room's extent along its line.
@@ -92,8 +95,10 @@ def sensor_path(polygon: np.ndarray, height: float, rng: np.random.Generator,
     segments = np.array(segments)
     n1 = steps // 2
     t = np.concatenate([np.linspace(0, 1, n1), np.linspace(0, 1, steps - n1)])[:, None]
-    xy = np.concatenate([segments[0, 0] + t[:n1] * (segments[0, 1] - segments[0, 0]),
-                         segments[1, 0] + t[n1:] * (segments[1, 1] - segments[1, 0])])
+    xy = np.concatenate([
+        segments[0, 0] + t[:n1] * (segments[0, 1] - segments[0, 0]),
+        segments[1, 0] + t[n1:] * (segments[1, 1] - segments[1, 0])
+    ])
     z = np.full((steps, 1), height_fraction * height)
     return np.concatenate([xy, z], axis=1), segments
 
@@ -117,27 +122,33 @@ class Scanner:
         # axis-aligned bounds of each movable part: the targets of aimed object rays
         self.targets = np.flatnonzero(scene.movable)
         tri_vertices = scene.vertices[scene.triangles]  # (T, 3, 3)
-        self.target_lo = np.array([tri_vertices[scene.part == p].reshape(-1, 3).min(axis=0)
-                                   for p in self.targets]).reshape(-1, 3)
-        self.target_hi = np.array([tri_vertices[scene.part == p].reshape(-1, 3).max(axis=0)
-                                   for p in self.targets]).reshape(-1, 3)
+        self.target_lo = np.array([
+            tri_vertices[scene.part == p].reshape(-1, 3).min(axis=0) for p in self.targets
+        ]).reshape(-1, 3)
+        self.target_hi = np.array([
+            tri_vertices[scene.part == p].reshape(-1, 3).max(axis=0) for p in self.targets
+        ]).reshape(-1, 3)
         extent = self.target_hi - self.target_lo
-        area = 2 * (extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2]
-                    + extent[:, 0] * extent[:, 2])
+        area = 2 * (
+            extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] +
+            extent[:, 0] * extent[:, 2])
         self.target_weight = area / area.sum() if len(area) else area
         self.full_scene = self._embree(scene.triangles)
-        self.object_scene = self._embree(scene.triangles[self.object_tri]) if len(self.object_tri) else None
+        self.object_scene = self._embree(scene.triangles[self.object_tri]) if len(
+            self.object_tri) else None
 
     def _embree(self, triangles: np.ndarray):
         o3d = self._o3d
         # a single-threaded build gives the same BVH whatever the thread count, hence the same
         # triangle on ties (shared edges); casting is per ray and may use any number of threads
         raycaster = o3d.t.geometry.RaycastingScene(nthreads=1)
-        raycaster.add_triangles(o3d.core.Tensor(self.scene.vertices.astype(np.float32)),
-                                o3d.core.Tensor(triangles.astype(np.uint32)))
+        raycaster.add_triangles(
+            o3d.core.Tensor(self.scene.vertices.astype(np.float32)),
+            o3d.core.Tensor(triangles.astype(np.uint32)))
         return raycaster
 
-    def cast(self, raycaster, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def cast(self, raycaster, origins: np.ndarray,
+             directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """First hits of a batch: distance (inf for a miss) and triangle index in that scene."""
         rays = np.concatenate([origins, directions], axis=1).astype(np.float32)
         answer = raycaster.cast_rays(self._o3d.core.Tensor(rays), nthreads=self.threads)
@@ -149,7 +160,8 @@ class Scanner:
              config: Mapping[str, Any]) -> ScanResult:
         """Collect ``n_points`` labelled points, ``object_ratio`` of them on movable objects."""
         batch = int(config['batch_rays'])
-        target_objects = int(round(object_ratio * n_points)) if self.object_scene is not None else 0
+        target_objects = int(round(object_ratio *
+                                   n_points)) if self.object_scene is not None else 0
         chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         state = {'rays': 0, 'step': 0}
 
@@ -173,7 +185,8 @@ class Scanner:
                     nominal = random_directions(rng, batch)
                 cast_dirs = nominal
                 if config['angular_jitter'] > 0:
-                    cast_dirs = nominal + rng.standard_normal((batch, 3)) * config['angular_jitter']
+                    cast_dirs = nominal + rng.standard_normal(
+                        (batch, 3)) * config['angular_jitter']
                     cast_dirs /= np.linalg.norm(cast_dirs, axis=1, keepdims=True)
                 t_hit, prim = self.cast(raycaster, origins, cast_dirs)
                 state['rays'] += batch
@@ -196,12 +209,21 @@ class Scanner:
 
         got_objects = 0
         if target_objects > 0:
-            got_objects = collect(self.object_scene, self.object_tri, target_objects, True,
-                                  int(config['max_object_rays']), aimed=aim)
+            got_objects = collect(
+                self.object_scene,
+                self.object_tri,
+                target_objects,
+                True,
+                int(config['max_object_rays']),
+                aimed=aim)
         remaining = n_points - got_objects
         identity = np.arange(len(self.scene.triangles))
         collect(self.full_scene, identity, remaining, False, max(64, 8 * remaining // batch + 64))
         xyz = np.concatenate([c[0] for c in chunks]) if chunks else np.zeros((0, 3))
         tri = np.concatenate([c[1] for c in chunks]) if chunks else np.zeros(0, np.int64)
-        return ScanResult(xyz=xyz, rgb=self.scene.colors[tri], part=self.scene.part[tri].astype(np.int32),
-                          rays_cast=state['rays'], object_points=got_objects)
+        return ScanResult(
+            xyz=xyz,
+            rgb=self.scene.colors[tri],
+            part=self.scene.part[tri].astype(np.int32),
+            rays_cast=state['rays'],
+            object_points=got_objects)

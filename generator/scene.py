@@ -35,7 +35,8 @@ def mesh_from_arrays(name: str, vertices: np.ndarray, triangles: np.ndarray,
     mesh.update(calc_edges=True)
     rgb = np.asarray(colors, dtype=np.int64)
     packed = mesh.attributes.new('synthdet_rgb', 'INT', 'FACE')
-    packed.data.foreach_set('value', ((rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]).astype(np.int32))
+    packed.data.foreach_set('value',
+                            ((rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]).astype(np.int32))
     display = mesh.attributes.new('Col', 'BYTE_COLOR', 'FACE')
     rgba = np.concatenate([rgb / 255.0, np.ones((len(rgb), 1))], axis=1).astype(np.float32)
     display.data.foreach_set('color_srgb', rgba.ravel())
@@ -66,11 +67,16 @@ class RoomScene:
     def _asset_mesh(self, cls: str, name: str) -> bpy.types.Mesh:
         key = f'{cls}/{name}'
         if key not in self._asset_meshes:
-            self._asset_meshes[key] = mesh_from_arrays(f'asset:{key}', *self.mesh_source(cls, name))
+            self._asset_meshes[key] = mesh_from_arrays(f'asset:{key}',
+                                                       *self.mesh_source(cls, name))
         return self._asset_meshes[key]
 
-    def _add_object(self, name: str, cls: str, mesh: bpy.types.Mesh,
-                    location=(0.0, 0.0, 0.0), yaw: float = 0.0) -> bpy.types.Object:
+    def _add_object(self,
+                    name: str,
+                    cls: str,
+                    mesh: bpy.types.Mesh,
+                    location=(0.0, 0.0, 0.0),
+                    yaw: float = 0.0) -> bpy.types.Object:
         obj = bpy.data.objects.new(name, mesh)
         obj.location = tuple(float(v) for v in location)
         obj.rotation_euler = (0.0, 0.0, float(yaw))
@@ -80,7 +86,7 @@ class RoomScene:
         return obj
 
     def build(self, layout: RoomLayout, rng: np.random.Generator) -> None:
-        """Replace the scene content by ``layout``: structure parts, then one object per instance."""
+        """Replace the scene by ``layout``: structure parts, then one object per instance."""
         self.clear()
         for part in structure_parts(layout, rng):
             mesh = mesh_from_arrays(f'room:{part.instance}', part.vertices, part.triangles,
@@ -99,9 +105,10 @@ class RoomScene:
         bpy.ops.wm.save_as_mainfile(filepath=str(Path(path).resolve()), copy=True)
 
 
-def export_triangles(collection_name: str = COLLECTION,
-                     movable_classes: Sequence[str] = ('table', 'chair', 'sofa', 'yumi', '3dprinter')
-                     ) -> tuple[TriangleScene, list[str], list[str]]:
+def export_triangles(
+    collection_name: str = COLLECTION,
+    movable_classes: Sequence[str] = ('table', 'chair', 'sofa', 'yumi', '3dprinter')
+) -> tuple[TriangleScene, list[str], list[str]]:
     """Read a room collection back as world triangles.
 
     Returns the :class:`TriangleScene` and, per part, its instance name and class; parts are the
@@ -135,8 +142,10 @@ def export_triangles(collection_name: str = COLLECTION,
         classes.append(obj['synthdet_class'])
         offset += n_vert
     movable = np.array([c in movable_classes for c in classes], dtype=bool)
-    scene = TriangleScene(vertices=np.concatenate(vertices),
-                          triangles=np.concatenate(triangles).astype(np.int32),
-                          colors=np.concatenate(colors).astype(np.uint8),
-                          part=np.concatenate(part), movable=movable)
+    scene = TriangleScene(
+        vertices=np.concatenate(vertices),
+        triangles=np.concatenate(triangles).astype(np.int32),
+        colors=np.concatenate(colors).astype(np.uint8),
+        part=np.concatenate(part),
+        movable=movable)
     return scene, names, classes

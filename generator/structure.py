@@ -1,8 +1,9 @@
 """Triangle meshes of the room structure (floor, ceiling, walls, doors, windows) and of clutter.
 
 Pure numpy. Each structural part is one annotated element in the S3DIS output (``floor_1``,
-``ceiling_1``, ``wall_<i>`` for polygon edge i, ``door_<k>``, ``window_<k>``). Openings are cut out of
-their wall and filled by a panel in the wall plane, so the room stays closed for the scanner.
+``ceiling_1``, ``wall_<i>`` for polygon edge i, ``door_<k>``, ``window_<k>``). Openings are cut
+out of their wall and filled by a panel in the wall plane, so the room stays closed for the
+scanner.
 """
 from dataclasses import dataclass
 
@@ -17,9 +18,9 @@ class PartMesh:
 
     instance: str
     cls: str
-    vertices: np.ndarray   # (V, 3) float64
+    vertices: np.ndarray  # (V, 3) float64
     triangles: np.ndarray  # (T, 3) int32
-    colors: np.ndarray     # (T, 3) uint8
+    colors: np.ndarray  # (T, 3) uint8
 
 
 def _quads_to_mesh(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -27,8 +28,8 @@ def _quads_to_mesh(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     q = len(corners)
     vertices = corners.reshape(-1, 3)
     base = np.arange(q, dtype=np.int32)[:, None] * 4
-    triangles = np.concatenate([base + np.array([0, 1, 2], np.int32),
-                                base + np.array([0, 2, 3], np.int32)], axis=0)
+    triangles = np.concatenate(
+        [base + np.array([0, 1, 2], np.int32), base + np.array([0, 2, 3], np.int32)], axis=0)
     return vertices, triangles
 
 
@@ -47,7 +48,8 @@ def _floor_cells(polygon: np.ndarray) -> list[tuple[float, float, float, float]]
 def _horizontal(polygon: np.ndarray, z: float) -> tuple[np.ndarray, np.ndarray]:
     cells = _floor_cells(polygon)
     corners = np.array([[[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]]
-                        for x0, y0, x1, y1 in cells], dtype=float)
+                        for x0, y0, x1, y1 in cells],
+                       dtype=float)
     return _quads_to_mesh(corners)
 
 
@@ -59,14 +61,14 @@ def _wall_cells(length: float, height: float, openings) -> tuple[list, list]:
     for u0, u1 in zip(us[:-1], us[1:]):
         for z0, z1 in zip(zs[:-1], zs[1:]):
             uc, zc = (u0 + u1) / 2, (z0 + z1) / 2
-            owner = next((k for k, o in enumerate(openings)
-                          if o.u0 < uc < o.u1 and o.z0 < zc < o.z1), None)
+            owner = next(
+                (k for k, o in enumerate(openings) if o.u0 < uc < o.u1 and o.z0 < zc < o.z1), None)
             (plain if owner is None else cut).append((u0, z0, u1, z1, owner))
     return plain, cut
 
 
 def opening_names(layout: RoomLayout) -> list[str]:
-    """Annotation names of the openings, numbered per kind in layout order (door_1, window_1...)."""
+    """Annotation names of the openings, numbered per kind in layout order (door_1, ...)."""
     counters: dict[str, int] = {}
     names = []
     for opening in layout.openings:
@@ -99,29 +101,33 @@ def structure_parts(layout: RoomLayout, rng: np.random.Generator) -> list[PartMe
             out = []
             for u0, z0, u1, z1, _ in cells:
                 a, b = p0 + direction * u0, p0 + direction * u1
-                out.append([[a[0], a[1], z0], [b[0], b[1], z0], [b[0], b[1], z1], [a[0], a[1], z1]])
+                out.append([[a[0], a[1], z0], [b[0], b[1], z0], [b[0], b[1], z1], [a[0], a[1],
+                                                                                   z1]])
             return np.array(out, dtype=float)
 
         vertices, triangles = _quads_to_mesh(corners(plain))
-        parts.append(PartMesh(f'wall_{wall + 1}', 'wall', vertices, triangles,
-                              np.tile(wall_rgb.astype(np.uint8), (len(triangles), 1))))
+        parts.append(
+            PartMesh(f'wall_{wall + 1}', 'wall', vertices, triangles,
+                     np.tile(wall_rgb.astype(np.uint8), (len(triangles), 1))))
         for k, (name, opening) in enumerate(openings):
-            rgb = (rng.integers(60, 140, size=3) if opening.kind == 'door'
-                   else np.array([150, 190, 215]) + rng.integers(-15, 15, size=3))
+            rgb = (
+                rng.integers(60, 140, size=3) if opening.kind == 'door' else
+                np.array([150, 190, 215]) + rng.integers(-15, 15, size=3))
             vertices, triangles = _quads_to_mesh(corners([c for c in cut if c[4] == k]))
-            parts.append(PartMesh(name, opening.kind,
-                                  vertices, triangles,
-                                  np.tile(rgb.astype(np.uint8), (len(triangles), 1))))
+            parts.append(
+                PartMesh(name, opening.kind, vertices, triangles,
+                         np.tile(rgb.astype(np.uint8), (len(triangles), 1))))
     return parts
 
 
 def clutter_mesh(spec: AssetSpec, segments: int = 16) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Closed box or cylinder for a clutter spec, in the asset local frame (z = 0 at the bottom)."""
+    """Closed box or cylinder for a clutter spec, in the asset local frame (z = 0 at bottom)."""
     sx, sy, sz = spec.size
     if spec.params['kind'] == 'box':
         x, y = sx / 2, sy / 2
-        vertices = np.array([[-x, -y, 0], [x, -y, 0], [x, y, 0], [-x, y, 0],
-                             [-x, -y, sz], [x, -y, sz], [x, y, sz], [-x, y, sz]], dtype=float)
+        vertices = np.array([[-x, -y, 0], [x, -y, 0], [x, y, 0], [-x, y, 0], [-x, -y, sz],
+                             [x, -y, sz], [x, y, sz], [-x, y, sz]],
+                            dtype=float)
         triangles = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4],
                               [1, 2, 6], [1, 6, 5], [2, 3, 7], [2, 7, 6], [3, 0, 4], [3, 4, 7]],
                              dtype=np.int32)
@@ -136,8 +142,10 @@ def clutter_mesh(spec: AssetSpec, segments: int = 16) -> tuple[np.ndarray, np.nd
         j = (i + 1) % segments
         cb, ct = 2 * segments, 2 * segments + 1
         triangles = np.concatenate([
-            np.stack([i, j, j + segments], 1), np.stack([i, j + segments, i + segments], 1),
+            np.stack([i, j, j + segments], 1),
+            np.stack([i, j + segments, i + segments], 1),
             np.stack([np.full(segments, cb), j, i], 1),
-            np.stack([np.full(segments, ct), i + segments, j + segments], 1)]).astype(np.int32)
+            np.stack([np.full(segments, ct), i + segments, j + segments], 1)
+        ]).astype(np.int32)
     colours = np.tile(np.asarray(spec.params['color'], dtype=np.uint8), (len(triangles), 1))
     return vertices, triangles, colours

@@ -30,7 +30,7 @@ def _digit_table(count: int, width: int) -> np.ndarray:
     n_digits = np.array([len(str(v)) for v in range(count)])
     for col in range(width):
         power = width - 1 - col
-        table[:, col] = np.where(n_digits > power, 48 + (values // 10 ** power) % 10, 0)
+        table[:, col] = np.where(n_digits > power, 48 + (values // 10**power) % 10, 0)
     return table
 
 
@@ -44,12 +44,12 @@ def format_lines(xyz: np.ndarray, rgb: np.ndarray, decimals: int = 3) -> tuple[b
     ``np.rint(x * 10**decimals) / 10**decimals`` exactly. Digits come from lookup tables.
     """
     n = len(xyz)
-    scale = 10 ** decimals
+    scale = 10**decimals
     fraction_digits = _digit_table(scale, decimals)
     fraction_digits[fraction_digits == 0] = 48  # fractions keep their leading zeros
     quantised = np.rint(np.asarray(xyz, dtype=np.float64) * scale).astype(np.int64)
     whole_max = int(np.abs(quantised).max()) // scale if n else 0
-    if whole_max >= 10 ** 7:
+    if whole_max >= 10**7:
         raise ValueError(f'coordinates up to {whole_max} m are out of range for the text writer')
     whole_digits = _digit_table(whole_max + 1, len(str(whole_max)))
     colours = np.asarray(rgb, dtype=np.int64)
@@ -103,9 +103,10 @@ def parse_lines(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
 def write_ply(path: Path, xyz: np.ndarray, rgb: np.ndarray, class_index: np.ndarray,
               instance_index: np.ndarray) -> None:
     """Binary little-endian PLY with x y z (float64), red green blue (uchar), class, instance."""
-    vertex = np.empty(len(xyz), dtype=[('x', '<f8'), ('y', '<f8'), ('z', '<f8'), ('red', 'u1'),
-                                       ('green', 'u1'), ('blue', 'u1'), ('class', '<i4'),
-                                       ('instance', '<i4')])
+    vertex = np.empty(
+        len(xyz),
+        dtype=[('x', '<f8'), ('y', '<f8'), ('z', '<f8'), ('red', 'u1'), ('green', 'u1'),
+               ('blue', 'u1'), ('class', '<i4'), ('instance', '<i4')])
     vertex['x'], vertex['y'], vertex['z'] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
     vertex['red'], vertex['green'], vertex['blue'] = rgb[:, 0], rgb[:, 1], rgb[:, 2]
     vertex['class'], vertex['instance'] = class_index, instance_index
@@ -119,15 +120,23 @@ def write_ply(path: Path, xyz: np.ndarray, rgb: np.ndarray, class_index: np.ndar
         f.write(vertex.tobytes())
 
 
-def write_room(area_dir: Path, room: str, xyz: np.ndarray, rgb: np.ndarray, part: np.ndarray,
-               part_names: Sequence[str], meta: dict[str, Any], decimals: int = 3,
-               ply: bool = False, preview: bool = False,
+def write_room(area_dir: Path,
+               room: str,
+               xyz: np.ndarray,
+               rgb: np.ndarray,
+               part: np.ndarray,
+               part_names: Sequence[str],
+               meta: dict[str, Any],
+               decimals: int = 3,
+               ply: bool = False,
+               preview: bool = False,
                extra_files: Mapping[str, Path] | None = None) -> Path:
     """Write one room atomically into ``area_dir/room`` and return that folder.
 
     ``part[i]`` indexes ``part_names`` (annotation names such as ``chair_1``); parts without
     points get no annotation file. Annotation files follow the order of ``part_names``.
-    ``extra_files`` (name -> path, e.g. a saved .blend) are moved into the room folder before it is published.
+    ``extra_files`` (name -> path, e.g. a saved .blend) are moved into the room folder before
+    it is published.
     """
     area_dir = Path(area_dir)
     final = area_dir / room
@@ -159,8 +168,14 @@ def write_room(area_dir: Path, room: str, xyz: np.ndarray, rgb: np.ndarray, part
         class_index = np.array([class_names.index(c) for c in classes], dtype=np.int32)[part]
         write_ply(tmp / f'{room}.ply', xyz, rgb, class_index, part)
         with open(tmp / f'{room}.ply.json', 'w') as f:
-            json.dump({'format': 'synthdet.ply-labels/1', 'classes': class_names,
-                       'instances': list(part_names)}, f, indent=1)
+            json.dump(
+                {
+                    'format': 'synthdet.ply-labels/1',
+                    'classes': class_names,
+                    'instances': list(part_names)
+                },
+                f,
+                indent=1)
     if preview:
         from generator.preview import write_preview
         write_preview(tmp / f'{room}.png', xyz, part, classes, meta)

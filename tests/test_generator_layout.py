@@ -40,7 +40,7 @@ def _inside_convex(points: np.ndarray, quad: np.ndarray, tol: float) -> np.ndarr
 
 
 def _footprints_overlap(a: np.ndarray, b: np.ndarray) -> bool:
-    """Independent of the layout's separating-axis test: dense samples of each quad in the other."""
+    """Independent of the layout's separating-axis test: samples of each quad in the other."""
     if np.linalg.norm(a.mean(0) - b.mean(0)) > (np.ptp(a, 0).sum() + np.ptp(b, 0).sum()):
         return False  # far apart: cannot overlap
     t = np.linspace(0.0, 1.0, 15)
@@ -55,7 +55,8 @@ def _footprints_overlap(a: np.ndarray, b: np.ndarray) -> bool:
 def _vertical_overlap(a: dict, b: dict) -> bool:
     az = a['box']['center'][2], a['box']['size'][2]
     bz = b['box']['center'][2], b['box']['size'][2]
-    return (az[0] + az[1] / 2 > bz[0] - bz[1] / 2 + 1e-6) and (bz[0] + bz[1] / 2 > az[0] - az[1] / 2 + 1e-6)
+    return (az[0] + az[1] / 2 > bz[0] - bz[1] / 2 + 1e-6) and (bz[0] + bz[1] / 2
+                                                               > az[0] - az[1] / 2 + 1e-6)
 
 
 def _check_rules(layout) -> None:
@@ -69,8 +70,10 @@ def _check_rules(layout) -> None:
     assert counts['chair'] <= 4
     assert counts['table'] + counts['sofa'] <= 4
     by_name = {o['instance']: o for o in objects}
-    quads = {o['instance']: box_corners_xy(o['box']['center'], o['box']['size'], o['box']['yaw'])
-             for o in objects}
+    quads = {
+        o['instance']: box_corners_xy(o['box']['center'], o['box']['size'], o['box']['yaw'])
+        for o in objects
+    }
     sides_used: dict[str, list[int]] = {}
     for obj in objects:
         box = obj['box']
@@ -82,8 +85,8 @@ def _check_rules(layout) -> None:
             table = by_name[obj['on']]  # only on tables
             assert table['class'] == 'table'
             tb = table['box']
-            assert box['center'][2] - box['size'][2] / 2 == pytest.approx(_top_z(table, layout),
-                                                                          abs=1e-6)
+            assert box['center'][2] - box['size'][2] / 2 == pytest.approx(
+                _top_z(table, layout), abs=1e-6)
             # footprint on one half of the table top, in the table frame
             rot = np.array([[np.cos(-tb['yaw']), -np.sin(-tb['yaw'])],
                             [np.sin(-tb['yaw']), np.cos(-tb['yaw'])]])
@@ -167,16 +170,59 @@ def test_expected_counts_are_calibrated(catalog):
 
 
 @pytest.mark.parametrize('patch, message', [
-    ({'probabilities': {'chair': 1.5}}, 'outside [0, 1]'),
-    ({'probabilities': {'robot': 0.5}}, 'unknown class "robot"'),
-    ({'probabilities': {'table': 0.7, 'sofa': 0.5}}, 'share one slot'),
-    ({'layout': {'clutter': [-1, 3]}}, 'must not be negative'),
-    ({'layout': {'chair_positions': -2}}, 'non-negative integer'),
-    ({'layout': {'wall_slots': 6}}, 'at most 4'),
-    ({'room': {'height': [3.5, 3.0]}}, 'min > max'),
-    ({'room': {'shapes': {'box': 0.5}}}, 'sum to'),
-    ({'room': {'colour': 'red'}}, 'unknown key "room.colour"'),
-    ({'scanner': {'dropout': 'high'}}, 'must be a number'),
+    ({
+        'probabilities': {
+            'chair': 1.5
+        }
+    }, 'outside [0, 1]'),
+    ({
+        'probabilities': {
+            'robot': 0.5
+        }
+    }, 'unknown class "robot"'),
+    ({
+        'probabilities': {
+            'table': 0.7,
+            'sofa': 0.5
+        }
+    }, 'share one slot'),
+    ({
+        'layout': {
+            'clutter': [-1, 3]
+        }
+    }, 'must not be negative'),
+    ({
+        'layout': {
+            'chair_positions': -2
+        }
+    }, 'non-negative integer'),
+    ({
+        'layout': {
+            'wall_slots': 6
+        }
+    }, 'at most 4'),
+    ({
+        'room': {
+            'height': [3.5, 3.0]
+        }
+    }, 'min > max'),
+    ({
+        'room': {
+            'shapes': {
+                'box': 0.5
+            }
+        }
+    }, 'sum to'),
+    ({
+        'room': {
+            'colour': 'red'
+        }
+    }, 'unknown key "room.colour"'),
+    ({
+        'scanner': {
+            'dropout': 'high'
+        }
+    }, 'must be a number'),
 ])
 def test_bad_configuration_is_rejected_with_its_key(tmp_path, patch, message):
     path = tmp_path / 'bad.json'
@@ -202,28 +248,39 @@ def test_cli_rejects_bad_input_before_any_work(tmp_path):
     bad = tmp_path / 'bad.json'
     bad.write_text(json.dumps({'probabilities': {'yumi': -0.1}}))
     for extra, message in ((['--config', str(bad)], 'outside [0, 1]'),
-                           (['--points', '-5'], '--points must be >= 1'),
-                           (['--shard', '3/2'], '--shard must be K/N'),
-                           (['--object-ratio', '1.5'], '--object-ratio'),
-                           (['--rooms-per-area', '0'], '--rooms-per-area')):
+                           (['--points',
+                             '-5'], '--points must be >= 1'), (['--shard',
+                                                                '3/2'], '--shard must be K/N'),
+                           (['--object-ratio',
+                             '1.5'], '--object-ratio'), (['--rooms-per-area',
+                                                          '0'], '--rooms-per-area')):
         out = tmp_path / 'out'
-        result = subprocess.run([sys.executable, '-m', 'generator', '--out', str(out), *extra],
-                                capture_output=True, text=True, timeout=60)
+        result = subprocess.run([sys.executable, '-m', 'generator', '--out',
+                                 str(out), *extra],
+                                capture_output=True,
+                                text=True,
+                                timeout=60)
         assert result.returncode == 2, result.stderr
         assert message in result.stderr
         assert not out.exists()
     real = tmp_path / 's3dis'
     (real / 'Area_5' / 'office_1').mkdir(parents=True)
-    result = subprocess.run([sys.executable, '-m', 'generator', '--out', str(real), '--areas', '5'],
-                            capture_output=True, text=True, timeout=60)
+    result = subprocess.run(
+        [sys.executable, '-m', 'generator', '--out',
+         str(real), '--areas', '5'],
+        capture_output=True,
+        text=True,
+        timeout=60)
     assert result.returncode == 2 and 'did not make (e.g. office_1)' in result.stderr
     assert [p.name for p in (real / 'Area_5').iterdir()] == ['office_1']
 
 
 def test_text_format_parses_back_exactly():
     rng = np.random.default_rng(3)
-    xyz = np.concatenate([rng.uniform(-30, 30, (5000, 3)),
-                          [[0.0, -0.0004, 0.0006], [-0.0006, 9.9996, -12.3454], [100.0, -0.001, 0.0]]])
+    xyz = np.concatenate([
+        rng.uniform(-30, 30, (5000, 3)),
+        [[0.0, -0.0004, 0.0006], [-0.0006, 9.9996, -12.3454], [100.0, -0.001, 0.0]]
+    ])
     rgb = rng.integers(0, 256, (len(xyz), 3))
     text, offsets = format_lines(xyz, rgb)
     lines = text.decode('ascii').split('\n')
@@ -234,5 +291,5 @@ def test_text_format_parses_back_exactly():
     assert np.array_equal(parsed[:, :3], np.rint(xyz * 1000) / 1000)
     assert np.array_equal(parsed[:, 3:], rgb)
     assert all(len(line.split(' ')) == 6 and '-0.000' not in line for line in lines[:-1])
-    assert [line.rsplit(' ', 3)[0] for line in lines[-4:-1]] == [
-        '0.000 0.000 0.001', '-0.001 10.000 -12.345', '100.000 -0.001 0.000']
+    assert [line.rsplit(' ', 3)[0] for line in lines[-4:-1]
+            ] == ['0.000 0.000 0.001', '-0.001 10.000 -12.345', '100.000 -0.001 0.000']

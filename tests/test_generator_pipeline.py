@@ -34,8 +34,12 @@ def asset_cache(tmp_path_factory):
 @pytest.fixture(scope='module')
 def reference_run(tmp_path_factory, asset_cache):
     out = tmp_path_factory.mktemp('run') / 'out'
-    args = ['--out', str(out), '--areas', '7', '8', '--rooms-per-area', '2', '--points',
-            str(POINTS), '--seed', '5', '--asset-cache', str(asset_cache), '--quiet']
+    args = [
+        '--out',
+        str(out), '--areas', '7', '8', '--rooms-per-area', '2', '--points',
+        str(POINTS), '--seed', '5', '--asset-cache',
+        str(asset_cache), '--quiet'
+    ]
     assert main(args + ['--workers', '1']) == 0
     return out, args
 
@@ -55,8 +59,8 @@ def _same_tree(a: Path, b: Path) -> None:
 def test_room_files_match_meta(reference_run):
     out, _ = reference_run
     rooms = _rooms(out)
-    assert [r.relative_to(out).as_posix() for r in rooms] == [
-        'Area_7/factory_1', 'Area_7/factory_2', 'Area_8/factory_1', 'Area_8/factory_2']
+    assert [r.relative_to(out).as_posix() for r in rooms
+            ] == ['Area_7/factory_1', 'Area_7/factory_2', 'Area_8/factory_1', 'Area_8/factory_2']
     for room in rooms:
         meta = json.loads((room / 'meta.json').read_text())
         assert meta['format'] == 'synthdet.room/1'
@@ -71,7 +75,8 @@ def test_room_files_match_meta(reference_run):
         # the room file is the concatenation of the annotation files
         annotations = sorted((room / 'Annotations').glob('*.txt'))
         joined = b''.join(p.read_bytes() for p in annotations)
-        assert sorted(joined.splitlines()) == sorted((room / f'{room.name}.txt').read_bytes().splitlines())
+        assert sorted(joined.splitlines()) == sorted(
+            (room / f'{room.name}.txt').read_bytes().splitlines())
         objects = {o['instance']: o for o in meta['objects']}
         object_points = 0
         for path in annotations:
@@ -110,12 +115,17 @@ def test_scene_export_matches_the_layout_boxes(asset_cache):
     from generator.layout import catalog_from_library, generate_layout
     from generator.pipeline import RunOptions, open_library
     from generator.scene import RoomScene, export_triangles
-    options = RunOptions(out='', points=1, object_ratio=0.5, seed=0, config=load_config(),
-                         asset_cache=str(asset_cache))
+    options = RunOptions(
+        out='',
+        points=1,
+        object_ratio=0.5,
+        seed=0,
+        config=load_config(),
+        asset_cache=str(asset_cache))
     library = open_library(options)
     by_name = {i.name: i for c in library.classes() for i in library.instances(c)}
-    layout = generate_layout(np.random.default_rng(11), catalog_from_library(library),
-                             options.config)
+    layout = generate_layout(
+        np.random.default_rng(11), catalog_from_library(library), options.config)
     assert layout.objects
     scene = RoomScene(lambda cls, name: by_name[name].mesh_arrays())
     scene.build(layout, np.random.default_rng(0))
@@ -168,9 +178,11 @@ def test_resume_completes_an_interrupted_run(reference_run, tmp_path):
 
 def test_optional_outputs(asset_cache, tmp_path):
     out = tmp_path / 'extras'
-    assert main(['--out', str(out), '--areas', '9', '--rooms-per-area', '1', '--points', '5000',
-                 '--asset-cache', str(asset_cache), '--ply', '--preview', '--save-blend',
-                 '--quiet']) == 0
+    assert main([
+        '--out',
+        str(out), '--areas', '9', '--rooms-per-area', '1', '--points', '5000', '--asset-cache',
+        str(asset_cache), '--ply', '--preview', '--save-blend', '--quiet'
+    ]) == 0
     room = out / 'Area_9' / 'factory_1'
     data = (room / 'factory_1.ply').read_bytes()
     header, body = data.split(b'end_header\n', 1)
@@ -186,22 +198,28 @@ def test_optional_outputs(asset_cache, tmp_path):
     script = ('import bpy, json, sys; bpy.ops.wm.open_mainfile(filepath=sys.argv[1]); '
               'print(json.dumps([o["synthdet_instance"] '
               'for o in bpy.data.collections["synthdet_room"].objects]))')
-    result = subprocess.run([sys.executable, '-c', script, str(room / 'factory_1.blend')],
-                            capture_output=True, text=True, timeout=120)
+    result = subprocess.run(
+        [sys.executable, '-c', script, str(room / 'factory_1.blend')],
+        capture_output=True,
+        text=True,
+        timeout=120)
     names = json.loads(result.stdout.strip().splitlines()[-1])
-    assert {o['instance'] for o in meta['objects']} | {'floor_1', 'ceiling_1', 'wall_1'} <= set(names)
+    assert {o['instance']
+            for o in meta['objects']} | {'floor_1', 'ceiling_1', 'wall_1'} <= set(names)
 
 
 def _box_room_scene() -> tuple[TriangleScene, np.ndarray]:
     """A 6 x 4 x 3 m box room (2 parts) with a 1 m cube (movable part 2) on the floor."""
+
     def box(lo, hi, inward):
         x0, y0, z0 = lo
         x1, y1, z1 = hi
-        v = np.array([[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0],
-                      [x0, y0, z1], [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]], float)
-        f = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4],
-                      [1, 2, 6], [1, 6, 5], [2, 3, 7], [2, 7, 6], [3, 0, 4], [3, 4, 7]])
+        v = np.array([[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0], [x0, y0, z1],
+                      [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]], float)
+        f = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4], [1, 2, 6],
+                      [1, 6, 5], [2, 3, 7], [2, 7, 6], [3, 0, 4], [3, 4, 7]])
         return v, (f[:, ::-1] if inward else f)
+
     room_v, room_f = box((0, 0, 0), (6, 4, 3), True)
     cube_v, cube_f = box((2, 1, 0), (3, 2, 1), False)
     vertices = np.concatenate([room_v, cube_v])
@@ -228,7 +246,8 @@ def test_scanner_on_a_hand_made_room():
     floor = scan.xyz[scan.part == 0]
     assert np.abs(floor[:, 2]).max() < 1e-4 and np.all(scan.rgb[scan.part == 0] == [10, 20, 30])
     # the cube hides the floor under it from every ray
-    assert not np.any((floor[:, 0] > 2.01) & (floor[:, 0] < 2.99) & (floor[:, 1] > 1.01) & (floor[:, 1] < 1.99))
+    assert not np.any((floor[:, 0] > 2.01) & (floor[:, 0] < 2.99) & (floor[:, 1] > 1.01)
+                      & (floor[:, 1] < 1.99))
     # noise models: range noise moves floor points off the plane, dropout costs extra rays
     noisy = Scanner(scene).scan(path, 10000, 0.3, np.random.default_rng(1),
                                 dict(config, range_noise=0.01, angular_jitter=0.002, dropout=0.5))
@@ -251,12 +270,22 @@ def test_user_library_with_two_classes(tmp_path):
     build_library(library, instances_per_class=2, seed=4, classes=('table', 'yumi'))
     out = tmp_path / 'out'
     config = tmp_path / 'config.json'
-    config.write_text(json.dumps({'probabilities': {'table': 1.0, 'sofa': 0.0, 'yumi': 1.0,
-                                                    '3dprinter': 0.0}}))
-    assert main(['--out', str(out), '--areas', '9', '--rooms-per-area', '1', '--points', '3000',
-                 '--library', str(library), '--config', str(config), '--quiet']) == 0
+    config.write_text(
+        json.dumps({'probabilities': {
+            'table': 1.0,
+            'sofa': 0.0,
+            'yumi': 1.0,
+            '3dprinter': 0.0
+        }}))
+    assert main([
+        '--out',
+        str(out), '--areas', '9', '--rooms-per-area', '1', '--points', '3000', '--library',
+        str(library), '--config',
+        str(config), '--quiet'
+    ]) == 0
     meta = json.loads((out / 'Area_9' / 'factory_1' / 'meta.json').read_text())
     classes = {o['class'] for o in meta['objects']}
     assert {'table', 'yumi'} <= classes <= {'table', 'yumi', 'clutter'}
     assert meta['generator']['library'] == 'user'
-    assert {o['asset'].split('/')[0] for o in meta['objects'] if o['class'] != 'clutter'} == {'table', 'yumi'}
+    assert {o['asset'].split('/')[0]
+            for o in meta['objects'] if o['class'] != 'clutter'} == {'table', 'yumi'}
