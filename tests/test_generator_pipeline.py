@@ -62,51 +62,56 @@ def test_room_files_match_meta(reference_run):
     assert [r.relative_to(out).as_posix() for r in rooms
             ] == ['Area_7/factory_1', 'Area_7/factory_2', 'Area_8/factory_1', 'Area_8/factory_2']
     for room in rooms:
-        meta = json.loads((room / 'meta.json').read_text())
-        assert meta['format'] == 'synthdet.room/1'
-        assert meta['generator']['points'] == POINTS
-        polygon = np.asarray(meta['room']['polygon'])
-        height = meta['room']['height']
-        xyz, rgb = parse_lines(room / f'{room.name}.txt')
-        assert len(xyz) == POINTS and rgb.min() >= 0 and rgb.max() <= 255
-        # all points inside the room (polygon shrunk/grown by the tolerance)
-        assert xyz[:, 2].min() >= -TOL and xyz[:, 2].max() <= height + TOL
-        assert points_in_polygon(xyz[:, :2], offset_polygon(polygon, -TOL)).all()
-        # the room file is the concatenation of the annotation files
-        annotations = sorted((room / 'Annotations').glob('*.txt'))
-        joined = b''.join(p.read_bytes() for p in annotations)
-        assert sorted(joined.splitlines()) == sorted(
-            (room / f'{room.name}.txt').read_bytes().splitlines())
-        objects = {o['instance']: o for o in meta['objects']}
-        object_points = 0
-        for path in annotations:
-            cls, index = path.stem.split('_')
-            assert index.isdigit() and cls in DETECTION_CLASSES + STRUCTURE_CLASSES
-            pts, _ = parse_lines(path)
-            if cls in DETECTION_CLASSES or cls == 'clutter':
-                box = objects[path.stem]['box']
-                yaw = box['yaw']
-                rel = pts[:, :2] - np.asarray(box['center'][:2])
-                local = rel @ np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])
-                half = np.asarray(box['size']) / 2
-                assert np.all(np.abs(local) <= half[:2] + TOL), path
-                assert np.all(np.abs(pts[:, 2] - box['center'][2]) <= half[2] + TOL), path
-                object_points += len(pts) * (cls != 'clutter')
-            elif cls == 'floor':
-                assert np.abs(pts[:, 2]).max() <= TOL
-            elif cls == 'ceiling':
-                assert np.abs(pts[:, 2] - height).max() <= TOL
-            elif cls in ('wall', 'door', 'window'):
-                # on the wall's segment of the polygon
-                openings = {o['instance']: o for o in meta['room']['openings']}
-                edge = int(index) - 1 if cls == 'wall' else openings[path.stem]['wall']
-                p0, p1 = polygon[edge], polygon[(edge + 1) % len(polygon)]
-                d = (p1 - p0) / np.linalg.norm(p1 - p0)
-                dist = (pts[:, 0] - p0[0]) * d[1] - (pts[:, 1] - p0[1]) * d[0]
-                assert np.abs(dist).max() <= TOL, path
-        movable = [o for o in meta['objects'] if o['class'] in DETECTION_CLASSES]
-        if movable:  # object share of the points, exactly as requested
-            assert object_points == round(0.5 * POINTS) == meta['generator']['object_points']
+        _check_room(room, POINTS)
+
+
+def _check_room(room: Path, points: int) -> None:
+    """S3DIS files of one room against its meta.json."""
+    meta = json.loads((room / 'meta.json').read_text())
+    assert meta['format'] == 'synthdet.room/1'
+    assert meta['generator']['points'] == points
+    polygon = np.asarray(meta['room']['polygon'])
+    height = meta['room']['height']
+    xyz, rgb = parse_lines(room / f'{room.name}.txt')
+    assert len(xyz) == points and rgb.min() >= 0 and rgb.max() <= 255
+    # all points inside the room (polygon shrunk/grown by the tolerance)
+    assert xyz[:, 2].min() >= -TOL and xyz[:, 2].max() <= height + TOL
+    assert points_in_polygon(xyz[:, :2], offset_polygon(polygon, -TOL)).all()
+    # the room file is the concatenation of the annotation files
+    annotations = sorted((room / 'Annotations').glob('*.txt'))
+    joined = b''.join(p.read_bytes() for p in annotations)
+    assert sorted(joined.splitlines()) == sorted(
+        (room / f'{room.name}.txt').read_bytes().splitlines())
+    objects = {o['instance']: o for o in meta['objects']}
+    object_points = 0
+    for path in annotations:
+        cls, index = path.stem.split('_')
+        assert index.isdigit() and cls in DETECTION_CLASSES + STRUCTURE_CLASSES
+        pts, _ = parse_lines(path)
+        if cls in DETECTION_CLASSES or cls == 'clutter':
+            box = objects[path.stem]['box']
+            yaw = box['yaw']
+            rel = pts[:, :2] - np.asarray(box['center'][:2])
+            local = rel @ np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])
+            half = np.asarray(box['size']) / 2
+            assert np.all(np.abs(local) <= half[:2] + TOL), path
+            assert np.all(np.abs(pts[:, 2] - box['center'][2]) <= half[2] + TOL), path
+            object_points += len(pts) * (cls != 'clutter')
+        elif cls == 'floor':
+            assert np.abs(pts[:, 2]).max() <= TOL
+        elif cls == 'ceiling':
+            assert np.abs(pts[:, 2] - height).max() <= TOL
+        elif cls in ('wall', 'door', 'window'):
+            # on the wall's segment of the polygon
+            openings = {o['instance']: o for o in meta['room']['openings']}
+            edge = int(index) - 1 if cls == 'wall' else openings[path.stem]['wall']
+            p0, p1 = polygon[edge], polygon[(edge + 1) % len(polygon)]
+            d = (p1 - p0) / np.linalg.norm(p1 - p0)
+            dist = (pts[:, 0] - p0[0]) * d[1] - (pts[:, 1] - p0[1]) * d[0]
+            assert np.abs(dist).max() <= TOL, path
+    movable = [o for o in meta['objects'] if o['class'] in DETECTION_CLASSES]
+    if movable:  # object share of the points, exactly as requested
+        assert object_points == round(0.5 * points) == meta['generator']['object_points']
 
 
 def test_scene_export_matches_the_layout_boxes(asset_cache):
@@ -176,13 +181,21 @@ def test_resume_completes_an_interrupted_run(reference_run, tmp_path):
     assert finished.stat().st_mtime_ns == stamp - 10**9  # finished rooms are not redone
 
 
-def test_optional_outputs(asset_cache, tmp_path):
+def test_optional_outputs_in_l_and_u_rooms(asset_cache, tmp_path):
     out = tmp_path / 'extras'
+    config = tmp_path / 'shapes.yaml'
+    config.write_text('room:\n  shapes: {L: 0.5, U: 0.5}\n  windows: [2, 3]\n')
     assert main([
         '--out',
-        str(out), '--areas', '9', '--rooms-per-area', '1', '--points', '5000', '--asset-cache',
-        str(asset_cache), '--ply', '--preview', '--save-blend', '--quiet'
+        str(out), '--areas', '9', '--rooms-per-area', '2', '--points', '5000', '--asset-cache',
+        str(asset_cache), '--config',
+        str(config), '--ply', '--preview', '--save-blend', '--quiet'
     ]) == 0
+    shapes = set()
+    for room in _rooms(out):
+        _check_room(room, 5000)
+        shapes.add(json.loads((room / 'meta.json').read_text())['room']['shape'])
+    assert shapes <= {'L', 'U'} and shapes
     room = out / 'Area_9' / 'factory_1'
     data = (room / 'factory_1.ply').read_bytes()
     header, body = data.split(b'end_header\n', 1)
