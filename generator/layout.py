@@ -289,16 +289,16 @@ def sample_room(rng: np.random.Generator, room_cfg: Mapping[str,
 class _Placer:
     """Keeps the placed objects and answers 'is this box free?'."""
 
-    def __init__(self, polygon: np.ndarray, height: float, clearance: float):
+    def __init__(self, polygon: np.ndarray, top_limit: float, clearance: float):
         self.polygon = polygon
-        self.height = height
+        self.top_limit = top_limit
         self.clearance = clearance
         self.objects: list[PlacedObject] = []
         self.blockers: list[PlacedObject] = []  # keep-out volumes (door swings), not written
         self.counters: dict[str, int] = {}
 
     def is_free(self, candidate: PlacedObject, ignore: str | None = None) -> bool:
-        if candidate.center[2] + candidate.size[2] / 2 > self.height - 0.05:
+        if candidate.center[2] + candidate.size[2] / 2 > self.top_limit:
             return False
         quad = box_corners_xy(candidate.center, candidate.size, candidate.yaw)
         if not quad_inside_polygon(quad, self.polygon):
@@ -473,7 +473,9 @@ def generate_layout(rng: np.random.Generator, catalog: Catalog,
     room_cfg, probs, layout_cfg = config['room'], config['probabilities'], config['layout']
     shape, polygon, height = sample_room(rng, room_cfg)
     layout = RoomLayout(shape, polygon, height)
-    placer = _Placer(polygon, height, float(layout_cfg['clearance']))
+    # objects stay below the sensor (and the ceiling), so the sensor path never runs through one
+    top_limit = min(height - 0.05, float(config['scanner']['sensor_height']) * height - 0.1)
+    placer = _Placer(polygon, top_limit, float(layout_cfg['clearance']))
     _place_openings(rng, placer, room_cfg, layout)
 
     # tables and sofas share the wall slots: the longest walls, at most 4

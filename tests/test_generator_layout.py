@@ -80,7 +80,8 @@ def _check_rules(layout) -> None:
         quad = quads[obj['instance']]
         assert points_in_polygon(quad, polygon).all(), f"{obj['instance']} outside the room"
         assert not _inside_convex(polygon, quad, 1e-6).any(), 'a room corner pokes into an object'
-        assert box['center'][2] + box['size'][2] / 2 <= meta['room']['height']
+        sensor_z = DEFAULTS['scanner']['sensor_height'] * meta['room']['height']
+        assert box['center'][2] + box['size'][2] / 2 <= sensor_z - 0.1 + 1e-6  # below the sensor
         if obj['class'] in ('yumi', '3dprinter'):
             table = by_name[obj['on']]  # only on tables
             assert table['class'] == 'table'
