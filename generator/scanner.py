@@ -15,10 +15,13 @@ sphere directions hit objects with only 1-2 % of rays. ``aim_at_objects: false``
 directions for both phases.
 Noise models (off by default): range noise, angular jitter and per-point dropout.
 """
+import warnings
 from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
+
+from generator.layout import points_in_polygon
 
 
 @dataclass
@@ -45,7 +48,6 @@ class ScanResult:
 
 def _interior_point(polygon: np.ndarray) -> np.ndarray:
     """Centre of the bounding box if it lies in the room, else the centre of the largest cell."""
-    from generator.layout import points_in_polygon
     centre = (polygon.min(axis=0) + polygon.max(axis=0)) / 2
     if points_in_polygon(centre[None], polygon)[0]:
         return centre
@@ -162,7 +164,7 @@ class Scanner:
         batch = int(config['batch_rays'])
         target_objects = int(round(object_ratio *
                                    n_points)) if self.object_scene is not None else 0
-        chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        chunks: list[tuple[np.ndarray, np.ndarray]] = []
         state = {'rays': 0, 'step': 0}
 
         aim = bool(config['aim_at_objects'])
@@ -203,7 +205,7 @@ class Scanner:
                 if config['range_noise'] > 0:
                     distance = distance + rng.normal(0.0, config['range_noise'], len(rows))
                 xyz = origins[rows] + nominal[rows] * distance[:, None]
-                chunks.append((xyz, tri[rows], rows))
+                chunks.append((xyz, tri[rows]))
                 got += len(rows)
             return got
 
@@ -216,9 +218,17 @@ class Scanner:
                 True,
                 int(config['max_object_rays']),
                 aimed=aim)
+            if got_objects < target_objects:
+                warnings.warn(f'only {got_objects} of {target_objects} object points after '
+                              f'{config["max_object_rays"]} ray batches; the rest goes to the '
+                              f'structure')
         remaining = n_points - got_objects
         identity = np.arange(len(self.scene.triangles))
-        collect(self.full_scene, identity, remaining, False, max(64, 8 * remaining // batch + 64))
+        got = collect(self.full_scene, identity, remaining, False,
+                      max(64, 8 * remaining // batch + 64))
+        if got < remaining:
+            warnings.warn(f'only {got_objects + got} of {n_points} points: most rays escape the '
+                          f'scene (is the room closed?)')
         xyz = np.concatenate([c[0] for c in chunks]) if chunks else np.zeros((0, 3))
         tri = np.concatenate([c[1] for c in chunks]) if chunks else np.zeros(0, np.int64)
         return ScanResult(
