@@ -339,8 +339,8 @@ def _pick(rng: np.random.Generator, probs: Mapping[str, float],
 
 def _fits_on_side(table: AssetSpec, item: AssetSpec, margin: float = 0.03) -> list[int]:
     """Quarter turns (0..3) in which ``item`` fits on one half of the table top."""
-    if table.top_size is None or table.top_z is None:
-        return []
+    if table.top_size is None or table.top_z is None or table.size[2] > table.top_z + 0.01:
+        return []  # no usable top, or parts above the top (a shelf) that an item would hit
     half_w, depth = table.top_size[0] / 2 - margin, table.top_size[1] - 2 * margin
     turns = []
     for k in range(4):
