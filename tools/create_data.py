@@ -5,33 +5,10 @@ Example::
     python tools/create_data.py s3dis --root-path data/s3dis --out-dir data/s3dis --workers 2
 """
 import argparse
-import importlib
-import importlib.util
 import sys
-from pathlib import Path
-from types import ModuleType
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-DATASETS_DIR = REPO_ROOT / 'projects' / 'synthdet' / 'datasets'
-
-
-def import_datasets_module(module: str) -> ModuleType:
-    """Import ``projects.synthdet.datasets.<module>`` without running the ``__init__`` of
-    ``projects.synthdet`` and of its ``datasets`` package.
-
-    Those register the mmdet3d plugin (torch, mmcv, mmdet3d, MinkowskiEngine); conversion and
-    statistics need only numpy and numba, so they also run where the training stack is not
-    importable. The packages keep their real names, to which numba's on-disk cache refers.
-    """
-    if str(REPO_ROOT) not in sys.path:
-        sys.path.insert(0, str(REPO_ROOT))
-    for name, folder in (('projects.synthdet', DATASETS_DIR.parent), ('projects.synthdet.datasets',
-                                                                      DATASETS_DIR)):
-        if name not in sys.modules:
-            spec = importlib.util.spec_from_file_location(
-                name, folder / '__init__.py', submodule_search_locations=[str(folder)])
-            sys.modules[name] = importlib.util.module_from_spec(spec)  # __init__ not run
-    return importlib.import_module(f'projects.synthdet.datasets.{module}')
+from projects.synthdet.datasets.point_text import PointFileError
+from projects.synthdet.datasets.s3dis_converter import S3DISLayoutError, convert_s3dis
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -55,15 +32,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    converter = import_datasets_module('s3dis_converter')
     try:
-        summary = converter.convert_s3dis(
+        summary = convert_s3dis(
             args.root_path,
             args.out_dir,
             areas=args.areas,
             workers=args.workers,
             on_error=args.on_error)
-    except (converter.PointFileError, converter.S3DISLayoutError) as error:
+    except (PointFileError, S3DISLayoutError) as error:
         print(f'create_data: error: {error}', file=sys.stderr)
         return 1
     print(summary.report())

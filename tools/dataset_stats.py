@@ -8,7 +8,7 @@ Counts come from the info pickles ``<data_root>/s3dis_infos_Area_N.pkl`` written
 import argparse
 import sys
 
-from create_data import import_datasets_module
+from projects.synthdet.datasets.instance_counts import count_instances, format_table1
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -16,15 +16,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('data_root', help='folder holding s3dis_infos_Area_N.pkl')
     parser.add_argument('--areas', type=int, nargs='+', help='areas (default: every pickle found)')
     args = parser.parse_args(argv)
-    instance_counts = import_datasets_module('instance_counts')
     try:
-        counts = instance_counts.count_instances(args.data_root, args.areas)
+        counts = count_instances(args.data_root, args.areas)
     except FileNotFoundError as error:
         print(f'dataset_stats: error: {error}', file=sys.stderr)
         return 1
     print(f'Table 1: detection instances per class, counted from the info pickles in '
           f'{args.data_root}')
-    print(instance_counts.format_table1(counts))
+    print(format_table1(counts))
     return 0
 
 
