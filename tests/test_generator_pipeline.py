@@ -8,8 +8,10 @@ import filecmp
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import bpy  # noqa: F401  (bpy before open3d: both ship libtbb)
@@ -179,6 +181,26 @@ def test_resume_completes_an_interrupted_run(reference_run, tmp_path):
     _same_tree(out, resumed)
     assert not list(resumed.glob(f'Area_*/{TMP_PREFIX}*'))
     assert finished.stat().st_mtime_ns == stamp - 10**9  # finished rooms are not redone
+
+
+def test_resume_after_a_killed_run(reference_run, tmp_path):
+    """SIGKILL a real run once its first room is published, then restart it."""
+    out, args = reference_run
+    killed = tmp_path / 'killed'
+    command = [sys.executable, '-m', 'generator', *args, '--out', str(killed)]
+    process = subprocess.Popen(
+        command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while (process.poll() is None and time.monotonic() < deadline
+           and not (killed / 'Area_7' / 'factory_1').exists()):
+        time.sleep(0.02)
+    if process.poll() is None:
+        os.killpg(process.pid, signal.SIGKILL)
+    process.wait()
+    assert (killed / 'Area_7' / 'factory_1' / 'meta.json').exists()
+    assert main([*args, '--out', str(killed)]) == 0
+    _same_tree(out, killed)
+    assert not list(killed.glob(f'Area_*/{TMP_PREFIX}*'))
 
 
 def test_optional_outputs_in_l_and_u_rooms(asset_cache, tmp_path):
