@@ -23,14 +23,17 @@ def build_parser() -> argparse.ArgumentParser:
         nargs='+',
         default=[7, 8, 9],
         help='area numbers to write (default: 7 8 9)')
-    parser.add_argument('--rooms-per-area', type=int, default=50)
-    parser.add_argument('--points', type=int, default=1_000_000, help='points per room')
+    parser.add_argument(
+        '--rooms-per-area', type=int, default=50, help='rooms per area (default 50)')
+    parser.add_argument(
+        '--points', type=int, default=1_000_000, help='points per room (default 1000000)')
     parser.add_argument(
         '--object-ratio',
         type=float,
         default=0.5,
         help='share of the points on movable objects (default 0.5)')
-    parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument(
+        '--seed', type=int, default=0, help='run seed; room seeds derive from (seed, area, room)')
     parser.add_argument('--workers', type=int, default=1, help="worker processes ('spawn')")
     parser.add_argument(
         '--shard',
