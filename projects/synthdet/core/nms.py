@@ -41,7 +41,7 @@ def axis_aligned_nms3d_cpu(boxes: Tensor, scores: Tensor, iou_thr: float) -> Ten
     if len(order) == 0:
         return order
     sorted_boxes = boxes[order]
-    overlaps = (pairwise_bev_iou(sorted_boxes, sorted_boxes) > iou_thr).numpy()
+    overlaps = (pairwise_bev_iou(sorted_boxes, sorted_boxes) > iou_thr).cpu().numpy()
     suppressed = np.zeros(len(order), dtype=bool)
     keep = []
     for i in range(len(order)):
@@ -49,7 +49,7 @@ def axis_aligned_nms3d_cpu(boxes: Tensor, scores: Tensor, iou_thr: float) -> Ten
             continue
         keep.append(i)
         suppressed |= overlaps[i]
-    return order[torch.as_tensor(keep, dtype=torch.long)]
+    return order[torch.as_tensor(keep, dtype=torch.long, device=order.device)]
 
 
 def axis_aligned_nms3d(boxes: Tensor, scores: Tensor, iou_thr: float) -> Tensor:

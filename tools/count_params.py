@@ -1,0 +1,54 @@
+"""Print the parameter count of the model in an mmdet3d config, total and per module.
+
+Usage: python tools/count_params.py CONFIG [--depth N] [--cfg-options key=value ...]
+"""
+import argparse
+
+from mmdet3d.registry import MODELS
+from mmdet3d.utils import register_all_modules
+from mmengine.config import Config, DictAction
+from torch import nn
+
+
+def count_parameters(module: nn.Module) -> int:
+    """Number of scalar parameters of ``module`` (trainable or not)."""
+    return sum(p.numel() for p in module.parameters())
+
+
+def parameter_table(model: nn.Module, depth: int) -> list[tuple[str, int]]:
+    """(module name, count) rows for sub-modules up to ``depth`` levels deep, then the total."""
+    rows = []
+
+    def visit(module: nn.Module, prefix: str, level: int) -> None:
+        for name, child in module.named_children():
+            count = count_parameters(child)
+            if count == 0:
+                continue
+            rows.append((prefix + name, count))
+            if level < depth:
+                visit(child, f'{prefix}{name}.', level + 1)
+
+    visit(model, '', 1)
+    rows.append(('total', count_parameters(model)))
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('config', help='mmdet3d config file with a `model` entry')
+    parser.add_argument('--depth', type=int, default=2, help='module levels to list')
+    parser.add_argument('--cfg-options', nargs='+', action=DictAction,
+                        help='override config entries, e.g. model.voxel_size=0.02')
+    args = parser.parse_args()
+    register_all_modules(init_default_scope=True)
+    cfg = Config.fromfile(args.config)
+    if args.cfg_options:
+        cfg.merge_from_dict(args.cfg_options)
+    model = MODELS.build(cfg.model)
+    for name, count in parameter_table(model, args.depth):
+        indent = '  ' * name.count('.') if name != 'total' else ''
+        print(f'{indent}{name:<{40 - len(indent)}} {count:>12}')
+
+
+if __name__ == '__main__':
+    main()
