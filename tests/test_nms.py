@@ -87,8 +87,8 @@ def test_multiclass_nms_matches_per_class_brute_force(seed):
     boxes, _ = random_boxes(80, 100 + seed)
     scores = torch.rand(80, 4, generator=torch.Generator().manual_seed(seed))
     score_thr, iou_thr = 0.3, 0.4
-    kept_boxes, kept_scores, labels = multiclass_axis_aligned_nms3d(
-        boxes, scores, score_thr, iou_thr)
+    kept_boxes, kept_scores, labels = multiclass_axis_aligned_nms3d(boxes, scores, score_thr,
+                                                                    iou_thr)
     expected = []
     for label in range(4):
         candidates = torch.nonzero(scores[:, label] > score_thr).flatten()
@@ -102,6 +102,7 @@ def test_multiclass_nms_matches_per_class_brute_force(seed):
 
 def test_multiclass_nms_nothing_above_threshold():
     boxes, _ = random_boxes(10, 3)
-    kept_boxes, kept_scores, labels = multiclass_axis_aligned_nms3d(
-        boxes, torch.full((10, 3), 0.005), 0.01, 0.5)
+    kept_boxes, kept_scores, labels = multiclass_axis_aligned_nms3d(boxes,
+                                                                    torch.full((10, 3), 0.005),
+                                                                    0.01, 0.5)
     assert kept_boxes.shape == (0, 6) and kept_scores.shape == (0, ) and labels.dtype == torch.long

@@ -31,14 +31,18 @@ def tr3d_config(num_classes=5, label2level=(1, 0, 1, 1, 0), voxel_size=0.01):
         type='TR3DDetector',
         voxel_size=voxel_size,
         data_preprocessor=dict(type='Det3DDataPreprocessor'),
-        backbone=dict(type='TR3DMinkResNet', in_channels=3, depth=34,
-                      num_planes=(64, 128, 128, 128)),
+        backbone=dict(
+            type='TR3DMinkResNet', in_channels=3, depth=34, num_planes=(64, 128, 128, 128)),
         neck=dict(type='TR3DNeck', in_channels=(64, 128, 128, 128), out_channels=128),
-        bbox_head=dict(type='TR3DHead', num_classes=num_classes, in_channels=128,
-                       num_reg_outs=6, pts_center_threshold=6, label2level=label2level,
-                       bbox_loss=dict(type='TR3DAxisAlignedIoULoss', mode='diou',
-                                      reduction='none'),
-                       cls_loss=dict(type='mmdet.FocalLoss', reduction='none')),
+        bbox_head=dict(
+            type='TR3DHead',
+            num_classes=num_classes,
+            in_channels=128,
+            num_reg_outs=6,
+            pts_center_threshold=6,
+            label2level=label2level,
+            bbox_loss=dict(type='TR3DAxisAlignedIoULoss', mode='diou', reduction='none'),
+            cls_loss=dict(type='mmdet.FocalLoss', reduction='none')),
         train_cfg=dict(),
         test_cfg=dict(nms_pre=1000, iou_thr=0.5, score_thr=0.01))
 
@@ -47,20 +51,23 @@ def tr3d_config(num_classes=5, label2level=(1, 0, 1, 1, 0), voxel_size=0.01):
 def scenes(tmp_path_factory):
     """Two small generated S3DIS rooms: (N, 6) points with RGB in 0-1, boxes and labels."""
     root = tmp_path_factory.mktemp('s3dis')
-    truth = write_synthetic_area(root, area=7, n_rooms=2, seed=5, classes=CLASSES,
-                                 points_per_object=250)
+    truth = write_synthetic_area(
+        root, area=7, n_rooms=2, seed=5, classes=CLASSES, points_per_object=250)
     result = []
     for room, boxes in truth.items():
-        points = np.loadtxt(root / 'Stanford3dDataset_v1.2_Aligned_Version' / 'Area_7' / room /
-                            f'{room}.txt', dtype=np.float32)
+        points = np.loadtxt(
+            root / 'Stanford3dDataset_v1.2_Aligned_Version' / 'Area_7' / room / f'{room}.txt',
+            dtype=np.float32)
         shift = points[:, :3].min(axis=0)
         points[:, :3] -= shift
         points[:, 3:] /= 255.0
         lo = np.array([b['min'] for b in boxes]) - shift
         hi = np.array([b['max'] for b in boxes]) - shift
-        result.append(dict(points=torch.from_numpy(points),
-                           boxes=np.concatenate(((lo + hi) / 2, hi - lo), axis=1),
-                           labels=np.array([CLASSES.index(b['class']) for b in boxes])))
+        result.append(
+            dict(
+                points=torch.from_numpy(points),
+                boxes=np.concatenate(((lo + hi) / 2, hi - lo), axis=1),
+                labels=np.array([CLASSES.index(b['class']) for b in boxes])))
     return result
 
 
@@ -69,8 +76,11 @@ def make_batch(model, scenes):
     for scene in scenes:
         sample = Det3DDataSample(metainfo=dict(box_type_3d=DepthInstance3DBoxes))
         sample.gt_instances_3d = InstanceData(
-            bboxes_3d=DepthInstance3DBoxes(torch.tensor(scene['boxes'], dtype=torch.float32),
-                                           box_dim=6, with_yaw=False, origin=(0.5, 0.5, 0.5)),
+            bboxes_3d=DepthInstance3DBoxes(
+                torch.tensor(scene['boxes'], dtype=torch.float32),
+                box_dim=6,
+                with_yaw=False,
+                origin=(0.5, 0.5, 0.5)),
             labels_3d=torch.tensor(scene['labels'], dtype=torch.long))
         samples.append(sample)
     data = dict(inputs=dict(points=[s['points'] for s in scenes]), data_samples=samples)
@@ -100,13 +110,19 @@ def test_count_params_tool(tmp_path):
     config = tmp_path / 'tr3d_s3dis.py'
     config.write_text("custom_imports = dict(imports=['projects.synthdet'])\n"
                       f'model = {tr3d_config()!r}\n')
-    result = subprocess.run([sys.executable, 'tools/count_params.py', str(config)], cwd=REPO,
-                            capture_output=True, text=True, timeout=120)
+    result = subprocess.run([sys.executable, 'tools/count_params.py',
+                             str(config)],
+                            cwd=REPO,
+                            capture_output=True,
+                            text=True,
+                            timeout=120)
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
     assert lines[-1].split() == ['total', str(PUBLISHED_S3DIS_PARAMS)]
-    per_module = {line.split()[0]: int(line.split()[1]) for line in lines[:-1]
-                  if line.split()[0] in ('backbone', 'neck', 'bbox_head')}
+    per_module = {
+        line.split()[0]: int(line.split()[1])
+        for line in lines[:-1] if line.split()[0] in ('backbone', 'neck', 'bbox_head')
+    }
     assert per_module == dict(backbone=12_002_624, neck=2_655_744, bbox_head=1_419)
 
 
@@ -124,6 +140,16 @@ def test_forward_backward_reaches_backbone(scenes):
                       model.neck.up_block_1[0].kernel, model.bbox_head.conv_cls.kernel,
                       model.bbox_head.conv_reg.kernel):
         assert parameter.grad is not None and parameter.grad.abs().sum() > 0
+
+
+def test_scene_without_objects_gives_finite_losses(scenes):
+    model = MODELS.build(tr3d_config(voxel_size=0.04)).train()
+    empty = dict(scenes[0], boxes=np.zeros((0, 6)), labels=np.zeros(0, dtype=np.int64))
+    losses = model(**make_batch(model, [empty]), mode='loss')
+    assert losses['bbox_loss'].item() == 0 and losses['bbox_loss'].requires_grad
+    assert torch.isfinite(losses['cls_loss']) and losses['cls_loss'] > 0
+    sum(losses.values()).backward()
+    assert model.backbone.conv1.kernel.grad.abs().sum() > 0
 
 
 def test_training_steps_reduce_loss(scenes):
@@ -202,6 +228,7 @@ def test_forward_mode_tensor_gives_two_levels(scenes):
 
 # --- assigner -----------------------------------------------------------------------------
 
+
 def grid(step, n):
     axis = torch.arange(n, dtype=torch.float32) * step
     return torch.cartesian_prod(axis, axis, axis)
@@ -210,15 +237,13 @@ def grid(step, n):
 def test_assigner_positives_are_nearest_points_of_the_assigned_level():
     fine, coarse = grid(0.1, 10), grid(0.3, 4)
     centre = torch.tensor([[0.42, 0.47, 0.51]])
-    assigned = tr3d_assign([fine, coarse], centre, torch.tensor([0]), label2level=(1, ),
-                           top_k=6)
+    assigned = tr3d_assign([fine, coarse], centre, torch.tensor([0]), label2level=(1, ), top_k=6)
     assert torch.all(assigned[:len(fine)] == -1)  # the wrong level is never positive
     positive = torch.nonzero(assigned[len(fine):] == 0).flatten()
     distances = (coarse - centre).pow(2).sum(dim=1)
     assert sorted(positive.tolist()) == sorted(distances.argsort()[:6].tolist())
 
-    assigned = tr3d_assign([fine, coarse], centre, torch.tensor([0]), label2level=(0, ),
-                           top_k=6)
+    assigned = tr3d_assign([fine, coarse], centre, torch.tensor([0]), label2level=(0, ), top_k=6)
     assert torch.all(assigned[len(fine):] == -1)
     distances = (fine - centre).pow(2).sum(dim=1)
     assert sorted(torch.nonzero(assigned == 0).flatten().tolist()) == \
@@ -237,18 +262,25 @@ def test_assigner_label2level_per_class_and_conflicts():
     # boxes 0 and 1 compete for the same fine points: each point goes to the nearer centre
     for index in torch.nonzero(fine_assigned >= 0).flatten():
         distances = (centres[:2] - fine[index]).pow(2).sum(dim=1)
-        nearest_candidates = [b for b in (0, 1)
-                              if index in (fine - centres[b]).pow(2).sum(1).argsort()[:6]]
+        nearest_candidates = [
+            b for b in (0, 1) if index in (fine - centres[b]).pow(2).sum(1).argsort()[:6]
+        ]
         assert fine_assigned[index].item() == min(nearest_candidates, key=lambda b: distances[b])
 
 
 def test_assigner_small_level_and_no_boxes():
     fine, coarse = grid(0.1, 4), grid(0.5, 2)
-    assigned = tr3d_assign([fine, coarse], torch.tensor([[0.2, 0.2, 0.2]]), torch.tensor([0]),
-                           label2level=(1, ), top_k=20)
+    assigned = tr3d_assign([fine, coarse],
+                           torch.tensor([[0.2, 0.2, 0.2]]),
+                           torch.tensor([0]),
+                           label2level=(1, ),
+                           top_k=20)
     assert torch.all(assigned[len(fine):] == 0) and torch.all(assigned[:len(fine)] == -1)
-    empty = tr3d_assign([fine, coarse], torch.zeros((0, 3)), torch.zeros(0, dtype=torch.long),
-                        label2level=(1, ), top_k=6)
+    empty = tr3d_assign([fine, coarse],
+                        torch.zeros((0, 3)),
+                        torch.zeros(0, dtype=torch.long),
+                        label2level=(1, ),
+                        top_k=6)
     assert torch.all(empty == -1) and len(empty) == len(fine) + len(coarse)
     with pytest.raises(ValueError, match='label2level'):
         tr3d_assign([fine], torch.zeros((1, 3)), torch.tensor([3]), label2level=(0, ), top_k=6)
@@ -257,8 +289,11 @@ def test_assigner_small_level_and_no_boxes():
 def test_head_targets_are_gravity_centres_and_sizes():
     head = MODELS.build(tr3d_config())  # through the detector so voxel_size is set
     head = head.bbox_head
-    boxes = DepthInstance3DBoxes(torch.tensor([[1.0, 1.0, 0.5, 0.4, 0.6, 1.0]]), box_dim=6,
-                                 with_yaw=False, origin=(0.5, 0.5, 0.5))
+    boxes = DepthInstance3DBoxes(
+        torch.tensor([[1.0, 1.0, 0.5, 0.4, 0.6, 1.0]]),
+        box_dim=6,
+        with_yaw=False,
+        origin=(0.5, 0.5, 0.5))
     points = [grid(0.16, 12), grid(0.32, 6)]
     bbox_targets, cls_targets = head.get_targets(points, boxes, torch.tensor([1]))
     positive = cls_targets == 1
@@ -269,6 +304,7 @@ def test_head_targets_are_gravity_centres_and_sizes():
 
 
 # --- losses -------------------------------------------------------------------------------
+
 
 def test_diou_loss_known_values():
     loss = MODELS.build(dict(type='TR3DAxisAlignedIoULoss', mode='diou', reduction='none'))

@@ -37,8 +37,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('config', help='mmdet3d config file with a `model` entry')
     parser.add_argument('--depth', type=int, default=2, help='module levels to list')
-    parser.add_argument('--cfg-options', nargs='+', action=DictAction,
-                        help='override config entries, e.g. model.voxel_size=0.02')
+    parser.add_argument(
+        '--cfg-options',
+        nargs='+',
+        action=DictAction,
+        help='override config entries, e.g. model.voxel_size=0.02')
     args = parser.parse_args()
     register_all_modules(init_default_scope=True)
     cfg = Config.fromfile(args.config)

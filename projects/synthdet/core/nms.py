@@ -94,6 +94,6 @@ def multiclass_axis_aligned_nms3d(boxes: Tensor, scores: Tensor, score_thr: floa
         kept_scores.append(class_scores[keep])
         kept_labels.append(torch.full_like(keep, label))
     if not kept_boxes:
-        return (boxes.new_zeros((0, boxes.shape[1])), scores.new_zeros((0, )),
-                torch.zeros((0, ), dtype=torch.long, device=boxes.device))
+        no_labels = torch.zeros((0, ), dtype=torch.long, device=boxes.device)
+        return boxes.new_zeros((0, boxes.shape[1])), scores.new_zeros((0, )), no_labels
     return torch.cat(kept_boxes), torch.cat(kept_scores), torch.cat(kept_labels)

@@ -71,7 +71,9 @@ class TR3DDetector(Base3DDetector):
         results = self.bbox_head.predict(self.extract_feat(batch_inputs_dict), batch_data_samples)
         return self.add_pred_to_datasample(batch_data_samples, results)
 
-    def _forward(self, batch_inputs_dict: dict, batch_data_samples: Optional[SampleList] = None,
+    def _forward(self,
+                 batch_inputs_dict: dict,
+                 batch_data_samples: Optional[SampleList] = None,
                  **kwargs) -> tuple:
         """Raw head outputs (box parameters, class logits, locations per level and scene)."""
         return self.bbox_head.forward(self.extract_feat(batch_inputs_dict))

@@ -17,6 +17,11 @@ from .tr3d_assigner import tr3d_assign
 PerLevelPerScene = list[list[Tensor]]
 
 
+def _scene(per_level: PerLevelPerScene, index: int) -> list[Tensor]:
+    """The tensors of scene ``index`` from per-level, per-scene lists."""
+    return [level[index] for level in per_level]
+
+
 @MODELS.register_module()
 class TR3DHead(Base3DDenseHead):
     """Two 1x1x1 sparse convolutions per level: class logits and 6 box parameters.
@@ -136,15 +141,15 @@ class TR3DHead(Base3DDenseHead):
         """Focal class loss over all locations and box loss over positive locations."""
         bbox_losses, cls_losses, num_positive = [], [], 0
         for i, gt_instances in enumerate(batch_gt_instances_3d):
-            scene_points = [level[i] for level in points]
-            bbox_targets, cls_targets = self.get_targets(
-                scene_points, gt_instances.bboxes_3d, gt_instances.labels_3d)
-            scene_cls = torch.cat([level[i] for level in cls_preds])
+            scene_points = _scene(points, i)
+            bbox_targets, cls_targets = self.get_targets(scene_points, gt_instances.bboxes_3d,
+                                                         gt_instances.labels_3d)
+            scene_cls = torch.cat(_scene(cls_preds, i))
             cls_losses.append(self.cls_loss(scene_cls, cls_targets).sum())
             positive = cls_targets < self.num_classes
             num_positive += int(positive.sum())
             if positive.any():
-                scene_bbox = torch.cat([level[i] for level in bbox_preds])[positive]
+                scene_bbox = torch.cat(_scene(bbox_preds, i))[positive]
                 decoded = self.decode_boxes(torch.cat(scene_points)[positive], scene_bbox)
                 bbox_losses.append(
                     self.bbox_loss(
@@ -153,8 +158,7 @@ class TR3DHead(Base3DDenseHead):
         if bbox_losses:
             bbox_loss = torch.cat(bbox_losses).mean()
         else:  # no positive location in the batch: zero loss that still touches the graph
-            bbox_loss = sum(level[i].sum() for level in bbox_preds
-                            for i in range(len(level))) * 0
+            bbox_loss = sum(pred.sum() for level in bbox_preds for pred in level) * 0
         cls_loss = torch.stack(cls_losses).sum() / max(num_positive, 1)
         return dict(bbox_loss=bbox_loss, cls_loss=cls_loss)
 
@@ -182,8 +186,7 @@ class TR3DHead(Base3DDenseHead):
                         **kwargs) -> list[InstanceData]:
         """Detections per scene: ``bboxes_3d`` (metres, yaw 0), ``scores_3d``, ``labels_3d``."""
         return [
-            self._predict_single([level[i] for level in bbox_preds],
-                                 [level[i] for level in cls_preds],
-                                 [level[i] for level in points], meta)
+            self._predict_single(
+                _scene(bbox_preds, i), _scene(cls_preds, i), _scene(points, i), meta)
             for i, meta in enumerate(batch_input_metas)
         ]
