@@ -44,13 +44,15 @@ class CornerParams:
     points_per_cell: float = 8.0  # footprint cell size targets this many points per cell
     min_cell: float = 0.04
     max_cell: float = 0.2
+    min_island_cells: int = 6  # smaller groups of occupied cells are outliers
     min_edge: float = 0.25  # shorter walls are merged into their neighbours
     min_turn: float = math.radians(12)  # smaller direction changes are not corners
     snap_angle: float = math.radians(5)  # walls this close to a dominant direction snap to it
     inlier_width: float = 0.03  # half width of the slab of points that belong to a wall plane
     on_polygon_tol: float = 0.05  # quality: wall points this close to the outline are on it
     min_wall_support: float = 0.4  # fraction of the outline that must be backed by wall points
-    max_quality_points: int = 200_000  # subsample for the quality figures (deterministic)
+    max_fit_points: int = 300_000  # wall points used for the fits (deterministic subsample)
+    max_quality_points: int = 50_000  # wall points used for the quality figures
 
 
 @dataclass
@@ -84,7 +86,7 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
     if len(points) == 0:
         raise CornerDetectionError('the scan holds no points')
     xyz = points[:, :3].astype(np.float64, copy=False)
-    bad = ~np.isfinite(xyz).all(axis=1)
+    bad = ~np.isfinite(xyz.sum(axis=1))  # NaN and inf propagate through the sum
     if bad.any():
         raise CornerDetectionError(f'the scan has {int(bad.sum())} points with non-finite '
                                    f'coordinates (first at row {int(np.flatnonzero(bad)[0])})')
@@ -92,7 +94,7 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
     floor_z, ceiling_z = find_levels(xyz[:, 2], params)
     in_band = (xyz[:, 2] > floor_z + params.wall_margin) & \
         (xyz[:, 2] < ceiling_z - params.wall_margin)
-    wall_xy = xyz[in_band, :2]
+    wall_xy = _subsample(xyz[in_band, :2], params.max_fit_points)
     if len(wall_xy) < 100:
         raise CornerDetectionError(f'no walls found: only {len(wall_xy)} points lie between '
                                    f'the floor (z={floor_z:.2f}) and ceiling (z={ceiling_z:.2f})')
@@ -176,6 +178,7 @@ def find_levels(z: np.ndarray, params: CornerParams | None = None) -> tuple[floa
     Without a ceiling peak (an open scan) the ceiling is the 99.9th z percentile.
     """
     params = params or CornerParams()
+    z = z[::max(1, len(z) // params.max_fit_points)]  # levels need no more points than this
     low, high = np.percentile(z, [0.1, 99.9])
     if high - low < params.min_room_height:
         raise CornerDetectionError(f'no walls found: the scan is only {high - low:.2f} m tall')
@@ -250,8 +253,12 @@ def _traced_outline(frame_xy: np.ndarray, params: CornerParams) -> tuple[np.ndar
     shape = (np.floor(extent / cell).astype(int) + 1 + 2 * pad)
     keys = np.floor((frame_xy - low) / cell).astype(np.int64) + pad
     counts = np.bincount(keys[:, 0] * shape[1] + keys[:, 1], minlength=shape[0] * shape[1])
-    footprint = counts.reshape(shape) > 0
     square = np.ones((3, 3), dtype=bool)
+    # small islands (outliers) go before closing could join them into loops around empty cells
+    footprint = counts.reshape(shape) > 0
+    labels, count = ndimage.label(footprint, square)
+    sizes = np.bincount(labels.ravel())
+    footprint &= sizes[labels] >= params.min_island_cells
     footprint = ndimage.binary_closing(footprint, square, iterations=2)
     footprint = ndimage.binary_fill_holes(footprint)
     footprint = ndimage.binary_opening(footprint, square, iterations=2)
@@ -442,6 +449,7 @@ def _fit_wall_lines(outline: np.ndarray, walls: np.ndarray, cell: float,
                     params: CornerParams) -> list[_WallLine]:
     """Refit every outline edge to the wall points near it (wall-aligned frame)."""
     band = 2.5 * cell + 0.05
+    index = _BucketIndex(walls, bucket=0.5)
     lines = []
     for i in range(len(outline)):
         a, b = outline[i], outline[(i + 1) % len(outline)]
@@ -449,10 +457,7 @@ def _fit_wall_lines(outline: np.ndarray, walls: np.ndarray, cell: float,
         direction = (b - a) / length
         normal = np.array([-direction[1], direction[0]])  # outward for clockwise polygons
         margin = min(0.2, 0.3 * length)
-        # cheap bounding-box preselection before the exact slab test
-        low = np.minimum(a, b) - band
-        high = np.maximum(a, b) + band
-        near = walls[((walls >= low) & (walls <= high)).all(axis=1)]
+        near = index.in_box(np.minimum(a, b) - band, np.maximum(a, b) + band)
         offset = (near - a) @ normal
         along = (near - a) @ direction
         near = near[(np.abs(offset) < band) & (along > margin) & (along < length - margin)]
@@ -479,6 +484,36 @@ def _fit_wall_lines(outline: np.ndarray, walls: np.ndarray, cell: float,
                 line.support = float(min(1.0, len(covered) * 0.1 / usable))
         lines.append(line)
     return lines
+
+
+class _BucketIndex:
+    """2D points sorted into square buckets, for fast bounding-box queries."""
+
+    def __init__(self, points: np.ndarray, bucket: float):
+        self.bucket = bucket
+        self.origin = points.min(axis=0)
+        keys = np.floor((points - self.origin) / bucket).astype(np.int64)
+        self.rows = int(keys[:, 1].max()) + 1
+        linear = keys[:, 0] * self.rows + keys[:, 1]
+        order = np.argsort(linear, kind='stable')
+        self.keys = linear[order]
+        self.points = points[order]
+        self.columns = int(keys[:, 0].max()) + 1
+
+    def in_box(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+        """The points inside the axis-aligned box [low, high]."""
+        first = np.maximum(np.floor((low - self.origin) / self.bucket).astype(int), 0)
+        last = np.floor((high - self.origin) / self.bucket).astype(int)
+        last = np.minimum(last, [self.columns - 1, self.rows - 1])
+        chunks = []
+        for column in range(first[0], last[0] + 1):
+            start = np.searchsorted(self.keys, column * self.rows + first[1])
+            stop = np.searchsorted(self.keys, column * self.rows + last[1], side='right')
+            chunks.append(self.points[start:stop])
+        if not chunks:
+            return np.zeros((0, 2))
+        near = np.concatenate(chunks)
+        return near[((near >= low) & (near <= high)).all(axis=1)]
 
 
 def _snap_directions(lines: list[_WallLine], snap_angle: float) -> list[_WallLine]:
@@ -545,6 +580,13 @@ def _canonical_order(corners: np.ndarray) -> np.ndarray:
     return np.roll(corners, -start, axis=0)
 
 
+def _subsample(points: np.ndarray, limit: int) -> np.ndarray:
+    """At most ``limit`` of the points, chosen at random with a fixed seed."""
+    if len(points) <= limit:
+        return points
+    return points[np.random.default_rng(0).choice(len(points), limit, replace=False)]
+
+
 def distance_to_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
     """Distance from each 2D point to the closed polygon's boundary."""
     best = np.full(len(points), np.inf)
@@ -557,9 +599,7 @@ def distance_to_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
 
 def _quality(corners: np.ndarray, wall_xy: np.ndarray, lines: list[_WallLine],
              params: CornerParams) -> dict[str, float]:
-    if len(wall_xy) > params.max_quality_points:
-        rng = np.random.default_rng(0)
-        wall_xy = wall_xy[rng.choice(len(wall_xy), params.max_quality_points, replace=False)]
+    wall_xy = _subsample(wall_xy, params.max_quality_points)
     distance = distance_to_polygon(wall_xy, corners)
     on = distance < params.on_polygon_tol
     supports = [line.support for line in lines if line.inliers]

@@ -176,7 +176,9 @@ def _place_furniture(polygon, count, rng):
             centre = rng.uniform(polygon.min(axis=0), polygon.max(axis=0))
             yaw = rng.uniform(0, math.pi)
         footprint = _box_corners(centre, size, yaw)
-        if inside_polygon(np.vstack([footprint, centre]), polygon).all():
+        grown = _box_corners(centre, size + 0.1, yaw)
+        if inside_polygon(np.vstack([footprint, centre]), polygon).all() and \
+                not inside_polygon(polygon, grown).any():  # no reflex corner inside the box
             boxes.append((centre, size, yaw))
     return boxes
 
