@@ -45,6 +45,7 @@ class CornerParams:
     min_cell: float = 0.04
     max_cell: float = 0.2
     min_island_cells: int = 6  # smaller groups of occupied cells are outliers
+    coarse_cell: float = 0.2  # second footprint scale, for sparsely scanned parts of a room
     min_edge: float = 0.25  # shorter walls are merged into their neighbours
     min_turn: float = math.radians(12)  # smaller direction changes are not corners
     snap_angle: float = math.radians(5)  # walls this close to a dominant direction snap to it
@@ -104,12 +105,12 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
     frame_xy = xyz[:, :2] @ to_frame.T
     frame_walls = wall_xy @ to_frame.T
 
-    outline, cell = _traced_outline(frame_xy, params)
+    outline, cell, outline_error = _traced_outline(frame_xy, params)
     outline = simplify_outline(outline, tolerance=1.5 * cell, min_edge=params.min_edge,
                                min_turn=params.min_turn)
     if len(outline) < 3:
         raise CornerDetectionError('no walls found: the footprint of the points has no area')
-    lines = _fit_wall_lines(outline, frame_walls, cell, params)
+    lines = _fit_wall_lines(outline, frame_walls, outline_error + 0.05, params)
     supported = sum(line.support * _edge_length(outline, i) for i, line in enumerate(lines))
     perimeter = sum(_edge_length(outline, i) for i in range(len(outline)))
     if supported < params.min_wall_support * perimeter:
@@ -123,7 +124,7 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
 
     corners = corners @ _rotation(angle).T
     corners = _canonical_order(corners)
-    quality = _quality(corners, wall_xy, lines, params)
+    quality = _quality(corners, xyz, floor_z, ceiling_z, lines, params)
     return RoomOutline(corners=corners, floor_z=floor_z, ceiling_z=ceiling_z,
                        wall_angle=float(angle % (math.pi / 2)), quality=quality)
 
@@ -242,35 +243,58 @@ def _rotation(theta: float) -> np.ndarray:
 # --------------------------------------------------------------------------- footprint tracing
 
 
-def _traced_outline(frame_xy: np.ndarray, params: CornerParams) -> tuple[np.ndarray, float]:
-    """Trace the boundary of the points' footprint; returns (clockwise polygon, cell size)."""
+def _traced_outline(frame_xy: np.ndarray,
+                    params: CornerParams) -> tuple[np.ndarray, float, float]:
+    """Trace the boundary of the points' footprint.
+
+    Returns the clockwise polygon, the grid cell and the largest boundary error to expect
+    (metres). The footprint is found at two scales: the fine grid gives accurate edges
+    where the scan is dense, a grid ``coarse_factor`` times coarser adds the regions the
+    fine grid sees as empty because they were scanned sparsely (such as the far arm of a
+    U-shaped room); a thin rim of the coarse footprint around the fine one is dropped.
+    """
     low = frame_xy.min(axis=0)
     extent = frame_xy.max(axis=0) - low
     area = max(float(extent[0] * extent[1]), 1e-6)
     cell = float(np.clip(math.sqrt(params.points_per_cell * area / len(frame_xy)),
                          params.min_cell, params.max_cell))
-    pad = 4
-    shape = (np.floor(extent / cell).astype(int) + 1 + 2 * pad)
+    factor = max(2, math.ceil(params.coarse_cell / cell))
+    pad = 2 * factor
+    shape = np.floor(extent / cell).astype(int) + 1 + 2 * pad
+    shape = -(-shape // factor) * factor  # whole coarse cells
     keys = np.floor((frame_xy - low) / cell).astype(np.int64) + pad
-    counts = np.bincount(keys[:, 0] * shape[1] + keys[:, 1], minlength=shape[0] * shape[1])
+    counts = np.bincount(keys[:, 0] * shape[1] + keys[:, 1],
+                         minlength=shape[0] * shape[1]).reshape(shape)
+    fine = _solid_footprint(counts > 0, params.min_island_cells, iterations=2)
+    coarse_counts = counts.reshape(shape[0] // factor, factor, shape[1] // factor,
+                                   factor).sum(axis=(1, 3))
+    coarse = _solid_footprint(coarse_counts > 0, params.min_island_cells, iterations=1)
+    coarse = np.repeat(np.repeat(coarse, factor, axis=0), factor, axis=1)
     square = np.ones((3, 3), dtype=bool)
-    # small islands (outliers) go before closing could join them into loops around empty cells
-    footprint = counts.reshape(shape) > 0
-    labels, count = ndimage.label(footprint, square)
-    sizes = np.bincount(labels.ravel())
-    footprint &= sizes[labels] >= params.min_island_cells
-    footprint = ndimage.binary_closing(footprint, square, iterations=2)
-    footprint = ndimage.binary_fill_holes(footprint)
-    footprint = ndimage.binary_opening(footprint, square, iterations=2)
+    sparse = ndimage.binary_opening(coarse & ~fine, square, iterations=factor)
+    footprint = ndimage.binary_fill_holes(ndimage.binary_closing(fine | sparse, square))
     labels, count = ndimage.label(footprint)
     if count == 0:
-        return np.zeros((0, 2)), cell
+        return np.zeros((0, 2)), cell, cell
     sizes = np.bincount(labels.ravel())
     sizes[0] = 0
     footprint = labels == int(np.argmax(sizes))
     loop = trace_boundary(footprint)
     origin = low - pad * cell
-    return origin + loop * cell, cell
+    error = factor * cell if (sparse & footprint).any() else 2 * cell
+    return origin + loop * cell, cell, error
+
+
+def _solid_footprint(occupied: np.ndarray, min_island: int, iterations: int) -> np.ndarray:
+    """Occupied cells without small islands, closed, hole-filled and opened."""
+    square = np.ones((3, 3), dtype=bool)
+    # small islands (outliers) go before closing could join them into loops around empty cells
+    labels, _ = ndimage.label(occupied, square)
+    sizes = np.bincount(labels.ravel())
+    occupied = occupied & (sizes[labels] >= min_island)
+    occupied = ndimage.binary_closing(occupied, square, iterations=iterations)
+    occupied = ndimage.binary_fill_holes(occupied)
+    return ndimage.binary_opening(occupied, square, iterations=iterations)
 
 
 def trace_boundary(mask: np.ndarray) -> np.ndarray:
@@ -445,10 +469,9 @@ def _edge_length(polygon: np.ndarray, i: int) -> float:
 # --------------------------------------------------------------------------- wall line fits
 
 
-def _fit_wall_lines(outline: np.ndarray, walls: np.ndarray, cell: float,
+def _fit_wall_lines(outline: np.ndarray, walls: np.ndarray, band: float,
                     params: CornerParams) -> list[_WallLine]:
-    """Refit every outline edge to the wall points near it (wall-aligned frame)."""
-    band = 2.5 * cell + 0.05
+    """Refit every outline edge to the wall points within ``band`` of it (wall frame)."""
     index = _BucketIndex(walls, bucket=0.5)
     lines = []
     for i in range(len(outline)):
@@ -587,6 +610,18 @@ def _subsample(points: np.ndarray, limit: int) -> np.ndarray:
     return points[np.random.default_rng(0).choice(len(points), limit, replace=False)]
 
 
+def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """Even-odd test: which 2D points lie inside the closed polygon."""
+    inside = np.zeros(len(points), dtype=bool)
+    for a, b in zip(polygon, np.roll(polygon, -1, axis=0)):
+        crosses = (a[1] > points[:, 1]) != (b[1] > points[:, 1])
+        if not crosses.any():
+            continue
+        t = (points[crosses, 1] - a[1]) / (b[1] - a[1])
+        inside[crosses] ^= points[crosses, 0] < a[0] + t * (b[0] - a[0])
+    return inside
+
+
 def distance_to_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
     """Distance from each 2D point to the closed polygon's boundary."""
     best = np.full(len(points), np.inf)
@@ -597,16 +632,22 @@ def distance_to_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
     return best
 
 
-def _quality(corners: np.ndarray, wall_xy: np.ndarray, lines: list[_WallLine],
-             params: CornerParams) -> dict[str, float]:
-    wall_xy = _subsample(wall_xy, params.max_quality_points)
-    distance = distance_to_polygon(wall_xy, corners)
+def _quality(corners: np.ndarray, xyz: np.ndarray, floor_z: float, ceiling_z: float,
+             lines: list[_WallLine], params: CornerParams) -> dict[str, float]:
+    """Quality figures of an outline (``docs/corners.md`` defines them)."""
+    xyz = _subsample(xyz, params.max_quality_points)
+    upper = (xyz[:, 2] > floor_z + 0.6 * (ceiling_z - floor_z)) & \
+        (xyz[:, 2] < ceiling_z - params.wall_margin)  # above most furniture
+    distance = distance_to_polygon(xyz[upper, :2], corners)
     on = distance < params.on_polygon_tol
+    outside = ~points_in_polygon(xyz[:, :2], corners) & \
+        (distance_to_polygon(xyz[:, :2], corners) > params.on_polygon_tol)
     supports = [line.support for line in lines if line.inliers]
     return {
-        'wall_points_on_polygon': float(on.mean()),
+        'wall_points_on_polygon': float(on.mean()) if len(on) else 0.0,
         'wall_rms_residual_m': float(np.sqrt(np.mean(np.square(distance[on])))) if on.any()
         else params.on_polygon_tol,
+        'points_outside_polygon': float(outside.mean()),
         'min_wall_support': float(min(supports)) if supports else 0.0,
     }
 

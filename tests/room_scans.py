@@ -152,7 +152,8 @@ def _sample_walls(polygon, height, density, rng, openings):
 
 
 def _place_furniture(polygon, count, rng):
-    """Boxes (centre xy, size xyz, yaw): tables and chairs free, cabinets against walls."""
+    """Boxes (centre xy, size xyz, yaw, against_wall): tables and chairs free, cabinets
+    against walls."""
     boxes = []
     edges = list(zip(polygon, np.roll(polygon, -1, axis=0)))
     attempts = 0
@@ -169,17 +170,19 @@ def _place_furniture(polygon, count, rng):
             inward = np.array([direction[1], -direction[0]])  # right side of a clockwise edge
             centre = a + direction * rng.uniform(0.2 + size[0] / 2, length - 0.2 - size[0] / 2) \
                 + inward * (size[1] / 2 + 0.01)
-            yaw = math.atan2(direction[1], direction[0])
+            yaw = math.atan2(direction[1], direction[0])  # local +y points at the wall
+            against_wall = True
         else:  # table or chair somewhere in the room
             size = np.array([rng.uniform(0.4, 1.8), rng.uniform(0.4, 1.0),
                              rng.uniform(0.45, 1.1)])
             centre = rng.uniform(polygon.min(axis=0), polygon.max(axis=0))
             yaw = rng.uniform(0, math.pi)
+            against_wall = False
         footprint = _box_corners(centre, size, yaw)
         grown = _box_corners(centre, size + 0.1, yaw)
         if inside_polygon(np.vstack([footprint, centre]), polygon).all() and \
                 not inside_polygon(polygon, grown).any():  # no reflex corner inside the box
-            boxes.append((centre, size, yaw))
+            boxes.append((centre, size, yaw, against_wall))
     return boxes
 
 
@@ -190,11 +193,14 @@ def _box_corners(centre, size, yaw):
 
 
 def _sample_box(box, density, rng):
-    centre, size, yaw = box
+    """Points on the top and sides of a box; the back of a box against a wall is hidden."""
+    centre, size, yaw, against_wall = box
     faces = [(size[0] * size[1], 'top'), (size[0] * size[2], 'x'), (size[0] * size[2], 'x'),
              (size[1] * size[2], 'y'), (size[1] * size[2], 'y')]
     chunks = []
     for sign_index, (area, kind) in enumerate(faces):
+        if against_wall and sign_index == 1:
+            continue
         count = int(density * area)
         u = rng.uniform(-0.5, 0.5, (count, 3)) * size
         if kind == 'top':
@@ -212,7 +218,7 @@ def _sample_box(box, density, rng):
 
 def _outside_box(points, box, margin):
     """Drop points inside the box's footprint (grown by margin) below its top."""
-    centre, size, yaw = box
+    centre, size, yaw, _ = box
     c, s = math.cos(yaw), math.sin(yaw)
     local = (points[:, :2] - centre) @ np.array([[c, -s], [s, c]])
     inside = (np.abs(local[:, 0]) < size[0] / 2) & (np.abs(local[:, 1]) < size[1] / 2 + margin) \

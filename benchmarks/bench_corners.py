@@ -1,0 +1,139 @@
+"""Room corners: the traced-outline method vs a convex-hull baseline, side by side.
+
+    .venv/bin/python benchmarks/bench_corners.py [--rooms 10] [--points 300000]
+        [--generated DIR ...]
+
+For every room shape (rect, L, U, T) and noise setting (clean; LiDAR noise: 1 cm range noise,
+0.03 degree angular jitter, 10 % dropout, dropout patches, 0.05 % outliers) it generates
+``--rooms`` rooms (``tests/room_scans.py``, random rotation, furniture, a door and a window)
+and prints, for both methods, the mean corner error (each true corner to the nearest found
+corner, cm) and the share of rooms with the right corner count. ``--generated DIR`` adds rooms
+made by ``python -m generator`` (every ``meta.json`` under DIR; its polygon is the truth).
+Then it times both methods on 1M-point rooms. The convex-hull baseline uses the same floor and
+ceiling levels, wall band and polygon simplification; only the outline differs.
+
+Ends with one line comparing both methods (error ratio, count accuracy, time per 1M points).
+"""
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import ConvexHull
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for tests/room_scans.py
+
+from configurator.corners import (CornerDetectionError, CornerParams, detect_corners,  # noqa
+                                  find_levels, simplify_outline)
+from configurator.scan_io import read_scan  # noqa: E402
+from tests.room_scans import SHAPES, NoiseModel, make_room  # noqa: E402
+
+
+def convex_hull_corners(points: np.ndarray, params: CornerParams = CornerParams()) -> np.ndarray:
+    """Baseline: convex hull of the wall-band points, simplified like the traced outline."""
+    floor_z, ceiling_z = find_levels(points[:, 2], params)
+    band = (points[:, 2] > floor_z + params.wall_margin) & \
+        (points[:, 2] < ceiling_z - params.wall_margin)
+    xy = points[band, :2]
+    hull = xy[ConvexHull(xy).vertices][::-1]  # scipy lists 2D hulls counter-clockwise
+    return simplify_outline(hull, tolerance=0.05, min_edge=params.min_edge,
+                            min_turn=params.min_turn)
+
+
+def corner_error(found: np.ndarray, truth: np.ndarray) -> float:
+    """Mean distance from each true corner to the nearest found corner (metres)."""
+    return float(np.linalg.norm(truth[:, None] - found[None], axis=2).min(axis=1).mean())
+
+
+def evaluate(method, points: np.ndarray, truth: np.ndarray) -> tuple[float, bool]:
+    try:
+        found = method(points)
+    except CornerDetectionError:
+        return float('nan'), False
+    return corner_error(found, truth), len(found) == len(truth)
+
+
+METHODS = {
+    'traced': lambda points: detect_corners(points).corners,
+    'hull': convex_hull_corners,
+}
+
+
+def generated_rooms(folder: Path):
+    """(label, points, true polygon) of every generator room under ``folder``."""
+    for meta_path in sorted(folder.rglob('meta.json')):
+        meta = json.loads(meta_path.read_text())
+        if meta.get('format') != 'synthdet.room/1':
+            raise ValueError(f'{meta_path}: unknown format {meta.get("format")!r}')
+        scan = meta_path.parent / f'{meta_path.parent.name}.txt'
+        noise = meta['generator'].get('config', {}).get('scanner', {}).get('range_noise', 0)
+        label = f'generator {meta["room"].get("shape", "?")}' + (' noisy' if noise else '')
+        yield label, read_scan(scan), np.array(meta['room']['polygon'], dtype=np.float64)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--rooms', type=int, default=10, help='rooms per shape and noise')
+    parser.add_argument('--points', type=int, default=300_000, help='points per room')
+    parser.add_argument('--timing-rooms', type=int, default=3, help='1M-point rooms timed')
+    parser.add_argument('--generated', type=Path, nargs='*', default=[],
+                        help='folders of python -m generator rooms (meta.json truth)')
+    args = parser.parse_args()
+
+    results: dict[str, dict[str, list]] = {}
+    cases = []
+    for noisy in (False, True):
+        for shape in SHAPES:
+            label = f'{shape} {"noisy" if noisy else "clean"}'
+            for seed in range(args.rooms):
+                cases.append((label, lambda s=shape, n=noisy, seed=seed: make_room(
+                    s, args.points, seed=1000 + seed, noise=NoiseModel() if n else None)))
+    for label, make in cases:
+        room = make()
+        for name, method in METHODS.items():
+            results.setdefault(label, {}).setdefault(name, []).append(
+                evaluate(method, room.points, room.polygon))
+    for folder in args.generated:
+        for label, points, truth in generated_rooms(folder):
+            for name, method in METHODS.items():
+                results.setdefault(label, {}).setdefault(name, []).append(
+                    evaluate(method, points, truth))
+
+    print(f'{"rooms":<22}{"n":>4} | {"traced err cm":>13} {"count ok":>9} | '
+          f'{"hull err cm":>11} {"count ok":>9}')
+    totals = {name: [] for name in METHODS}
+    for label, by_method in results.items():
+        row = f'{label:<22}{len(by_method["traced"]):>4} |'
+        for name in METHODS:
+            errors = np.array([e for e, _ in by_method[name]])
+            correct = np.mean([ok for _, ok in by_method[name]])
+            totals[name] += by_method[name]
+            width = 13 if name == 'traced' else 11
+            row += f' {np.nanmean(errors) * 100:>{width}.2f} {correct:>9.0%} |'
+        print(row.rstrip(' |'))
+
+    timings = {name: [] for name in METHODS}
+    for seed in range(args.timing_rooms):
+        room = make_room(SHAPES[seed % len(SHAPES)], 1_000_000, seed=2000 + seed,
+                         noise=NoiseModel())
+        for name, method in METHODS.items():
+            start = time.perf_counter()
+            method(room.points)
+            timings[name].append(time.perf_counter() - start)
+    seconds = {name: float(np.median(values)) for name, values in timings.items()}
+    print(f'time per 1M-point room (median of {args.timing_rooms}): traced '
+          f'{seconds["traced"]:.3f} s, hull {seconds["hull"]:.3f} s')
+
+    error = {name: np.nanmean([e for e, _ in totals[name]]) * 100 for name in METHODS}
+    correct = {name: np.mean([ok for _, ok in totals[name]]) for name in METHODS}
+    print(f'corners, all rooms: traced {error["traced"]:.2f} cm / {correct["traced"]:.0%} right '
+          f'count vs convex hull {error["hull"]:.2f} cm / {correct["hull"]:.0%}: hull error '
+          f'{error["hull"] / error["traced"]:.1f}x traced; time per 1M points traced '
+          f'{seconds["traced"]:.2f} s vs hull {seconds["hull"]:.2f} s '
+          f'({seconds["traced"] / seconds["hull"]:.1f}x)')
+
+
+if __name__ == '__main__':
+    main()

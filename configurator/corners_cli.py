@@ -1,0 +1,44 @@
+"""Find a scan's room corners and floor/ceiling levels and write them as synthdet.corners/1 JSON.
+
+Usage: ``python -m configurator corners SCAN --out corners.json [--preview corners.png]``.
+"""
+from __future__ import annotations
+import argparse
+import sys
+
+from configurator.corners import (CornerDetectionError, CornerParams, detect_corners,
+                                  outline_to_dict, write_corners)
+from configurator.scan_io import read_scan
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Declare the ``corners`` sub-command's arguments."""
+    parser.add_argument('scan', help='room scan: S3DIS .txt, .bin (float32 N x 6) or .ply')
+    parser.add_argument('--out', required=True, help='output synthdet.corners/1 JSON file')
+    parser.add_argument('--preview', help='optional PNG: the points from above with the outline')
+    parser.add_argument('--min-edge', type=float, default=CornerParams.min_edge,
+                        help='walls shorter than this (m) are merged into their neighbours '
+                             '(default: %(default)s)')
+
+
+def run(args: argparse.Namespace) -> int:
+    """Detect the corners of ``args.scan``; returns 0, or 2 with a message on bad input."""
+    try:
+        points = read_scan(args.scan)
+        outline = detect_corners(points, CornerParams(min_edge=args.min_edge))
+    except (OSError, ValueError) as error:  # ScanFormatError and CornerDetectionError too
+        kind = 'no room found' if isinstance(error, CornerDetectionError) else 'bad scan'
+        print(f'corners: {kind}: {error}', file=sys.stderr)
+        return 2
+    result = outline_to_dict(outline, args.scan)
+    write_corners(args.out, result)
+    print(f'corners: {len(outline.corners)} corners, floor z={outline.floor_z:.3f} m, '
+          f'ceiling z={outline.ceiling_z:.3f} m, '
+          f'{outline.quality["wall_points_on_polygon"]:.0%} of wall points on the outline '
+          f'-> {args.out}')
+    if args.preview:
+        from configurator.preview import save_preview
+        save_preview(args.preview, points, outline.corners,
+                     title=f'{args.scan}: {len(outline.corners)} corners')
+        print(f'corners: preview -> {args.preview}')
+    return 0
