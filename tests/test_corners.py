@@ -1,0 +1,257 @@
+"""Room corners (configurator/corners.py, the corners CLI) and the shared scan reader."""
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from configurator.corners import (CORNERS_FORMAT, CornerDetectionError, detect_corners,
+                                  dominant_wall_angle, load_corners, simplify_outline,
+                                  trace_boundary, write_corners)
+from configurator.scan_io import ScanFormatError, read_scan, write_scan
+from tests.room_scans import SHAPES, NoiseModel, inside_polygon, make_room
+
+
+def signed_area(polygon: np.ndarray) -> float:
+    x, y = polygon[:, 0], polygon[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+
+
+def matched_error(found: np.ndarray, truth: np.ndarray) -> float:
+    """Mean corner distance under the best cyclic shift of the found corners (same order)."""
+    assert len(found) == len(truth), f'{len(found)} corners found, {len(truth)} expected'
+    return min(float(np.linalg.norm(np.roll(found, k, axis=0) - truth, axis=1).mean())
+               for k in range(len(found)))
+
+
+@pytest.mark.parametrize('shape', SHAPES)
+def test_clean_rooms_of_each_shape(shape):
+    room = make_room(shape, n_points=150_000, seed=11)
+    outline = detect_corners(room.points)
+    assert signed_area(room.polygon) < 0  # the generator's truth is clockwise too
+    assert signed_area(outline.corners) < 0, 'corners must be clockwise seen from above'
+    assert matched_error(outline.corners, room.polygon) < 0.03
+    assert abs(outline.floor_z - room.floor_z) < 0.01
+    assert abs(outline.ceiling_z - room.ceiling_z) < 0.01
+    assert outline.quality['wall_points_on_polygon'] > 0.8
+
+
+@pytest.mark.parametrize('shape', SHAPES)
+def test_noisy_rooms_of_each_shape(shape):
+    room = make_room(shape, n_points=150_000, seed=21, noise=NoiseModel())
+    outline = detect_corners(room.points)
+    assert signed_area(outline.corners) < 0
+    assert matched_error(outline.corners, room.polygon) < 0.05
+    assert abs(outline.floor_z - room.floor_z) < 0.02
+
+
+def test_axis_aligned_and_rotated_room_agree():
+    """The same L room, once axis-aligned and once turned: both outlines are right."""
+    aligned = make_room('L', n_points=100_000, seed=5, rotate=False)
+    turned = make_room('L', n_points=100_000, seed=5)
+    assert not np.allclose(aligned.polygon, turned.polygon)
+    for room in (aligned, turned):
+        assert matched_error(detect_corners(room.points).corners, room.polygon) < 0.03
+
+
+def test_reflex_corners_of_u_room_are_found():
+    """Angle ordering or a convex hull would lose the 2 reflex corners of a U room."""
+    room = make_room('U', n_points=150_000, seed=3)
+    corners = detect_corners(room.points).corners
+    edges = np.roll(corners, -1, axis=0) - corners
+    turns = np.cross(np.roll(edges, 1, axis=0), edges)
+    assert (turns > 0).sum() == 2  # left turns of a clockwise polygon are reflex corners
+
+
+def test_corners_start_near_the_lower_left_and_go_clockwise():
+    room = make_room('rect', n_points=80_000, seed=2, rotate=False)
+    corners = detect_corners(room.points).corners
+    low = room.polygon.min(axis=0)
+    assert np.linalg.norm(corners[0] - low) < 0.05
+    assert corners[1][1] > corners[0][1] + 1.0  # clockwise from the lower left goes up first
+
+
+def test_dominant_wall_angle_recovers_the_rotation():
+    rng = np.random.default_rng(0)
+    t = rng.uniform(0, 1, 20_000)
+    square = np.concatenate([np.column_stack([t * 6, np.zeros_like(t)]),
+                             np.column_stack([np.full_like(t, 6), t * 4]),
+                             np.column_stack([t * 6, np.full_like(t, 4)]),
+                             np.column_stack([np.zeros_like(t), t * 4])])
+    theta = math.radians(27.3)
+    rotation = np.array([[math.cos(theta), -math.sin(theta)],
+                         [math.sin(theta), math.cos(theta)]])
+    found = dominant_wall_angle(square @ rotation.T)
+    assert abs(found - theta) < math.radians(0.1)
+
+
+def test_trace_boundary_of_an_l_mask():
+    mask = np.zeros((8, 6), dtype=bool)
+    mask[1:7, 1:3] = True
+    mask[1:3, 1:5] = True
+    loop = trace_boundary(mask)
+    assert len(loop) == 6
+    assert signed_area(loop) == pytest.approx(-(6 * 2 + 2 * 2))  # clockwise, cell units
+
+
+def test_simplify_outline_merges_jogs_and_keeps_corners():
+    rectangle_with_jog = np.array([[0, 0], [0, 4], [3, 4], [3, 4.1], [6, 4.1], [6, 0]], float)
+    simplified = simplify_outline(rectangle_with_jog, tolerance=0.02, min_edge=0.25,
+                                  min_turn=math.radians(12))
+    assert len(simplified) == 4
+
+
+# --------------------------------------------------------------------------- bad inputs
+
+
+def test_empty_scan_is_rejected():
+    with pytest.raises(CornerDetectionError, match='no points'):
+        detect_corners(np.zeros((0, 6)))
+
+
+def test_nan_is_rejected():
+    points = make_room('rect', n_points=20_000, seed=1).points
+    points[123, 1] = np.nan
+    with pytest.raises(CornerDetectionError, match='non-finite.*row 123'):
+        detect_corners(points)
+
+
+def test_wrong_column_count_is_rejected():
+    with pytest.raises(CornerDetectionError, match=r'\(N, 3\+\)'):
+        detect_corners(np.zeros((100, 2)))
+
+
+def test_flat_scan_has_no_walls():
+    rng = np.random.default_rng(0)
+    floor = np.column_stack([rng.uniform(0, 5, (5000, 2)), rng.normal(0, 0.005, 5000)])
+    with pytest.raises(CornerDetectionError, match='no walls'):
+        detect_corners(floor)
+
+
+@pytest.mark.parametrize('scattered', [0, 3000])
+def test_floor_and_ceiling_without_walls_has_no_walls(scattered):
+    """Only the two planes, optionally with points floating in the room but no wall planes."""
+    room = make_room('rect', n_points=50_000, seed=4, furniture=0)
+    heights = room.points[:, 2]
+    planes = room.points[(np.abs(heights - room.floor_z) < 1e-6) |
+                         (np.abs(heights - room.ceiling_z) < 1e-6), :3]
+    rng = np.random.default_rng(0)
+    floating = np.column_stack([
+        rng.uniform(room.polygon.min(axis=0), room.polygon.max(axis=0), (3 * scattered, 2)),
+        rng.uniform(room.floor_z, room.ceiling_z, 3 * scattered)])
+    floating = floating[inside_polygon(floating[:, :2], room.polygon)][:scattered]
+    assert len(floating) == scattered
+    with pytest.raises(CornerDetectionError, match='no walls'):
+        detect_corners(np.vstack([planes, floating]))
+
+
+# --------------------------------------------------------------------------- JSON and CLI
+
+
+def test_corners_json_round_trip_and_format_check(tmp_path):
+    data = {'format': CORNERS_FORMAT, 'scan': 'room.txt', 'corners': [[0, 0], [0, 5], [6, 5]],
+            'floor_z': 0.0, 'ceiling_z': 3.0, 'quality': {'wall_points_on_polygon': 0.9}}
+    path = tmp_path / 'room.corners.json'
+    write_corners(path, data)
+    assert load_corners(path) == data
+    future = dict(data, format='synthdet.corners/2')
+    path.write_text(json.dumps(future))
+    with pytest.raises(ValueError, match='unknown format'):
+        load_corners(path)
+    path.write_text(json.dumps(dict(data, corners=[[0, 0], [6, 5], [0, 5]])))
+    with pytest.raises(ValueError, match='clockwise'):
+        load_corners(path)
+    path.write_text('{"format": ')
+    with pytest.raises(ValueError, match=r'room.corners.json:1: not valid JSON'):
+        load_corners(path)
+
+
+def test_cli_writes_json_and_preview(tmp_path):
+    room = make_room('T', n_points=100_000, seed=8, noise=NoiseModel())
+    scan = tmp_path / 'room.ply'
+    write_scan(scan, room.points)
+    out, preview = tmp_path / 'room.corners.json', tmp_path / 'room.png'
+    result = subprocess.run([sys.executable, '-m', 'configurator', 'corners', str(scan),
+                             '--out', str(out), '--preview', str(preview)],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    data = load_corners(out)
+    assert data['format'] == CORNERS_FORMAT and data['scan'] == str(scan)
+    assert matched_error(np.array(data['corners']), room.polygon) < 0.05
+    assert data['ceiling_z'] - data['floor_z'] == pytest.approx(
+        room.ceiling_z - room.floor_z, abs=0.02)
+    from PIL import Image
+    with Image.open(preview) as image:
+        image.load()
+        assert image.format == 'PNG' and min(image.size) >= 400
+        assert len(image.getcolors(1 << 20)) > 10  # points and the outline, not a blank page
+
+
+def test_cli_reports_bad_scans(tmp_path):
+    scan = tmp_path / 'empty.txt'
+    scan.write_text('')
+    result = subprocess.run([sys.executable, '-m', 'configurator', 'corners', str(scan),
+                             '--out', str(tmp_path / 'x.json')],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    assert 'empty.txt' in result.stderr and 'no points' in result.stderr
+    assert not (tmp_path / 'x.json').exists()
+
+
+# --------------------------------------------------------------------------- scan_io
+
+
+@pytest.mark.parametrize('suffix,tolerance', [('.txt', 1e-6), ('.bin', 1e-5), ('.ply', 1e-5)])
+def test_scan_round_trip(tmp_path, suffix, tolerance):
+    rng = np.random.default_rng(0)
+    points = np.column_stack([rng.uniform(-10, 10, (500, 3)),
+                              rng.integers(0, 256, (500, 3))]).astype(np.float64)
+    path = tmp_path / f'scan{suffix}'
+    write_scan(path, points)
+    loaded = read_scan(path)
+    assert loaded.shape == (500, 6) and loaded.dtype == np.float64
+    np.testing.assert_allclose(loaded[:, :3], points[:, :3], atol=tolerance)
+    np.testing.assert_array_equal(loaded[:, 3:], points[:, 3:])
+
+
+def test_read_ply_without_colours(tmp_path):
+    from plyfile import PlyData, PlyElement
+    vertex = np.array([(0.0, 1.0, 2.0), (3.0, 4.0, 5.0)],
+                      dtype=[('x', 'f8'), ('y', 'f8'), ('z', 'f8')])
+    path = tmp_path / 'bare.ply'
+    PlyData([PlyElement.describe(vertex, 'vertex')], text=True).write(str(path))
+    np.testing.assert_array_equal(read_scan(path), [[0, 1, 2, 0, 0, 0], [3, 4, 5, 0, 0, 0]])
+
+
+@pytest.mark.parametrize('text,message', [
+    ('', 'no points'),
+    ('1 2 3 4 5 6\n1 2 3 4 5 6 7\n', r'bad.txt:2: expected 6 numbers, got 7'),
+    ('1 2 3 4 5 6\n1 2 3 4 5\n', r'bad.txt:2: expected 6 numbers, got 5'),
+    ('1 2 3 4 5 6\n1 2 x 4 5 6\n', r"bad.txt:2: not a number: 'x'"),
+    ('1 2 3 4\n', r'bad.txt:1: expected 6 numbers per line'),
+    ('1 2 3 4 5 6\n1 2 3 4 5 6\nnan 2 3 4 5 6\n', r'bad.txt:3: non-finite'),
+])
+def test_bad_text_scans_name_file_and_line(tmp_path, text, message):
+    path = tmp_path / 'bad.txt'
+    path.write_text(text)
+    with pytest.raises(ScanFormatError, match=message):
+        read_scan(path)
+
+
+def test_bad_binary_and_other_files(tmp_path):
+    path = tmp_path / 'bad.bin'
+    np.zeros(7, dtype=np.float32).tofile(path)
+    with pytest.raises(ScanFormatError, match='bad.bin: 28 bytes'):
+        read_scan(path)
+    path = tmp_path / 'bad.ply'
+    path.write_bytes(b'not a ply file')
+    with pytest.raises(ScanFormatError, match='bad.ply: not a readable PLY'):
+        read_scan(path)
+    path = tmp_path / 'scan.las'
+    path.write_bytes(b'\0')
+    with pytest.raises(ScanFormatError, match="unknown scan type '.las'"):
+        read_scan(path)
+    with pytest.raises(FileNotFoundError, match='missing.txt'):
+        read_scan(tmp_path / 'missing.txt')
