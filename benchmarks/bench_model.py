@@ -1,0 +1,175 @@
+"""TR3D on CPU at 1 cm vs 2 cm voxels on one generated room: train step, inference, peak memory.
+
+Usage: python benchmarks/bench_model.py [--points 100000] [--iters 3] [--threads 1]
+
+One room (6 x 6 x 3 m, floor, ceiling, walls and ~10 objects, written by
+``tests/s3dis_fixtures.write_synthetic_area``) is sampled to ``--points`` points. Every voxel
+size runs in its own subprocess so that peak RSS (``ru_maxrss``, including the ~0.5 GB of
+imported libraries) is per configuration. A training iteration is forward + backward + AdamW
+step on a batch of one scene; inference is ``predict`` with NMS. Times are medians over
+``--iters`` runs after one warm-up run, as CPU seconds of the process (``time.process_time``,
+the cost on any machine) and as wall seconds (inflated on a shared machine). Workers get ``OMP_NUM_THREADS=--threads``: the OpenMP
+runtime reads it at start-up only, and ``torch.set_num_threads`` alone leaves MinkowskiEngine's
+CPU kernels spin-waiting on a busy machine. The last line is the 2 cm vs 1 cm ratio.
+"""
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0,
+                str(REPO))  # run as a script from anywhere: make `tests` and `projects` importable
+
+CLASSES = ('table', 'chair', 'sofa', 'bookcase', 'board')
+LABEL2LEVEL = (1, 0, 1, 1, 0)  # published TR3D S3DIS
+
+
+def make_room(num_points: int, seed: int, out_file: Path) -> None:
+    """Write one generated room as an .npz of (N, 6) float32 points (RGB 0-1), boxes, labels."""
+    from tests.s3dis_fixtures import write_synthetic_area
+    with tempfile.TemporaryDirectory() as root:
+        truth = write_synthetic_area(
+            Path(root),
+            area=7,
+            n_rooms=1,
+            seed=seed,
+            classes=CLASSES,
+            points_per_object=6000,
+            room_size=(6.0, 6.0, 3.0))
+        room, boxes = next(iter(truth.items()))
+        points = np.loadtxt(
+            Path(root) / 'Stanford3dDataset_v1.2_Aligned_Version' / 'Area_7' / room /
+            f'{room}.txt',
+            dtype=np.float32)
+    rng = np.random.default_rng(seed)
+    points = points[rng.choice(len(points), num_points, replace=len(points) < num_points)]
+    shift = points[:, :3].min(axis=0)
+    points[:, :3] -= shift
+    points[:, 3:] /= 255.0
+    lo = np.array([b['min'] for b in boxes]) - shift
+    hi = np.array([b['max'] for b in boxes]) - shift
+    np.savez(
+        out_file,
+        points=points,
+        boxes=np.concatenate(((lo + hi) / 2, hi - lo), axis=1),
+        labels=np.array([CLASSES.index(b['class']) for b in boxes]))
+
+
+def run_worker(room_file: Path, voxel_size: float, iters: int, threads: int) -> dict:
+    """Time training and inference of the published TR3D S3DIS model at ``voxel_size``."""
+    import torch
+    from mmdet3d.registry import MODELS
+    from mmdet3d.structures import Det3DDataSample, DepthInstance3DBoxes
+    from mmdet3d.utils import register_all_modules
+    from mmengine.structures import InstanceData
+
+    import projects.synthdet  # noqa: F401  (registers TR3D)
+    torch.set_num_threads(threads)
+    torch.manual_seed(0)
+    register_all_modules(init_default_scope=True)
+    room = np.load(room_file)
+    model = MODELS.build(
+        dict(
+            type='TR3DDetector',
+            voxel_size=voxel_size,
+            backbone=dict(
+                type='TR3DMinkResNet', in_channels=3, depth=34, num_planes=(64, 128, 128, 128)),
+            neck=dict(type='TR3DNeck', in_channels=(64, 128, 128, 128), out_channels=128),
+            bbox_head=dict(type='TR3DHead', num_classes=len(CLASSES), label2level=LABEL2LEVEL),
+            test_cfg=dict(nms_pre=1000, iou_thr=0.5, score_thr=0.01)))
+    model.init_weights()
+    sample = Det3DDataSample(metainfo=dict(box_type_3d=DepthInstance3DBoxes))
+    sample.gt_instances_3d = InstanceData(
+        bboxes_3d=DepthInstance3DBoxes(
+            torch.from_numpy(room['boxes']).float(),
+            box_dim=6,
+            with_yaw=False,
+            origin=(0.5, 0.5, 0.5)),
+        labels_3d=torch.from_numpy(room['labels']).long())
+    data = dict(inputs=dict(points=[torch.from_numpy(room['points'])]), data_samples=[sample])
+    optimizer = torch.optim.AdamW(model.parameters(), lr=1e-3, weight_decay=1e-4)
+
+    def train_step() -> None:
+        losses = model(**model.data_preprocessor(data, training=True), mode='loss')
+        optimizer.zero_grad()
+        sum(losses.values()).backward()
+        optimizer.step()
+
+    def infer() -> None:
+        with torch.no_grad():
+            model(**model.data_preprocessor(data, training=False), mode='predict')
+
+    def median_seconds(step) -> tuple[float, float]:
+        """Median CPU seconds (this process) and wall seconds of ``step``."""
+        step()  # warm-up
+        cpu, wall = [], []
+        for _ in range(iters):
+            cpu_start, wall_start = time.process_time(), time.perf_counter()
+            step()
+            cpu.append(time.process_time() - cpu_start)
+            wall.append(time.perf_counter() - wall_start)
+        return statistics.median(cpu), statistics.median(wall)
+
+    model.train()
+    train_cpu, train_wall = median_seconds(train_step)
+    model.eval()
+    infer_cpu, infer_wall = median_seconds(infer)
+    voxels = len(np.unique(np.floor(room['points'][:, :3] / voxel_size), axis=0))
+    return dict(
+        voxels=voxels,
+        train_cpu=train_cpu,
+        train_wall=train_wall,
+        infer_cpu=infer_cpu,
+        infer_wall=infer_wall,
+        peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--points', type=int, default=100_000)
+    parser.add_argument('--iters', type=int, default=3, help='timed runs after one warm-up')
+    parser.add_argument('--threads', type=int, default=1, help='torch CPU threads')
+    parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--worker', type=float, metavar='VOXEL_SIZE', help=argparse.SUPPRESS)
+    parser.add_argument('--room', type=Path, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.worker is not None:
+        print(json.dumps(run_worker(args.room, args.worker, args.iters, args.threads)))
+        return
+
+    with tempfile.TemporaryDirectory() as tmp:
+        room_file = Path(tmp) / 'room.npz'
+        make_room(args.points, args.seed, room_file)
+        results = {}
+        env = dict(os.environ, OMP_NUM_THREADS=str(args.threads))
+        for voxel_size in (0.01, 0.02):
+            command = [sys.executable, __file__, '--worker', str(voxel_size)]
+            command += ['--room', str(room_file), '--iters', str(args.iters)]
+            command += ['--threads', str(args.threads)]
+            run = subprocess.run(command, check=True, capture_output=True, text=True, env=env)
+            results[voxel_size] = json.loads(run.stdout.strip().splitlines()[-1])
+    print(f'TR3D (published S3DIS model), {args.points} points, one 6x6x3 m room, '
+          f'{args.threads} thread(s), median of {args.iters}; CPU = process CPU seconds')
+    print(f"{'voxel':>6} {'voxels':>8} {'train CPU s':>12} {'train wall s':>13} "
+          f"{'infer CPU s':>12} {'infer wall s':>13} {'peak RSS MB':>12}")
+    for voxel_size, r in results.items():
+        print(f"{voxel_size * 100:>4.0f}cm {r['voxels']:>8} {r['train_cpu']:>12.2f} "
+              f"{r['train_wall']:>13.2f} {r['infer_cpu']:>12.2f} {r['infer_wall']:>13.2f} "
+              f"{r['peak_rss_mb']:>12.0f}")
+    fine, coarse = results[0.01], results[0.02]
+    print(f"2 cm vs 1 cm (CPU seconds): train x{fine['train_cpu'] / coarse['train_cpu']:.2f} "
+          f"faster, inference x{fine['infer_cpu'] / coarse['infer_cpu']:.2f} faster, "
+          f"peak memory x{coarse['peak_rss_mb'] / fine['peak_rss_mb']:.2f}")
+
+
+if __name__ == '__main__':
+    main()
