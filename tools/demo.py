@@ -1,0 +1,463 @@
+"""The whole synthdet pipeline in one command (``make demo``): generate, convert, train, test,
+predict, room corners, FreeCAD documents, pictures and a report.
+
+    python tools/demo.py [--size tiny|demo] [--work-dir work_dirs/demo] [--force]
+
+Every step runs a stage's own CLI with this interpreter as a subprocess, shows its progress and
+keeps its log in ``WORK/logs/``. A step whose outputs exist is skipped, so a run that was
+stopped continues where it stopped (training resumes from its newest checkpoint). Data never
+goes to ``data/``: the generated areas and converted files live in ``WORK/data``.
+
+Steps and outputs (``WORK`` = the work directory):
+ 1. generate areas 7-9          WORK/data/Stanford3dDataset_v1.2_Aligned_Version/Area_{7,8,9}
+ 2. convert                     WORK/data/s3dis_infos_Area_{7,8,9}.pkl, points/, masks
+ 3. Table 1                     WORK/table1.txt
+ 4. train (exp2_cpu, resized)   WORK/exp2_cpu_<size>.py, WORK/train/epoch_N.pth, best_*.pth
+ 5. test, Table 3               WORK/table3.json, WORK/table3.txt
+ 6. predict held-out rooms of 9 WORK/predictions/<room>.pred.json
+ 7. Table 4                     WORK/table4.json, WORK/table4.txt
+ 8. corners                     WORK/rooms/<room>.corners.json (+ .corners.png)
+ 9. FreeCAD documents           WORK/rooms/<room>.FCStd
+10. pictures                    WORK/rooms/<room>.png (GT, predictions, corners), <room>.ply
+11. report                      WORK/REPORT.md
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO_ROOT))
+
+BASE_CONFIG = REPO_ROOT / 'configs/tr3d/exp2_cpu.py'
+AREAS = (7, 8, 9)
+TEST_AREA = 9
+RAW_DIR = 'Stanford3dDataset_v1.2_Aligned_Version'
+
+
+@dataclass(frozen=True)
+class Size:
+    """How big the demo is: data, training schedule and how many test rooms get a CAD model."""
+    rooms_per_area: int
+    points: int  # points per generated room
+    num_points: int  # points sampled per room for the detector
+    epochs: int
+    repeats: int  # times the training areas are repeated per epoch
+    batch_size: int
+    loader_workers: int
+    predict_rooms: int  # rooms of area 9 that are predicted, get corners, CAD and pictures
+    workers: int  # generator and converter processes
+    log_interval: int
+    score_thr: float  # detections kept for Table 4, the FreeCAD documents and the pictures
+
+
+SIZES = {
+    # the smoke test: minutes on 2 cores; the model is far from converged, so its weak
+    # detections are kept (score >= 0.05) to exercise the CAD and drawing steps
+    'tiny': Size(rooms_per_area=2, points=30_000, num_points=4_000, epochs=1, repeats=1,
+                 batch_size=2, loader_workers=0, predict_rooms=1, workers=1, log_interval=1,
+                 score_thr=0.05),
+    # make demo: about 30 minutes on 2 free cores
+    'demo': Size(rooms_per_area=16, points=300_000, num_points=40_000, epochs=5, repeats=2,
+                 batch_size=4, loader_workers=1, predict_rooms=3, workers=2, log_interval=4,
+                 score_thr=0.3),
+}
+
+
+# Stop-gaps for checkouts whose `python -m configurator` cannot dispatch yet because one of its
+# sub-command modules is missing: the same sub-command module run on its own, and the corners
+# step through the public functions that `configurator corners` wraps.
+SUBCOMMAND_SCRIPT = '''
+import argparse, importlib, sys
+module = importlib.import_module(sys.argv[1])
+parser = argparse.ArgumentParser(prog='python -m configurator ' + sys.argv[1])
+module.add_arguments(parser)
+sys.exit(module.run(parser.parse_args(sys.argv[2:])))
+'''
+CORNERS_SCRIPT = '''
+import sys
+import numpy as np
+from configurator.corners import corners_for_scan, write_corners
+from configurator.preview import save_preview
+from configurator.scan_io import read_scan
+scan, out, preview = sys.argv[1:4]
+corners = corners_for_scan(scan)
+write_corners(out, corners)
+save_preview(preview, read_scan(scan), np.array(corners['corners']))
+print(f'{out}: {len(corners["corners"])} corners')
+'''
+CONFIGURATOR_MODULES = {'corners': 'configurator.corners_cli', 'freecad': 'configurator.freecad_cli'}
+
+
+class StepError(RuntimeError):
+    """A pipeline step failed; the message names the step and its log file."""
+
+
+class Demo:
+    """The pipeline's steps over one work directory."""
+
+    def __init__(self, work_dir: Path, size_name: str, seed: int = 0,
+                 threads: int | None = None, python: str = sys.executable) -> None:
+        self.work = work_dir.resolve()
+        self.size_name = size_name
+        self.size = SIZES[size_name]
+        self.seed = seed
+        self.python = python
+        self.threads = threads
+        self.data = self.work / 'data'
+        self.raw = self.data / RAW_DIR
+        self.logs = self.work / 'logs'
+        self.rooms_dir = self.work / 'rooms'
+        self.predictions = self.work / 'predictions'
+        self.config = self.work / f'exp2_cpu_{size_name}.py'  # its stem names the model
+        self.train_dir = self.work / 'train'
+        self.durations_file = self.work / 'durations.json'
+        self.durations: dict[str, float] = (json.loads(self.durations_file.read_text())
+                                            if self.durations_file.is_file() else {})
+
+    # ------------------------------------------------------------------ running commands
+    def run(self, name: str, *args: str | os.PathLike) -> str:
+        """Run ``python ARGS`` from the repository root, echo its output live (progress bars
+        included) and keep it in ``logs/<name>.log``; returns the output, raises on failure."""
+        self.logs.mkdir(parents=True, exist_ok=True)
+        log_path = self.logs / f'{name}.log'
+        command = [self.python, *map(str, args)]
+        env = dict(os.environ, PYTHONUNBUFFERED='1', PYTHONWARNINGS='ignore',
+                   # mmengine's checkpoint loader calls torch.load without weights_only, which
+                   # torch >= 2.6 turns into a weights-only load that rejects its own
+                   # checkpoints (HistoryBuffer); these checkpoints are the demo's own files
+                   TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD='1')
+        if self.threads:
+            env['OMP_NUM_THREADS'] = str(self.threads)
+        chunks = []
+        with open(log_path, 'wb') as log, subprocess.Popen(
+                command, cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                env=env) as process:
+            log.write(('$ ' + ' '.join(command) + '\n').encode())
+            for chunk in iter(lambda: process.stdout.read1(4096), b''):
+                log.write(chunk)
+                chunks.append(chunk)
+                sys.stdout.buffer.write(chunk)
+                sys.stdout.flush()
+        if process.returncode != 0:
+            raise StepError(f'{name}: `{" ".join(command)}` exited with {process.returncode}; '
+                            f'see {log_path}')
+        return b''.join(chunks).decode(errors='replace')
+
+    # ------------------------------------------------------------------ the steps
+    def steps(self) -> list[tuple[str, callable, callable]]:
+        """(name, outputs-exist check, action) of every step, in order."""
+        return [
+            ('generate', self.generated, self.generate),
+            ('convert', self.converted, self.convert),
+            ('table1', lambda: (self.work / 'table1.txt').is_file(), self.table1),
+            ('train', self.trained, self.train),
+            ('test', lambda: (self.work / 'table3.txt').is_file(), self.test),
+            ('predict', self.predicted, self.predict),
+            ('table4', lambda: (self.work / 'table4.txt').is_file(), self.table4),
+            ('corners', lambda: self.all_exist('.corners.json'), self.corners),
+            ('freecad', lambda: self.all_exist('.FCStd'), self.freecad),
+            ('pictures', lambda: self.all_exist('.png'), self.pictures),
+            ('report', lambda: False, self.report),
+        ]
+
+    def room_names(self, area: int) -> list[str]:
+        """The generated rooms of an area that hold a ``meta.json``, in generation order."""
+        folder = self.raw / f'Area_{area}'
+        names = [p.parent.name for p in folder.glob('*/meta.json')] if folder.is_dir() else []
+        return sorted(names, key=lambda name: int(name.rsplit('_', 1)[-1]))
+
+    def held_out_rooms(self) -> list[str]:
+        """The first rooms of the test area, which the detector never trained on."""
+        return self.room_names(TEST_AREA)[:self.size.predict_rooms]
+
+    def scan(self, room: str) -> Path:
+        return self.raw / f'Area_{TEST_AREA}' / room / f'{room}.txt'
+
+    def all_exist(self, suffix: str) -> bool:
+        rooms = self.held_out_rooms()
+        return bool(rooms) and all((self.rooms_dir / f'{room}{suffix}').is_file()
+                                   for room in rooms)
+
+    def generated(self) -> bool:
+        return all(len(self.room_names(area)) >= self.size.rooms_per_area for area in AREAS)
+
+    def generate(self) -> None:
+        self.run('generate', '-m', 'generator', '--out', self.raw, '--areas', *map(str, AREAS),
+                 '--rooms-per-area', str(self.size.rooms_per_area), '--points',
+                 str(self.size.points), '--seed', str(self.seed), '--workers',
+                 str(self.size.workers))
+
+    def converted(self) -> bool:
+        return all((self.data / f's3dis_infos_Area_{area}.pkl').is_file() for area in AREAS)
+
+    def convert(self) -> None:
+        self.run('convert', 'tools/create_data.py', 's3dis', '--root-path', self.data,
+                 '--out-dir', self.data, '--areas', *map(str, AREAS), '--workers',
+                 str(self.size.workers))
+
+    def table1(self) -> None:
+        output = self.run('table1', 'tools/dataset_stats.py', self.data, '--areas',
+                          *map(str, AREAS))
+        (self.work / 'table1.txt').write_text(_table_lines(output, 'Table 1'))
+
+    def write_config(self) -> None:
+        """The demo's config: ``configs/tr3d/exp2_cpu.py`` with this size's data, points and
+        schedule, dumped as one self-contained file next to the checkpoints."""
+        from mmengine.config import Config
+
+        cfg = Config.fromfile(BASE_CONFIG)
+        size = self.size
+        data_root = f'{self.data}/'
+        loader = dict(num_workers=size.loader_workers,
+                      persistent_workers=size.loader_workers > 0)
+        for dataset in cfg.train_dataloader.dataset.dataset.datasets:
+            dataset.data_root = data_root
+            _set_num_points(dataset.pipeline, size.num_points)
+        cfg.train_dataloader.dataset.times = size.repeats
+        cfg.train_dataloader.batch_size = size.batch_size
+        cfg.train_dataloader.update(loader)
+        for name in ('val_dataloader', 'test_dataloader'):
+            cfg[name].update(loader)
+            cfg[name].dataset.data_root = data_root
+            _set_num_points(cfg[name].dataset.pipeline, size.num_points)
+        cfg.train_cfg.max_epochs = size.epochs
+        cfg.train_cfg.val_interval = 1
+        cfg.default_hooks.logger.interval = size.log_interval
+        cfg.randomness = dict(seed=self.seed)
+        self.work.mkdir(parents=True, exist_ok=True)
+        header = (f'# synthdet demo ({self.size_name}): {BASE_CONFIG.relative_to(REPO_ROOT)} '
+                  f'with the data in {self.data},\n# {size.num_points} sampled points, '
+                  f'{size.epochs} epochs, training areas repeated {size.repeats}x, batch '
+                  f'{size.batch_size}. Written by tools/demo.py.\n')
+        self.config.write_text(header + cfg.pretty_text)
+
+    def trained(self) -> bool:
+        return (self.train_dir / f'epoch_{self.size.epochs}.pth').is_file()
+
+    def train(self) -> None:
+        if not self.config.is_file():
+            self.write_config()
+        resume = ['--resume'] if list(self.train_dir.glob('epoch_*.pth')) else []
+        self.run('train', 'tools/train.py', self.config, '--work-dir', self.train_dir, *resume)
+
+    def best_checkpoint(self) -> Path:
+        """The checkpoint with the best validation mAP@0.25 (the paper's best epoch)."""
+        best = sorted(self.train_dir.glob('best_*.pth'), key=lambda p: p.stat().st_mtime)
+        if not best:
+            raise StepError(f'no best_*.pth in {self.train_dir}: run the train step first')
+        return best[-1]
+
+    def test(self) -> None:
+        output = self.run('test', 'tools/test.py', self.config, self.best_checkpoint(),
+                          '--work-dir', self.work / 'test', '--out', self.work / 'table3.json')
+        (self.work / 'table3.txt').write_text(_table_lines(output, 'Table 3'))
+
+    def predicted(self) -> bool:
+        rooms = self.held_out_rooms()
+        return bool(rooms) and all((self.predictions / f'{room}.pred.json').is_file()
+                                   for room in rooms)
+
+    def predict(self) -> None:
+        self.run('predict', 'tools/predict.py', self.config, self.best_checkpoint(),
+                 *[self.scan(room) for room in self.held_out_rooms()], '--out', self.predictions,
+                 '--seed', str(self.seed), '--score-thr', str(self.size.score_thr))
+
+    def table4(self) -> None:
+        output = self.run('table4', 'tools/count_table.py', self.predictions, '--out',
+                          self.work / 'table4.json', '--score-thr', str(self.size.score_thr))
+        (self.work / 'table4.txt').write_text(_table_lines(output, 'Table 4'))
+
+    def configurator(self, log: str, command: str, *args: str | os.PathLike) -> None:
+        """Run ``python -m configurator COMMAND ARGS`` (or its stop-gap, see above)."""
+        def present(module: str) -> bool:
+            return (REPO_ROOT / (module.replace('.', '/') + '.py')).is_file()
+
+        if all(map(present, CONFIGURATOR_MODULES.values())):
+            self.run(log, '-m', 'configurator', command, *args)
+        elif present(CONFIGURATOR_MODULES[command]):
+            self.run(log, '-c', SUBCOMMAND_SCRIPT, CONFIGURATOR_MODULES[command], *args)
+        elif command == 'corners':
+            self.run(log, '-c', CORNERS_SCRIPT, args[0], args[2], args[4])
+        else:
+            raise StepError(f'{CONFIGURATOR_MODULES[command]} is missing')
+
+    def corners(self) -> None:
+        self.rooms_dir.mkdir(parents=True, exist_ok=True)
+        for room in self.held_out_rooms():
+            self.configurator(f'corners_{room}', 'corners', self.scan(room), '--out',
+                              self.rooms_dir / f'{room}.corners.json', '--preview',
+                              self.rooms_dir / f'{room}.corners.png')
+
+    def freecad(self) -> None:
+        for room in self.held_out_rooms():
+            self.configurator(f'freecad_{room}', 'freecad', '--scan', self.scan(room),
+                              '--predictions', self.predictions / f'{room}.pred.json',
+                              '--corners', self.rooms_dir / f'{room}.corners.json', '--out',
+                              self.rooms_dir / f'{room}.FCStd', '--min-score',
+                              str(self.size.score_thr))
+
+    def pictures(self) -> None:
+        for room in self.held_out_rooms():
+            self.run(f'visualize_{room}', 'tools/visualize.py', self.scan(room), '--gt',
+                     self.scan(room).parent / 'meta.json', '--pred',
+                     self.predictions / f'{room}.pred.json', '--corners',
+                     self.rooms_dir / f'{room}.corners.json', '--out',
+                     self.rooms_dir / f'{room}.png', '--ply', self.rooms_dir / f'{room}.ply',
+                     '--min-score', str(self.size.score_thr), '--title',
+                     f'Area_{TEST_AREA}/{room}: ground truth (solid), predictions with score >= '
+                     f'{self.size.score_thr} (dashed), room corners (black)')
+
+    def report(self) -> None:
+        (self.work / 'REPORT.md').write_text(self.report_text())
+
+    # ------------------------------------------------------------------ the report
+    def report_text(self) -> str:
+        """REPORT.md: the tables, the pictures, the corners and the FreeCAD documents."""
+        size = self.size
+        lines = [
+            f'# synthdet demo report ({self.size_name})', '',
+            f'Generated areas 7, 8, 9 with {size.rooms_per_area} rooms each and {size.points:,} '
+            f'points per room (seed {self.seed}); TR3D trained on areas 7 and 8 with '
+            f'`{self.config.name}` (configs/tr3d/exp2_cpu.py with {size.num_points:,} sampled '
+            f'points, {size.epochs} epoch(s), areas repeated {size.repeats}x), tested on area 9. '
+            f'Data: `{self.data}`. Logs of every step: `logs/`.', '',
+            '## Table 1: instances per class and area', '',
+            '```', (self.work / 'table1.txt').read_text().rstrip(), '```', '',
+            '## Table 3: test on area 9', '',
+            f'Checkpoint `{self.best_checkpoint().relative_to(self.work)}` (best validation '
+            'mAP@0.25). JSON: [table3.json](table3.json).', '',
+            _table3_markdown(json.loads((self.work / 'table3.json').read_text())), '',
+            f'## Table 4: objects per held-out room (score >= {size.score_thr})', '',
+            'True objects, then correct(incorrect) detections. JSON: [table4.json](table4.json).',
+            '', '```', (self.work / 'table4.txt').read_text().rstrip(), '```', '',
+            '## Held-out rooms of area 9', '',
+        ]
+        for room in self.held_out_rooms():
+            corners = json.loads((self.rooms_dir / f'{room}.corners.json').read_text())
+            meta = json.loads((self.scan(room).parent / 'meta.json').read_text())
+            detections = json.loads((self.predictions / f'{room}.pred.json').read_text())
+            fcstd = self.rooms_dir / f'{room}.FCStd'
+            lines += [
+                f'### {room}', '',
+                f'![{room}: top view with boxes](rooms/{room}.png)', '',
+                f'- scan: `{self.scan(room)}`',
+                f'- detections (score >= {size.score_thr}): {len(detections["detections"])}; '
+                f'ground-truth '
+                f'objects: {len(meta["objects"])} ([predictions]'
+                f'(predictions/{room}.pred.json))',
+                f'- corners ({len(corners["corners"])}, clockwise, metres): '
+                + ', '.join(f'({x:.2f}, {y:.2f})' for x, y in corners['corners']),
+                f'- true floor polygon ({len(meta["room"]["polygon"])} corners, '
+                f'{meta["room"].get("shape", "?")}): '
+                + ', '.join(f'({x:.2f}, {y:.2f})' for x, y in meta['room']['polygon']),
+                f'- floor z {corners["floor_z"]:.3f} m, ceiling z {corners["ceiling_z"]:.3f} m '
+                f'(true height {meta["room"]["height"]:.2f} m); corner preview: '
+                f'[{room}.corners.png](rooms/{room}.corners.png)',
+                f'- FreeCAD document: [`{fcstd}`](rooms/{room}.FCStd)',
+                f'- point cloud for CloudCompare: [rooms/{room}.ply](rooms/{room}.ply)', '',
+            ]
+        if self.durations:
+            lines += ['## Wall time per step', '', '| step | seconds |', '|---|---|']
+            lines += [f'| {name} | {seconds:.0f} |' for name, seconds in self.durations.items()]
+            lines.append('')
+        return '\n'.join(lines)
+
+    # ------------------------------------------------------------------ driver
+    def check_work_dir(self) -> None:
+        """Record the size and seed in ``demo.json``; refuse a work dir made with others."""
+        stamp = self.work / 'demo.json'
+        wanted = {'format': 'synthdet.demo/1', 'size': self.size_name, 'seed': self.seed}
+        if stamp.is_file():
+            found = json.loads(stamp.read_text())
+            if found != wanted:
+                raise StepError(f'{stamp}: this work dir holds a demo run with {found}, not '
+                                f'{wanted}; choose another --work-dir')
+        else:
+            self.work.mkdir(parents=True, exist_ok=True)
+            stamp.write_text(json.dumps(wanted) + '\n')
+
+    def run_all(self, force: bool = False) -> None:
+        """Run every step whose outputs are missing (all of them with ``force``)."""
+        self.check_work_dir()
+        steps = self.steps()
+        start = time.monotonic()
+        for index, (name, done, action) in enumerate(steps, start=1):
+            prefix = f'[demo {index}/{len(steps)}] {name}'
+            if done() and not force:
+                print(f'{prefix}: outputs exist, skipped', flush=True)
+                continue
+            print(f'{prefix} ...', flush=True)
+            began = time.monotonic()
+            action()
+            self.durations[name] = time.monotonic() - began
+            self.durations_file.write_text(json.dumps(self.durations, indent=1) + '\n')
+            print(f'{prefix}: done in {self.durations[name]:.0f} s', flush=True)
+        print(f'[demo] finished in {time.monotonic() - start:.0f} s: {self.work / "REPORT.md"}',
+              flush=True)
+
+
+def _set_num_points(pipeline: list, num_points: int) -> None:
+    """Set the ``PointSample`` transform's point count in a pipeline."""
+    samplers = [step for step in pipeline if step['type'] == 'PointSample']
+    if not samplers:
+        raise StepError(f'{BASE_CONFIG}: a pipeline has no PointSample transform')
+    for step in samplers:
+        step['num_points'] = num_points
+
+
+def _table_lines(output: str, name: str) -> str:
+    """The table a tool printed: its output without log, warning and progress lines."""
+    keep = []
+    for line in output.replace('\r', '\n').splitlines():
+        if not line.strip() or ' - mmengine - ' in line or 'Warning' in line \
+                or line.startswith(('  warnings.warn', '  sp = ', '$ ')) or '%|' in line:
+            continue
+        keep.append(line.rstrip())
+    if not any(any(ch.isdigit() for ch in line) for line in keep):
+        raise StepError(f'{name}: the tool printed no table:\n{output[-2000:]}')
+    return '\n'.join(keep) + '\n'
+
+
+def _table3_markdown(table3: dict) -> str:
+    """Table 3 (rows mAP@0.25 and mAP@0.5, a column per class and the mean) as Markdown."""
+    classes = list(table3['classes']) + ['mean']
+    lines = ['| | ' + ' | '.join(classes) + ' |', '|---' * (len(classes) + 1) + '|']
+    for row, values in table3['rows'].items():
+        cells = ['-' if values.get(c) is None else f'{values[c]:.3f}' for c in classes]
+        lines.append(f'| {row} | ' + ' | '.join(cells) + ' |')
+    return '\n'.join(lines)
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--size', choices=sorted(SIZES), default='demo',
+                        help='tiny: smoke test (minutes); demo: about 30 min on 2 cores')
+    parser.add_argument('--work-dir', type=Path, default=REPO_ROOT / 'work_dirs/demo')
+    parser.add_argument('--seed', type=int, default=0, help='generator and training seed')
+    parser.add_argument('--force', action='store_true', help='rerun steps whose outputs exist')
+    parser.add_argument('--threads', type=int,
+                        help='OpenMP threads per step (OMP_NUM_THREADS); 1 is much faster on a '
+                        'machine busy with other work')
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    demo = Demo(args.work_dir, args.size, args.seed, args.threads)
+    try:
+        demo.run_all(force=args.force)
+    except StepError as error:
+        print(f'[demo] error: {error}', file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,60 @@
+"""Draw a scan from above, coloured by class, with ground-truth and predicted boxes (PNG), and
+export it as PLY.
+
+    python tools/visualize.py Area_9/factory_1/factory_1.txt --gt Area_9/factory_1/meta.json \\
+        --pred factory_1.pred.json --corners factory_1.corners.json --out factory_1.png \\
+        [--ply factory_1.ply] [--colour-by class|rgb|height] [--min-score 0.3]
+
+SCAN is an S3DIS room ``.txt`` (classes from its ``Annotations/``), a converted
+``points/<room>.bin`` (classes from ``semantic_mask/``), or any ``.txt``/``.bin``/``.ply``
+(then coloured by RGB or height). ``--gt`` takes a generator ``meta.json`` or an info pickle
+(``s3dis_infos_Area_N.pkl``, matched by the scan's file name).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from anywhere
+
+from tools.visualization import (boxes_from_predictions, draw_top_view,  # noqa: E402
+                                 load_corners, load_ground_truth, load_scan, write_ply)
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('scan', help='S3DIS room .txt, .bin or .ply')
+    parser.add_argument('--gt', help='ground truth: generator meta.json or info .pkl')
+    parser.add_argument('--pred', help='predictions JSON (synthdet.predictions/1)')
+    parser.add_argument('--corners', help='corners JSON (synthdet.corners/1)')
+    parser.add_argument('--out', required=True, help='output PNG')
+    parser.add_argument('--ply', help='also write the scan as PLY (with class indices)')
+    parser.add_argument('--colour-by', choices=('class', 'rgb', 'height'),
+                        help='point colours (default: class if annotated, else rgb/height)')
+    parser.add_argument('--min-score', type=float, default=0.3,
+                        help='draw predictions scoring at least this (default 0.3)')
+    parser.add_argument('--title', default='', help='figure title (default: the scan name)')
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        scan = load_scan(args.scan)
+        gt = load_ground_truth(args.gt, args.scan) if args.gt else []
+        pred = boxes_from_predictions(args.pred, args.min_score) if args.pred else []
+        corners = load_corners(args.corners) if args.corners else None
+        draw_top_view(args.out, scan, gt, pred, corners, args.colour_by, args.title)
+        if args.ply:
+            write_ply(args.ply, scan)
+    except (OSError, ValueError, KeyError) as error:
+        print(f'visualize: error: {error}', file=sys.stderr)
+        return 1
+    print(f'wrote {args.out} ({len(scan.points)} points, {len(gt)} ground-truth and '
+          f'{len(pred)} predicted boxes)' + (f' and {args.ply}' if args.ply else ''))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
