@@ -42,3 +42,9 @@ exp2-cpu: setup
 	    $$(ls $(EXP2_WORK)/epoch_*.pth >/dev/null 2>&1 && echo --resume)
 	$(PY) tools/test.py configs/tr3d/exp2_cpu.py $$(ls -t $(EXP2_WORK)/best_*.pth | head -n 1) \
 	    --work-dir $(EXP2_WORK)/test
+
+# Every benchmarks/bench_*.py, one after the other; their last lines go to docs/benchmarks.md.
+# BENCH_ARGS="--only scanner convert" runs a subset (the other rows come from earlier logs).
+BENCH_ARGS ?=
+bench: setup
+	$(PY) tools/collect_benchmarks.py $(BENCH_ARGS)
