@@ -46,6 +46,7 @@ class CornerParams:
     max_cell: float = 0.2
     min_island_cells: int = 6  # smaller groups of occupied cells are outliers
     coarse_cell: float = 0.2  # second footprint scale, for sparsely scanned parts of a room
+    min_sparse_area: float = 1.0  # smaller sparsely scanned regions are not added (m^2)
     min_edge: float = 0.25  # shorter walls are merged into their neighbours
     min_turn: float = math.radians(12)  # smaller direction changes are not corners
     snap_angle: float = math.radians(5)  # walls this close to a dominant direction snap to it
@@ -268,10 +269,13 @@ def _traced_outline(frame_xy: np.ndarray,
     fine = _solid_footprint(counts > 0, params.min_island_cells, iterations=2)
     coarse_counts = counts.reshape(shape[0] // factor, factor, shape[1] // factor,
                                    factor).sum(axis=(1, 3))
-    coarse = _solid_footprint(coarse_counts > 0, params.min_island_cells, iterations=1)
+    coarse = _solid_footprint(coarse_counts >= 2, params.min_island_cells, iterations=1)
     coarse = np.repeat(np.repeat(coarse, factor, axis=0), factor, axis=1)
     square = np.ones((3, 3), dtype=bool)
     sparse = ndimage.binary_opening(coarse & ~fine, square, iterations=factor)
+    labels, _ = ndimage.label(sparse)
+    sizes = np.bincount(labels.ravel()) * cell ** 2
+    sparse &= sizes[labels] >= params.min_sparse_area  # whole room parts, not outlier bumps
     footprint = ndimage.binary_fill_holes(ndimage.binary_closing(fine | sparse, square))
     labels, count = ndimage.label(footprint)
     if count == 0:
