@@ -11,6 +11,7 @@ input scan's own frame (``"format": "synthdet.predictions/1"``, see docs/trainin
 """
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -19,6 +20,10 @@ from tqdm import tqdm
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))  # the configs' custom_imports load `projects.synthdet`
+# mmengine 0.10's checkpoints hold numpy arrays and its HistoryBuffer, which torch >= 2.6 refuses
+# to unpickle by default (open-mmlab/mmengine#1655): load them fully, as torch < 2.6 did. A
+# checkpoint is a pickle, so only resume from, test or predict with checkpoints you trust.
+os.environ.setdefault('TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD', '1')
 
 import torch  # noqa: E402
 from mmdet3d.apis import inference_detector, init_model  # noqa: E402
