@@ -25,8 +25,12 @@ from scipy.spatial import ConvexHull
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for tests/room_scans.py
 
-from configurator.corners import (CornerDetectionError, CornerParams, detect_corners,  # noqa
-                                  find_levels, simplify_outline)
+from configurator.corners import (
+    CornerDetectionError,
+    CornerParams,
+    detect_corners,  # noqa
+    find_levels,
+    simplify_outline)
 from configurator.scan_io import read_scan  # noqa: E402
 from tests.room_scans import SHAPES, NoiseModel, make_room  # noqa: E402
 
@@ -38,8 +42,8 @@ def convex_hull_corners(points: np.ndarray, params: CornerParams = CornerParams(
         (points[:, 2] < ceiling_z - params.wall_margin)
     xy = points[band, :2]
     hull = xy[ConvexHull(xy).vertices][::-1]  # scipy lists 2D hulls counter-clockwise
-    return simplify_outline(hull, tolerance=0.05, min_edge=params.min_edge,
-                            min_turn=params.min_turn)
+    return simplify_outline(
+        hull, tolerance=0.05, min_edge=params.min_edge, min_turn=params.min_turn)
 
 
 def corner_error(found: np.ndarray, truth: np.ndarray) -> float:
@@ -78,8 +82,12 @@ def main() -> None:
     parser.add_argument('--rooms', type=int, default=10, help='rooms per shape and noise')
     parser.add_argument('--points', type=int, default=300_000, help='points per room')
     parser.add_argument('--timing-rooms', type=int, default=3, help='1M-point rooms timed')
-    parser.add_argument('--generated', type=Path, nargs='*', default=[],
-                        help='folders of python -m generator rooms (meta.json truth)')
+    parser.add_argument(
+        '--generated',
+        type=Path,
+        nargs='*',
+        default=[],
+        help='folders of python -m generator rooms (meta.json truth)')
     args = parser.parse_args()
 
     results: dict[str, dict[str, list]] = {}
@@ -98,8 +106,9 @@ def main() -> None:
     for folder in args.generated:
         for label, points, truth in generated_rooms(folder):
             for name, method in METHODS.items():
-                results.setdefault(label, {}).setdefault(name, []).append(
-                    evaluate(method, points, truth))
+                results.setdefault(label,
+                                   {}).setdefault(name,
+                                                  []).append(evaluate(method, points, truth))
 
     print(f'{"rooms":<22}{"n":>4} | {"traced err cm":>13} {"count ok":>9} | '
           f'{"hull err cm":>11} {"count ok":>9}')
@@ -116,8 +125,8 @@ def main() -> None:
 
     timings = {name: [] for name in METHODS}
     for seed in range(args.timing_rooms):
-        room = make_room(SHAPES[seed % len(SHAPES)], 1_000_000, seed=2000 + seed,
-                         noise=NoiseModel())
+        room = make_room(
+            SHAPES[seed % len(SHAPES)], 1_000_000, seed=2000 + seed, noise=NoiseModel())
         for name, method in METHODS.items():
             start = time.perf_counter()
             method(room.points)

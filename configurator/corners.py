@@ -53,7 +53,7 @@ class CornerParams:
     inlier_width: float = 0.03  # half width of the slab of points that belong to a wall plane
     on_polygon_tol: float = 0.05  # quality: wall points this close to the outline are on it
     min_wall_support: float = 0.4  # fraction of the outline that must be backed by wall points
-    max_fit_points: int = 300_000  # wall points used for the fits (deterministic subsample)
+    max_fit_points: int = 300_000  # wall points used for the fits (every k-th point)
     max_quality_points: int = 50_000  # wall points used for the quality figures
 
 
@@ -107,8 +107,8 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
     frame_walls = wall_xy @ to_frame.T
 
     outline, cell, outline_error = _traced_outline(frame_xy, params)
-    outline = simplify_outline(outline, tolerance=1.5 * cell, min_edge=params.min_edge,
-                               min_turn=params.min_turn)
+    outline = simplify_outline(
+        outline, tolerance=1.5 * cell, min_edge=params.min_edge, min_turn=params.min_turn)
     if len(outline) < 3:
         raise CornerDetectionError('no walls found: the footprint of the points has no area')
     lines = _fit_wall_lines(outline, frame_walls, outline_error + 0.05, params)
@@ -126,12 +126,15 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
     corners = corners @ _rotation(angle).T
     corners = _canonical_order(corners)
     quality = _quality(corners, xyz, floor_z, ceiling_z, lines, params)
-    return RoomOutline(corners=corners, floor_z=floor_z, ceiling_z=ceiling_z,
-                       wall_angle=float(angle % (math.pi / 2)), quality=quality)
+    return RoomOutline(
+        corners=corners,
+        floor_z=floor_z,
+        ceiling_z=ceiling_z,
+        wall_angle=float(angle % (math.pi / 2)),
+        quality=quality)
 
 
-def corners_for_scan(scan_path: str | os.PathLike,
-                     params: CornerParams | None = None) -> dict:
+def corners_for_scan(scan_path: str | os.PathLike, params: CornerParams | None = None) -> dict:
     """Read a scan file and return its ``synthdet.corners/1`` dictionary."""
     from configurator.scan_io import read_scan
     outline = detect_corners(read_scan(scan_path), params)
@@ -146,7 +149,10 @@ def outline_to_dict(outline: RoomOutline, scan: str) -> dict:
         'corners': [[round(float(x), 4), round(float(y), 4)] for x, y in outline.corners],
         'floor_z': round(float(outline.floor_z), 4),
         'ceiling_z': round(float(outline.ceiling_z), 4),
-        'quality': {key: round(float(value), 4) for key, value in outline.quality.items()},
+        'quality': {
+            key: round(float(value), 4)
+            for key, value in outline.quality.items()
+        },
     }
 
 
@@ -244,8 +250,7 @@ def _rotation(theta: float) -> np.ndarray:
 # --------------------------------------------------------------------------- footprint tracing
 
 
-def _traced_outline(frame_xy: np.ndarray,
-                    params: CornerParams) -> tuple[np.ndarray, float, float]:
+def _traced_outline(frame_xy: np.ndarray, params: CornerParams) -> tuple[np.ndarray, float, float]:
     """Trace the boundary of the points' footprint.
 
     Returns the clockwise polygon, the grid cell and the largest boundary error to expect
@@ -257,15 +262,17 @@ def _traced_outline(frame_xy: np.ndarray,
     low = frame_xy.min(axis=0)
     extent = frame_xy.max(axis=0) - low
     area = max(float(extent[0] * extent[1]), 1e-6)
-    cell = float(np.clip(math.sqrt(params.points_per_cell * area / len(frame_xy)),
-                         params.min_cell, params.max_cell))
+    cell = float(
+        np.clip(
+            math.sqrt(params.points_per_cell * area / len(frame_xy)), params.min_cell,
+            params.max_cell))
     factor = max(2, math.ceil(params.coarse_cell / cell))
     pad = 2 * factor
     shape = np.floor(extent / cell).astype(int) + 1 + 2 * pad
     shape = -(-shape // factor) * factor  # whole coarse cells
     keys = np.floor((frame_xy - low) / cell).astype(np.int64) + pad
-    counts = np.bincount(keys[:, 0] * shape[1] + keys[:, 1],
-                         minlength=shape[0] * shape[1]).reshape(shape)
+    counts = np.bincount(
+        keys[:, 0] * shape[1] + keys[:, 1], minlength=shape[0] * shape[1]).reshape(shape)
     fine = _solid_footprint(counts > 0, params.min_island_cells, iterations=2)
     coarse_counts = counts.reshape(shape[0] // factor, factor, shape[1] // factor,
                                    factor).sum(axis=(1, 3))
@@ -274,7 +281,7 @@ def _traced_outline(frame_xy: np.ndarray,
     square = np.ones((3, 3), dtype=bool)
     sparse = ndimage.binary_opening(coarse & ~fine, square, iterations=factor)
     labels, _ = ndimage.label(sparse)
-    sizes = np.bincount(labels.ravel()) * cell ** 2
+    sizes = np.bincount(labels.ravel()) * cell**2
     sparse &= sizes[labels] >= params.min_sparse_area  # whole room parts, not outlier bumps
     footprint = ndimage.binary_fill_holes(ndimage.binary_closing(fine | sparse, square))
     labels, count = ndimage.label(footprint)
@@ -421,8 +428,8 @@ def _douglas_peucker_closed(polygon: np.ndarray, tolerance: float) -> np.ndarray
             if norm < 1e-12:
                 distance = np.linalg.norm(segment - a, axis=1)
             else:
-                distance = np.abs(direction[0] * (segment[:, 1] - a[1]) -
-                                  direction[1] * (segment[:, 0] - a[0])) / norm
+                distance = np.abs(direction[0] * (segment[:, 1] - a[1]) - direction[1] *
+                                  (segment[:, 0] - a[0])) / norm
             k = int(np.argmax(distance))
             if distance[k] > tolerance:
                 keep[i + 1 + k] = True
@@ -434,8 +441,9 @@ def _drop_small_turns(polygon: np.ndarray, min_turn: float) -> np.ndarray:
     while len(polygon) >= 3:
         incoming = polygon - np.roll(polygon, 1, axis=0)
         outgoing = np.roll(polygon, -1, axis=0) - polygon
-        turn = np.abs(np.arctan2(incoming[:, 0] * outgoing[:, 1] - incoming[:, 1] * outgoing[:, 0],
-                                 (incoming * outgoing).sum(axis=1)))
+        turn = np.abs(
+            np.arctan2(incoming[:, 0] * outgoing[:, 1] - incoming[:, 1] * outgoing[:, 0],
+                       (incoming * outgoing).sum(axis=1)))
         weakest = int(np.argmin(turn))
         if turn[weakest] >= min_turn:
             break
@@ -559,9 +567,11 @@ def _snap_directions(lines: list[_WallLine], snap_angle: float) -> list[_WallLin
     for line, deviation in zip(lines, deviations):
         if abs(deviation) < snap_angle or line.inliers == 0:
             theta = math.atan2(line.direction[1], line.direction[0]) - deviation + common
-            line = _WallLine(point=line.point, direction=np.array([math.cos(theta),
-                                                                  math.sin(theta)]),
-                             inliers=line.inliers, support=line.support)
+            line = _WallLine(
+                point=line.point,
+                direction=np.array([math.cos(theta), math.sin(theta)]),
+                inliers=line.inliers,
+                support=line.support)
         snapped.append(line)
     return snapped
 
@@ -575,8 +585,12 @@ def _intersect_lines(lines: list[_WallLine], min_edge: float, min_turn: float) -
         parallel = None
         for i in range(n):
             previous, current = lines[i - 1], lines[i]
-            point = _line_intersection(previous.point, previous.direction, current.point,
-                                       current.direction, min_sine=math.sin(min_turn))
+            point = _line_intersection(
+                previous.point,
+                previous.direction,
+                current.point,
+                current.direction,
+                min_sine=math.sin(min_turn))
             if point is None:
                 parallel = i
                 break
@@ -608,10 +622,8 @@ def _canonical_order(corners: np.ndarray) -> np.ndarray:
 
 
 def _subsample(points: np.ndarray, limit: int) -> np.ndarray:
-    """At most ``limit`` of the points, chosen at random with a fixed seed."""
-    if len(points) <= limit:
-        return points
-    return points[np.random.default_rng(0).choice(len(points), limit, replace=False)]
+    """At most about ``limit`` of the points: every k-th one (deterministic, no copy)."""
+    return points[::max(1, math.ceil(len(points) / limit))]
 
 
 def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
@@ -648,11 +660,14 @@ def _quality(corners: np.ndarray, xyz: np.ndarray, floor_z: float, ceiling_z: fl
         (distance_to_polygon(xyz[:, :2], corners) > params.on_polygon_tol)
     supports = [line.support for line in lines if line.inliers]
     return {
-        'wall_points_on_polygon': float(on.mean()) if len(on) else 0.0,
-        'wall_rms_residual_m': float(np.sqrt(np.mean(np.square(distance[on])))) if on.any()
-        else params.on_polygon_tol,
-        'points_outside_polygon': float(outside.mean()),
-        'min_wall_support': float(min(supports)) if supports else 0.0,
+        'wall_points_on_polygon':
+        float(on.mean()) if len(on) else 0.0,
+        'wall_rms_residual_m':
+        float(np.sqrt(np.mean(np.square(distance[on])))) if on.any() else params.on_polygon_tol,
+        'points_outside_polygon':
+        float(outside.mean()),
+        'min_wall_support':
+        float(min(supports)) if supports else 0.0,
     }
 
 
@@ -664,8 +679,8 @@ def _validate_corners(data: object, where: str) -> None:
                          f'{CORNERS_FORMAT!r}')
     corners = data.get('corners')
     if not isinstance(corners, list) or len(corners) < 3 or not all(
-            isinstance(c, list) and len(c) == 2 and
-            all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            isinstance(c, list) and len(c) == 2 and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
                 for v in c) for c in corners):
         raise ValueError(f'{where}: "corners" must be a list of at least 3 [x, y] finite numbers')
     if _signed_area(np.array(corners, dtype=np.float64)) >= 0:

@@ -16,9 +16,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('scan', help='room scan: S3DIS .txt, .bin (float32 N x 6) or .ply')
     parser.add_argument('--out', required=True, help='output synthdet.corners/1 JSON file')
     parser.add_argument('--preview', help='optional PNG: the points from above with the outline')
-    parser.add_argument('--min-edge', type=float, default=CornerParams.min_edge,
-                        help='walls shorter than this (m) are merged into their neighbours '
-                             '(default: %(default)s)')
+    parser.add_argument(
+        '--min-edge',
+        type=float,
+        default=CornerParams.min_edge,
+        help='walls shorter than this (m) are merged into their neighbours '
+        '(default: %(default)s)')
 
 
 def run(args: argparse.Namespace) -> int:
@@ -38,7 +41,10 @@ def run(args: argparse.Namespace) -> int:
           f'-> {args.out}')
     if args.preview:
         from configurator.preview import save_preview
-        save_preview(args.preview, points, outline.corners,
-                     title=f'{args.scan}: {len(outline.corners)} corners')
+        save_preview(
+            args.preview,
+            points,
+            outline.corners,
+            title=f'{args.scan}: {len(outline.corners)} corners')
         print(f'corners: preview -> {args.preview}')
     return 0

@@ -64,8 +64,10 @@ def write_scan(path: str | os.PathLike, points: np.ndarray) -> None:
         points.astype(np.float32).tofile(tmp)
     elif suffix == '.ply':
         from plyfile import PlyData, PlyElement
-        vertex = np.empty(len(points), dtype=[('x', 'f4'), ('y', 'f4'), ('z', 'f4'),
-                                              ('red', 'u1'), ('green', 'u1'), ('blue', 'u1')])
+        vertex = np.empty(
+            len(points),
+            dtype=[('x', 'f4'), ('y', 'f4'), ('z', 'f4'), ('red', 'u1'), ('green', 'u1'),
+                   ('blue', 'u1')])
         for i, name in enumerate(('x', 'y', 'z')):
             vertex[name] = points[:, i]
         for i, name in enumerate(('red', 'green', 'blue')):
@@ -80,8 +82,8 @@ def write_scan(path: str | os.PathLike, points: np.ndarray) -> None:
 def _read_txt(path: Path) -> np.ndarray:
     import pandas as pd
     try:
-        frame = pd.read_csv(path, sep=r'\s+', header=None, dtype=np.float64, engine='c',
-                            comment=None)
+        frame = pd.read_csv(
+            path, sep=r'\s+', header=None, dtype=np.float64, engine='c', comment=None)
     except pd.errors.EmptyDataError:
         raise ScanFormatError(f'{path}: the scan holds no points') from None
     except (ValueError, pd.errors.ParserError):

@@ -55,8 +55,8 @@ def room_polygon(shape: str, rng: np.random.Generator) -> np.ndarray:
     elif shape == 'T':
         stem_l, stem_r = width * rng.uniform(0.2, 0.35), width * (1 - rng.uniform(0.2, 0.35))
         bar = depth * rng.uniform(0.4, 0.6)
-        ccw = [(stem_l, 0), (stem_r, 0), (stem_r, bar), (width, bar), (width, depth),
-               (0, depth), (0, bar), (stem_l, bar)]
+        ccw = [(stem_l, 0), (stem_r, 0), (stem_r, bar), (width, bar), (width, depth), (0, depth),
+               (0, bar), (stem_l, bar)]
     else:
         raise ValueError(f'unknown room shape {shape!r}, expected one of {SHAPES}')
     return np.array(ccw[::-1], dtype=np.float64)
@@ -73,8 +73,12 @@ def inside_polygon(xy: np.ndarray, polygon: np.ndarray) -> np.ndarray:
     return inside
 
 
-def make_room(shape: str = 'rect', n_points: int = 300_000, seed: int = 0,
-              noise: NoiseModel | None = None, furniture: int = 8, openings: bool = True,
+def make_room(shape: str = 'rect',
+              n_points: int = 300_000,
+              seed: int = 0,
+              noise: NoiseModel | None = None,
+              furniture: int = 8,
+              openings: bool = True,
               rotate: bool = True) -> RoomScan:
     """Generate a room scan of about ``n_points`` points with its true corners."""
     rng = np.random.default_rng(seed)
@@ -84,8 +88,10 @@ def make_room(shape: str = 'rect', n_points: int = 300_000, seed: int = 0,
     floor_area = _area(polygon)
     density = n_points / (2 * floor_area + perimeter * height + 6.0 * furniture)
 
-    parts = [_sample_flat(polygon, 0.0, int(density * floor_area), rng, (150, 140, 130)),
-             _sample_flat(polygon, height, int(density * floor_area), rng, (230, 230, 225))]
+    parts = [
+        _sample_flat(polygon, 0.0, int(density * floor_area), rng, (150, 140, 130)),
+        _sample_flat(polygon, height, int(density * floor_area), rng, (230, 230, 225))
+    ]
     walls = _sample_walls(polygon, height, density, rng, openings)
     boxes = _place_furniture(polygon, furniture, rng)
     for box in boxes:
@@ -106,8 +112,12 @@ def make_room(shape: str = 'rect', n_points: int = 300_000, seed: int = 0,
     points[:, 2] += floor_z
     polygon = polygon @ rotation.T + shift
     order = rng.permutation(len(points))
-    return RoomScan(points=points[order], polygon=polygon, floor_z=floor_z,
-                    ceiling_z=floor_z + height, shape=shape)
+    return RoomScan(
+        points=points[order],
+        polygon=polygon,
+        floor_z=floor_z,
+        ceiling_z=floor_z + height,
+        shape=shape)
 
 
 def _area(polygon: np.ndarray) -> float:
@@ -162,8 +172,7 @@ def _place_furniture(polygon, count, rng):
         if rng.random() < 0.35:  # cabinet or bookcase against a wall
             a, b = edges[int(rng.integers(len(edges)))]
             length = float(np.linalg.norm(b - a))
-            size = np.array([rng.uniform(0.6, 1.6), rng.uniform(0.35, 0.6),
-                             rng.uniform(0.8, 2.2)])
+            size = np.array([rng.uniform(0.6, 1.6), rng.uniform(0.35, 0.6), rng.uniform(0.8, 2.2)])
             if length < size[0] + 0.4:
                 continue
             direction = (b - a) / length
@@ -173,8 +182,7 @@ def _place_furniture(polygon, count, rng):
             yaw = math.atan2(direction[1], direction[0])  # local +y points at the wall
             against_wall = True
         else:  # table or chair somewhere in the room
-            size = np.array([rng.uniform(0.4, 1.8), rng.uniform(0.4, 1.0),
-                             rng.uniform(0.45, 1.1)])
+            size = np.array([rng.uniform(0.4, 1.8), rng.uniform(0.4, 1.0), rng.uniform(0.45, 1.1)])
             centre = rng.uniform(polygon.min(axis=0), polygon.max(axis=0))
             yaw = rng.uniform(0, math.pi)
             against_wall = False

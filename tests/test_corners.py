@@ -22,8 +22,9 @@ def signed_area(polygon: np.ndarray) -> float:
 def matched_error(found: np.ndarray, truth: np.ndarray) -> float:
     """Mean corner distance under the best cyclic shift of the found corners (same order)."""
     assert len(found) == len(truth), f'{len(found)} corners found, {len(truth)} expected'
-    return min(float(np.linalg.norm(np.roll(found, k, axis=0) - truth, axis=1).mean())
-               for k in range(len(found)))
+    return min(
+        float(np.linalg.norm(np.roll(found, k, axis=0) - truth, axis=1).mean())
+        for k in range(len(found)))
 
 
 @pytest.mark.parametrize('shape', SHAPES)
@@ -76,13 +77,14 @@ def test_corners_start_near_the_lower_left_and_go_clockwise():
 def test_dominant_wall_angle_recovers_the_rotation():
     rng = np.random.default_rng(0)
     t = rng.uniform(0, 1, 20_000)
-    square = np.concatenate([np.column_stack([t * 6, np.zeros_like(t)]),
-                             np.column_stack([np.full_like(t, 6), t * 4]),
-                             np.column_stack([t * 6, np.full_like(t, 4)]),
-                             np.column_stack([np.zeros_like(t), t * 4])])
+    square = np.concatenate([
+        np.column_stack([t * 6, np.zeros_like(t)]),
+        np.column_stack([np.full_like(t, 6), t * 4]),
+        np.column_stack([t * 6, np.full_like(t, 4)]),
+        np.column_stack([np.zeros_like(t), t * 4])
+    ])
     theta = math.radians(27.3)
-    rotation = np.array([[math.cos(theta), -math.sin(theta)],
-                         [math.sin(theta), math.cos(theta)]])
+    rotation = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
     found = dominant_wall_angle(square @ rotation.T)
     assert abs(found - theta) < math.radians(0.1)
 
@@ -98,8 +100,8 @@ def test_trace_boundary_of_an_l_mask():
 
 def test_simplify_outline_merges_jogs_and_keeps_corners():
     rectangle_with_jog = np.array([[0, 0], [0, 4], [3, 4], [3, 4.1], [6, 4.1], [6, 0]], float)
-    simplified = simplify_outline(rectangle_with_jog, tolerance=0.02, min_edge=0.25,
-                                  min_turn=math.radians(12))
+    simplified = simplify_outline(
+        rectangle_with_jog, tolerance=0.02, min_edge=0.25, min_turn=math.radians(12))
     assert len(simplified) == 4
 
 
@@ -140,7 +142,8 @@ def test_floor_and_ceiling_without_walls_has_no_walls(scattered):
     rng = np.random.default_rng(0)
     floating = np.column_stack([
         rng.uniform(room.polygon.min(axis=0), room.polygon.max(axis=0), (3 * scattered, 2)),
-        rng.uniform(room.floor_z, room.ceiling_z, 3 * scattered)])
+        rng.uniform(room.floor_z, room.ceiling_z, 3 * scattered)
+    ])
     floating = floating[inside_polygon(floating[:, :2], room.polygon)][:scattered]
     assert len(floating) == scattered
     with pytest.raises(CornerDetectionError, match='no walls'):
@@ -151,8 +154,16 @@ def test_floor_and_ceiling_without_walls_has_no_walls(scattered):
 
 
 def test_corners_json_round_trip_and_format_check(tmp_path):
-    data = {'format': CORNERS_FORMAT, 'scan': 'room.txt', 'corners': [[0, 0], [0, 5], [6, 5]],
-            'floor_z': 0.0, 'ceiling_z': 3.0, 'quality': {'wall_points_on_polygon': 0.9}}
+    data = {
+        'format': CORNERS_FORMAT,
+        'scan': 'room.txt',
+        'corners': [[0, 0], [0, 5], [6, 5]],
+        'floor_z': 0.0,
+        'ceiling_z': 3.0,
+        'quality': {
+            'wall_points_on_polygon': 0.9
+        }
+    }
     path = tmp_path / 'room.corners.json'
     write_corners(path, data)
     assert load_corners(path) == data
@@ -173,9 +184,15 @@ def test_cli_writes_json_and_preview(tmp_path):
     scan = tmp_path / 'room.ply'
     write_scan(scan, room.points)
     out, preview = tmp_path / 'room.corners.json', tmp_path / 'room.png'
-    result = subprocess.run([sys.executable, '-m', 'configurator', 'corners', str(scan),
-                             '--out', str(out), '--preview', str(preview)],
-                            capture_output=True, text=True, timeout=120)
+    result = subprocess.run([
+        sys.executable, '-m', 'configurator', 'corners',
+        str(scan), '--out',
+        str(out), '--preview',
+        str(preview)
+    ],
+                            capture_output=True,
+                            text=True,
+                            timeout=120)
     assert result.returncode == 0, result.stderr
     data = load_corners(out)
     assert data['format'] == CORNERS_FORMAT and data['scan'] == str(scan)
@@ -192,9 +209,14 @@ def test_cli_writes_json_and_preview(tmp_path):
 def test_cli_reports_bad_scans(tmp_path):
     scan = tmp_path / 'empty.txt'
     scan.write_text('')
-    result = subprocess.run([sys.executable, '-m', 'configurator', 'corners', str(scan),
-                             '--out', str(tmp_path / 'x.json')],
-                            capture_output=True, text=True, timeout=120)
+    result = subprocess.run([
+        sys.executable, '-m', 'configurator', 'corners',
+        str(scan), '--out',
+        str(tmp_path / 'x.json')
+    ],
+                            capture_output=True,
+                            text=True,
+                            timeout=120)
     assert result.returncode == 2
     assert 'empty.txt' in result.stderr and 'no points' in result.stderr
     assert not (tmp_path / 'x.json').exists()
