@@ -122,6 +122,10 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
     corners = _intersect_lines(lines, params.min_edge, params.min_turn)
     if len(corners) < 3:
         raise CornerDetectionError('no walls found: fewer than 3 wall lines were fitted')
+    crossing = first_self_crossing(corners)
+    if crossing is not None:
+        raise CornerDetectionError(f'the fitted outline crosses itself (walls {crossing[0]} and '
+                                   f'{crossing[1]}); the scan is too sparse or not one room')
 
     corners = corners @ _rotation(angle).T
     corners = _canonical_order(corners)
@@ -613,6 +617,35 @@ def _intersect_lines(lines: list[_WallLine], min_edge: float, min_turn: float) -
 # --------------------------------------------------------------------------- output helpers
 
 
+def first_self_crossing(polygon: np.ndarray) -> tuple[int, int] | None:
+    """The first pair of non-adjacent edges of a closed polygon that touch or cross."""
+    count = len(polygon)
+    for i in range(count):
+        for j in range(i + 2, count):
+            if i == 0 and j == count - 1:
+                continue  # adjacent through the closing edge
+            if _segments_touch(polygon[i], polygon[(i + 1) % count], polygon[j],
+                               polygon[(j + 1) % count]):
+                return i, j
+    return None
+
+
+def _segments_touch(a, b, c, d) -> bool:
+
+    def side(p, q, r) -> float:
+        return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+
+    def within(p, q, r) -> bool:  # r on the segment p-q, given collinear
+        return min(p[0], q[0]) <= r[0] <= max(p[0], q[0]) and \
+            min(p[1], q[1]) <= r[1] <= max(p[1], q[1])
+
+    s1, s2, s3, s4 = side(a, b, c), side(a, b, d), side(c, d, a), side(c, d, b)
+    if ((s1 > 0) != (s2 > 0)) and ((s3 > 0) != (s4 > 0)) and 0 not in (s1, s2, s3, s4):
+        return True
+    return any(s == 0 and within(p, q, r)
+               for s, p, q, r in ((s1, a, b, c), (s2, a, b, d), (s3, c, d, a), (s4, c, d, b)))
+
+
 def _canonical_order(corners: np.ndarray) -> np.ndarray:
     """Clockwise order starting at the corner nearest the bounding box's (min x, min y)."""
     if _signed_area(corners) > 0:
@@ -683,7 +716,12 @@ def _validate_corners(data: object, where: str) -> None:
                 isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
                 for v in c) for c in corners):
         raise ValueError(f'{where}: "corners" must be a list of at least 3 [x, y] finite numbers')
-    if _signed_area(np.array(corners, dtype=np.float64)) >= 0:
+    polygon = np.array(corners, dtype=np.float64)
+    crossing = first_self_crossing(polygon)
+    if crossing is not None:
+        raise ValueError(f'{where}: "corners" cross themselves (edges {crossing[0]} and '
+                         f'{crossing[1]})')
+    if _signed_area(polygon) >= 0:
         raise ValueError(f'{where}: "corners" must be clockwise seen from above')
     for key in ('floor_z', 'ceiling_z'):
         value = data.get(key)

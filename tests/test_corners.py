@@ -174,6 +174,9 @@ def test_corners_json_round_trip_and_format_check(tmp_path):
     path.write_text(json.dumps(dict(data, corners=[[0, 0], [6, 5], [0, 5]])))
     with pytest.raises(ValueError, match='clockwise'):
         load_corners(path)
+    path.write_text(json.dumps(dict(data, corners=[[0, 0], [0, 5], [6, 0], [6, 5]])))
+    with pytest.raises(ValueError, match='cross themselves'):
+        load_corners(path)
     path.write_text('{"format": ')
     with pytest.raises(ValueError, match=r'room.corners.json:1: not valid JSON'):
         load_corners(path)
