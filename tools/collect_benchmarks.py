@@ -99,8 +99,8 @@ def machine() -> str:
     return f'{model}, {os.cpu_count()} cores, Python {platform.python_version()}'
 
 
-def render(records: list[dict]) -> str:
-    """docs/benchmarks.md from the benchmark records."""
+def render(records: list[dict], not_run: list[str]) -> str:
+    """docs/benchmarks.md from the benchmark records (and the benchmarks without one)."""
     lines = [
         '# Benchmarks', '',
         'Written by `make bench` (`tools/collect_benchmarks.py`), which runs every '
@@ -117,6 +117,8 @@ def render(records: list[dict]) -> str:
         lines.append(f'| `{r["name"]}` | {WHAT.get(r["name"], "")} | {result} | {r["seconds"]} | '
                      f'{" / ".join(map(str, r["load_before"]))} | '
                      f'{" / ".join(map(str, r["load_after"]))} | {r["finished"]} |')
+    for name in not_run:
+        lines.append(f'| `{name}` | {WHAT.get(name, "")} | not run in this collection | | | | |')
     lines += ['', '## Outputs', '']
     for r in records:
         lines += [f'### {r["name"]}', '', f'`{r["command"]}`', '', '```', *r['tail'], '```', '']
@@ -151,7 +153,8 @@ def main(argv: list[str] | None = None) -> int:
         records.append(run_benchmark(name, args.log_dir))
         print(f'[bench] {name}: {records[-1]["seconds"]} s, exit {records[-1]["returncode"]}',
               flush=True)
-    args.out.write_text(render(records))
+    done = {r['name'] for r in records}
+    args.out.write_text(render(records, [n for n in names if n not in done]))
     print(f'[bench] wrote {args.out}')
     return 0 if all(r['returncode'] == 0 for r in records) else 1
 

@@ -241,7 +241,7 @@ def draw_top_view(out: str | os.PathLike, scan: Scan, gt: list[Box] = (), pred: 
     height = float(np.clip(width * (hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-6), 4.0, 14.0))
     figure, axes = plt.subplots(figsize=(width + 2.6, height), dpi=110)
     # marker area (pt^2) from the point density, so sparse and dense scans both read well
-    marker = float(np.clip(0.4 * (72 * width) * (72 * height) / max(len(points), 1), 0.3, 10))
+    marker = float(np.clip(0.12 * (72 * width) * (72 * height) / max(len(points), 1), 0.25, 8))
     axes.scatter(points[order, 0], points[order, 1], c=colours[order], s=marker, linewidths=0,
                  rasterized=True)
     for box in gt:
