@@ -64,7 +64,7 @@ SIZES = {
                  batch_size=2, loader_workers=0, predict_rooms=1, workers=1, log_interval=1,
                  score_thr=0.05),
     # make demo: about 30 minutes on 2 free cores
-    'demo': Size(rooms_per_area=16, points=300_000, num_points=40_000, epochs=5, repeats=2,
+    'demo': Size(rooms_per_area=12, points=200_000, num_points=40_000, epochs=5, repeats=2,
                  batch_size=4, loader_workers=1, predict_rooms=3, workers=2, log_interval=4,
                  score_thr=0.3),
 }
