@@ -66,6 +66,19 @@ def test_reflex_corners_of_u_room_are_found():
     assert (turns > 0).sum() == 2  # left turns of a clockwise polygon are reflex corners
 
 
+def test_sparsely_scanned_arm_of_a_u_room():
+    """Only 1.5 % of the points of one arm survive (as when a sensor path stays in the other
+    part of the room); the coarse footprint must still put the arm's corners in place."""
+    room = make_room('U', n_points=300_000, seed=0, rotate=False)
+    xs, ys = np.unique(room.polygon[:, 0]), np.unique(room.polygon[:, 1])
+    points = room.points
+    arm = (points[:, 0] < xs[1]) & (points[:, 1] > ys[1] + 0.3)
+    keep = ~arm | (np.random.default_rng(0).random(len(points)) < 0.015)
+    assert arm.sum() > 20_000 and (arm & keep).sum() < 0.02 * arm.sum()
+    outline = detect_corners(points[keep])
+    assert matched_error(outline.corners, room.polygon) < 0.03
+
+
 def test_corners_start_near_the_lower_left_and_go_clockwise():
     room = make_room('rect', n_points=80_000, seed=2, rotate=False)
     corners = detect_corners(room.points).corners
