@@ -238,3 +238,22 @@ def test_top_view_draws_class_colours_and_boxes(tmp_path):
     with Image.open(tmp_path / 'rgb.png') as image:
         pixels = np.asarray(image.convert('RGB')).reshape(-1, 3)
     assert (np.abs(pixels - [200, 50, 50]).max(axis=1) <= 2).sum() > 50
+
+
+def test_visualize_cli_writes_png_and_ply_and_names_bad_files(tmp_path):
+    room = write_room(tmp_path)
+    proc = subprocess.run([sys.executable, 'tools/visualize.py', str(room), '--gt',
+                           str(room.parent / 'meta.json'), '--out', str(tmp_path / 'v.png'),
+                           '--ply', str(tmp_path / 'v.ply')], cwd=REPO, capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert '700 points, 1 ground-truth' in proc.stdout
+    with Image.open(tmp_path / 'v.png') as image:
+        assert image.size[0] > 300
+    assert PlyData.read(str(tmp_path / 'v.ply'))['vertex'].count == 700
+    bad = tmp_path / 'bad.pred.json'
+    bad.write_text('{"format": "synthdet.predictions/1", "detections": [{"class": "chair"}]}')
+    proc = subprocess.run([sys.executable, 'tools/visualize.py', str(room), '--pred', str(bad),
+                           '--out', str(tmp_path / 'w.png')], cwd=REPO, capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 1 and 'bad.pred.json: detections[0] is not valid' in proc.stderr
