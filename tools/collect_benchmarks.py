@@ -42,6 +42,13 @@ WHAT = {
     'model': 'TR3D train step, inference and peak memory, 1 cm vs 2 cm voxels',
     'corners': 'room corners: traced outline vs convex-hull baseline (error, count, time)',
 }
+# The issues' goals, shown next to the results.
+GOALS = {
+    'scanner': '>= 30x',
+    'generate': '<= 600 s for 150 rooms',
+    'convert': '>= 3x',
+    'corners': 'traced <= 3 cm, >= 95% right count, <= 1 s per 1M points',
+}
 TAIL_LINES = 25
 
 
@@ -109,16 +116,19 @@ def render(records: list[dict], not_run: list[str]) -> str:
         f'Machine: {machine()}. Load average = 1/5/15-minute load before and after the run; the '
         'project machine is shared with other jobs, so absolute times vary with it more than '
         'the ratios do.', '',
-        '| benchmark | what | result (last line) | wall s | load before | load after | finished |',
-        '|---|---|---|---|---|---|---|',
+        '| benchmark | what | result (last line) | goal | wall s | load before | load after | '
+        'finished |',
+        '|---|---|---|---|---|---|---|---|',
     ]
     for r in records:
         result = r['last_line'] if r['returncode'] == 0 else f'FAILED (exit {r["returncode"]})'
-        lines.append(f'| `{r["name"]}` | {WHAT.get(r["name"], "")} | {result} | {r["seconds"]} | '
+        lines.append(f'| `{r["name"]}` | {WHAT.get(r["name"], "")} | {result} | '
+                     f'{GOALS.get(r["name"], "")} | {r["seconds"]} | '
                      f'{" / ".join(map(str, r["load_before"]))} | '
                      f'{" / ".join(map(str, r["load_after"]))} | {r["finished"]} |')
     for name in not_run:
-        lines.append(f'| `{name}` | {WHAT.get(name, "")} | not run in this collection | | | | |')
+        lines.append(f'| `{name}` | {WHAT.get(name, "")} | not run in this collection | '
+                     f'{GOALS.get(name, "")} | | | | |')
     lines += ['', '## Outputs', '']
     for r in records:
         lines += [f'### {r["name"]}', '', f'`{r["command"]}`', '', '```', *r['tail'], '```', '']
