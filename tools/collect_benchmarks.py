@@ -85,7 +85,7 @@ def run_benchmark(name: str, log_dir: Path) -> dict:
         'finished': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC'),
     }
     text = ''.join(output).replace('\r', '\n')
-    lines = [line for line in text.splitlines() if line.strip()]
+    lines = [line for line in text.splitlines() if line.strip() and '%|' not in line]
     record['last_line'] = lines[-1].strip() if lines else ''
     record['tail'] = lines[-TAIL_LINES:]
     log_dir.mkdir(parents=True, exist_ok=True)
