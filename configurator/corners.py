@@ -148,11 +148,18 @@ def corners_for_scan(scan_path: str | os.PathLike, params: CornerParams | None =
 def outline_to_dict(outline: RoomOutline, scan: str) -> dict:
     """The ``synthdet.corners/1`` dictionary of an outline found in the scan ``scan``."""
     return {
-        'format': CORNERS_FORMAT,
-        'scan': scan,
-        'corners': [[round(float(x), 4), round(float(y), 4)] for x, y in outline.corners],
-        'floor_z': round(float(outline.floor_z), 4),
-        'ceiling_z': round(float(outline.ceiling_z), 4),
+        'format':
+        CORNERS_FORMAT,
+        'scan':
+        scan,
+        'corners': [
+            [round(float(x), 4) + 0.0, round(float(y), 4) + 0.0]  # + 0.0: no '-0.0'
+            for x, y in outline.corners
+        ],
+        'floor_z':
+        round(float(outline.floor_z), 4),
+        'ceiling_z':
+        round(float(outline.ceiling_z), 4),
         'quality': {
             key: round(float(value), 4)
             for key, value in outline.quality.items()
@@ -165,7 +172,8 @@ def write_corners(path: str | os.PathLike, corners: dict) -> None:
     path = Path(path)
     _validate_corners(corners, str(path))
     tmp = path.with_name(path.name + '.tmp')
-    tmp.write_text(json.dumps(corners, indent=2) + '\n')
+    lines = [f'  {json.dumps(key)}: {json.dumps(value)}' for key, value in corners.items()]
+    tmp.write_text('{\n' + ',\n'.join(lines) + '\n}\n')  # one line per key
     os.replace(tmp, path)
 
 
