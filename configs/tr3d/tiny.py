@@ -7,7 +7,7 @@
 # - no augmentation (no flips, scaling or translation jitter): the test asks for memorisation;
 # - batch 1, no dataset repeat, no loader worker processes;
 # - a constant learning rate (TR3D's 1e-3 without its decay after epochs 8 and 11), 24 epochs,
-#   validation after the last one only, log every 5 iterations.
+#   validation and a checkpoint after the last one only, log every 5 iterations.
 _base_ = ['./exp2.py']
 
 data_root = 'data/s3dis_tiny/'
@@ -66,4 +66,4 @@ test_dataloader = val_dataloader
 
 train_cfg = dict(max_epochs=24, val_interval=24)
 param_scheduler = []
-default_hooks = dict(logger=dict(interval=5))
+default_hooks = dict(logger=dict(interval=5), checkpoint=dict(interval=24))
