@@ -1,10 +1,11 @@
 """Synthetic room scans with known corners, for the corner tests and benchmark.
 
-A room is a floor polygon (rectangular, L, U or T shaped) extruded to a ceiling height. Its
-floor, ceiling and walls are sampled uniformly (walls with door and window openings),
-furniture boxes stand inside (some against walls, hiding the floor and wall behind them), and
-an optional LiDAR-like noise model perturbs the points as seen from a scanner position: range
-noise along the ray, angular jitter across it, random dropout, dropout patches and outliers.
+A room is a floor polygon (rectangular, L, U or T shaped, or a rectangle with one corner cut
+by a non-Manhattan wall) extruded to a ceiling height. Its floor, ceiling and walls are
+sampled uniformly (walls with door and window openings), furniture boxes stand inside (some
+against walls, hiding the floor and wall behind them), and an optional LiDAR-like noise model
+perturbs the points as seen from a scanner position: range noise along the ray, angular
+jitter across it, random dropout, dropout patches and outliers.
 The whole room is then rotated and translated at random, so walls are not axis-aligned.
 """
 from __future__ import annotations
@@ -13,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-SHAPES = ('rect', 'L', 'U', 'T')
+SHAPES = ('rect', 'L', 'U', 'T', 'chamfer')
 
 
 @dataclass(frozen=True)
@@ -57,6 +58,9 @@ def room_polygon(shape: str, rng: np.random.Generator) -> np.ndarray:
         bar = depth * rng.uniform(0.4, 0.6)
         ccw = [(stem_l, 0), (stem_r, 0), (stem_r, bar), (width, bar), (width, depth), (0, depth),
                (0, bar), (stem_l, bar)]
+    elif shape == 'chamfer':  # a non-Manhattan wall cuts one corner at 30-60 degrees
+        cut_w, cut_d = rng.uniform(1.0, 2.5), rng.uniform(1.0, 2.5)
+        ccw = [(0, 0), (width, 0), (width, depth - cut_d), (width - cut_w, depth), (0, depth)]
     else:
         raise ValueError(f'unknown room shape {shape!r}, expected one of {SHAPES}')
     return np.array(ccw[::-1], dtype=np.float64)
