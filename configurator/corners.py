@@ -6,9 +6,9 @@ Method (``docs/corners.md`` explains it in full):
 2. wall points are the points between them (a margin away from both); their dominant
    directions come from a rotation search that makes their projections sharpest;
 3. in that wall-aligned frame, every point is binned into a 2D occupancy grid; closing,
-   hole filling and opening leave the room's footprint, whose boundary is traced
-   (crack following) into a polygon; this works for L-, U- and T-shaped rooms, where
-   angle ordering and convex hulls fail;
+   hole filling and opening leave the room's footprint (a second, coarser grid adds
+   sparsely scanned parts), whose boundary is traced (crack following) into a polygon;
+   this works for L-, U- and T-shaped rooms, where angle ordering and convex hulls fail;
 4. the polygon is simplified (Douglas-Peucker, then walls shorter than ``min_edge`` are
    merged into their neighbours, the 1D analogue of clustering corner candidates with
    an eps);
