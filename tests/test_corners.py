@@ -263,6 +263,19 @@ def test_read_ply_without_colours(tmp_path):
     np.testing.assert_array_equal(read_scan(path), [[0, 1, 2, 0, 0, 0], [3, 4, 5, 0, 0, 0]])
 
 
+def test_read_text_with_xyz_only_and_ply_with_float_colours(tmp_path):
+    path = tmp_path / 'xyz.txt'
+    path.write_text('1.5 2 3\n\n4 5 6.25\n')  # blank lines are skipped
+    np.testing.assert_array_equal(read_scan(path), [[1.5, 2, 3, 0, 0, 0], [4, 5, 6.25, 0, 0, 0]])
+    from plyfile import PlyData, PlyElement
+    vertex = np.array([(0.0, 1.0, 2.0, 1.0, 0.5, 0.0)],
+                      dtype=[('x', 'f4'), ('y', 'f4'), ('z', 'f4'), ('red', 'f4'), ('green', 'f4'),
+                             ('blue', 'f4')])
+    path = tmp_path / 'float.ply'
+    PlyData([PlyElement.describe(vertex, 'vertex')]).write(str(path))
+    np.testing.assert_allclose(read_scan(path), [[0, 1, 2, 255, 127.5, 0]])
+
+
 @pytest.mark.parametrize('text,message', [
     ('', 'no points'),
     ('1 2 3 4 5 6\n1 2 3 4 5 6 7\n', r'bad.txt:2: expected 6 numbers, got 7'),
