@@ -140,7 +140,8 @@ def test_checkpoints_save_resume_and_load(tiny: dict, monkeypatch: pytest.Monkey
     # Resume for one more epoch (2 iterations) into another work dir.
     resumed_dir = tiny['root'] / 'resumed'
     run_tool('tools/train.py', TINY, '--work-dir', resumed_dir, '--resume', first,
-             '--cfg-options', *data_options(tiny['data']), 'train_cfg.max_epochs=2')
+             '--cfg-options', *data_options(tiny['data']), 'train_cfg.max_epochs=2',
+             'val_cfg=None', 'val_dataloader=None', 'val_evaluator=None')
     resumed = torch.load(resumed_dir / 'epoch_2.pth', map_location='cpu', weights_only=False)
     assert resumed['meta']['epoch'] == 2 and resumed['meta']['iter'] == 4
     # Adam continued from the saved state: 4 steps per parameter, not 2 of a fresh optimizer.
