@@ -18,23 +18,29 @@ def run_tool(*args) -> subprocess.CompletedProcess:
     """Run a tool with one OpenMP thread (MinkowskiEngine's CPU kernels were ~4x slower with a
     thread per core on the shared 2-core machine) unless the caller chose otherwise."""
     env = {**os.environ, 'OMP_NUM_THREADS': os.environ.get('OMP_NUM_THREADS', '1')}
-    proc = subprocess.run([sys.executable, *map(str, args)], cwd=REPO, capture_output=True,
-                          text=True, timeout=900, env=env)
+    proc = subprocess.run([sys.executable, *map(str, args)],
+                          cwd=REPO,
+                          capture_output=True,
+                          text=True,
+                          timeout=900,
+                          env=env)
     assert proc.returncode == 0, f'{args[0]} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}'
     return proc
 
 
 def test_tr3d_overfits_tiny_generated_rooms(tmp_path: Path) -> None:
-    truth = write_synthetic_area(tmp_path / 'raw', area=1, n_rooms=3, seed=7,
-                                 points_per_object=300)
+    truth = write_synthetic_area(
+        tmp_path / 'raw', area=1, n_rooms=3, seed=7, points_per_object=300)
     convert_s3dis(tmp_path / 'raw', tmp_path / 'data', areas=[1])
-    data = [f'train_dataloader.dataset.dataset.datasets.0.data_root={tmp_path / "data"}/',
-            f'val_dataloader.dataset.data_root={tmp_path / "data"}/',
-            f'test_dataloader.dataset.data_root={tmp_path / "data"}/']
+    data = [
+        f'train_dataloader.dataset.dataset.datasets.0.data_root={tmp_path / "data"}/',
+        f'val_dataloader.dataset.data_root={tmp_path / "data"}/',
+        f'test_dataloader.dataset.data_root={tmp_path / "data"}/'
+    ]
     work = tmp_path / 'work'
     # Train without validation (tools/test.py evaluates the final weights below).
-    run_tool('tools/train.py', TINY, '--work-dir', work, '--cfg-options', *data,
-             'val_cfg=None', 'val_dataloader=None', 'val_evaluator=None')
+    run_tool('tools/train.py', TINY, '--work-dir', work, '--cfg-options', *data, 'val_cfg=None',
+             'val_dataloader=None', 'val_evaluator=None')
     proc = run_tool('tools/test.py', TINY, work / 'epoch_24.pth', '--work-dir', work,
                     '--cfg-options', *data)
     print(proc.stdout[proc.stdout.index('Table 3'):])

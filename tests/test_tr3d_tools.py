@@ -39,8 +39,8 @@ EXPERIMENTS = {
 
 def load_tool(name: str) -> ModuleType:
     """Import tools/<name>.py (the tools folder is scripts, not a package)."""
-    spec = importlib.util.spec_from_file_location(f'synthdet_tools_{name}', REPO / 'tools' /
-                                                  f'{name}.py')
+    spec = importlib.util.spec_from_file_location(f'synthdet_tools_{name}',
+                                                  REPO / 'tools' / f'{name}.py')
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -53,17 +53,23 @@ def run_tool(*args: str) -> subprocess.CompletedProcess:
     about 4x slower with a thread per core on this shared 2-core machine.
     """
     env = {**os.environ, 'OMP_NUM_THREADS': os.environ.get('OMP_NUM_THREADS', '1')}
-    proc = subprocess.run([sys.executable, *map(str, args)], cwd=REPO, capture_output=True,
-                          text=True, timeout=600, env=env)
+    proc = subprocess.run([sys.executable, *map(str, args)],
+                          cwd=REPO,
+                          capture_output=True,
+                          text=True,
+                          timeout=600,
+                          env=env)
     assert proc.returncode == 0, f'{args[0]} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}'
     return proc
 
 
 def data_options(data_root: Path) -> list[str]:
     """--cfg-options pointing the tiny config's datasets at a converted folder."""
-    return [f'train_dataloader.dataset.dataset.datasets.0.data_root={data_root}/',
-            f'val_dataloader.dataset.data_root={data_root}/',
-            f'test_dataloader.dataset.data_root={data_root}/']
+    return [
+        f'train_dataloader.dataset.dataset.datasets.0.data_root={data_root}/',
+        f'val_dataloader.dataset.data_root={data_root}/',
+        f'test_dataloader.dataset.data_root={data_root}/'
+    ]
 
 
 @pytest.fixture(scope='module')
@@ -74,10 +80,13 @@ def tiny(tmp_path_factory: pytest.TempPathFactory) -> dict:
     convert_s3dis(root / 'raw', root / 'data', areas=[1])
     work_dir = root / 'work'
     run_tool('tools/train.py', TINY, '--work-dir', work_dir, '--cfg-options',
-             *data_options(root / 'data'),
-             'train_cfg.max_epochs=1', 'train_cfg.val_interval=1')
-    return dict(root=root, data=root / 'data', work=work_dir, truth=truth,
-                raw=root / 'raw' / S3DIS_DIR / 'Area_1')
+             *data_options(root / 'data'), 'train_cfg.max_epochs=1', 'train_cfg.val_interval=1')
+    return dict(
+        root=root,
+        data=root / 'data',
+        work=work_dir,
+        truth=truth,
+        raw=root / 'raw' / S3DIS_DIR / 'Area_1')
 
 
 @pytest.mark.parametrize('path', CONFIGS, ids=[p.stem for p in CONFIGS])
@@ -99,13 +108,14 @@ def test_registry_builds_the_model_of_every_config(path: Path) -> None:
     assert model.bbox_head.num_classes == len(classes)
     train_sets = cfg.train_dataloader.dataset.dataset.datasets
     assert all(tuple(d.metainfo['classes']) == classes for d in train_sets)
-    assert all(d.type == 'SynthdetS3DISDataset' for d in [*train_sets, cfg.test_dataloader.dataset])
+    assert all(d.type == 'SynthdetS3DISDataset'
+               for d in [*train_sets, cfg.test_dataloader.dataset])
     assert cfg.val_evaluator.type == 'IndoorMetric'
     experiment = path.stem.split('_')[0]
     if experiment in EXPERIMENTS:
         train_areas, test_area, expected_classes = EXPERIMENTS[experiment]
-        assert [d.ann_file for d in train_sets] == [
-            f's3dis_infos_Area_{a}.pkl' for a in train_areas]
+        assert [d.ann_file
+                for d in train_sets] == [f's3dis_infos_Area_{a}.pkl' for a in train_areas]
         assert cfg.test_dataloader.dataset.ann_file == f's3dis_infos_Area_{test_area}.pkl'
         assert cfg.val_dataloader.dataset.ann_file == f's3dis_infos_Area_{test_area}.pkl'
         assert classes == expected_classes
@@ -139,22 +149,23 @@ def test_checkpoints_save_resume_and_load(tiny: dict, monkeypatch: pytest.Monkey
 
     # Resume for one more epoch (2 iterations) into another work dir.
     resumed_dir = tiny['root'] / 'resumed'
-    run_tool('tools/train.py', TINY, '--work-dir', resumed_dir, '--resume', first,
-             '--cfg-options', *data_options(tiny['data']), 'train_cfg.max_epochs=2',
-             'val_cfg=None', 'val_dataloader=None', 'val_evaluator=None')
+    run_tool('tools/train.py', TINY, '--work-dir', resumed_dir, '--resume', first, '--cfg-options',
+             *data_options(tiny['data']), 'train_cfg.max_epochs=2', 'val_cfg=None',
+             'val_dataloader=None', 'val_evaluator=None')
     resumed = torch.load(resumed_dir / 'epoch_2.pth', map_location='cpu', weights_only=False)
     assert resumed['meta']['epoch'] == 2 and resumed['meta']['iter'] == 4
     # Adam continued from the saved state: 4 steps per parameter, not 2 of a fresh optimizer.
     assert {int(s['step']) for s in resumed['optimizer']['state'].values()} == {4}
-    assert resumed['optimizer']['param_groups'][0]['lr'] == saved['optimizer']['param_groups'][
-        0]['lr']
+    assert resumed['optimizer']['param_groups'][0]['lr'] == saved['optimizer']['param_groups'][0][
+        'lr']
     # The weights continued too: BatchNorm counted 2 + 2 batches, and two Adam steps of
     # lr 1e-3 moved no parameter by more than a few lr (a fresh init differs by ~0.1).
     before, after = saved['state_dict'], resumed['state_dict']
     counters = [k for k in after if k.endswith('num_batches_tracked')]
     assert counters and all(int(before[k]) == 2 and int(after[k]) == 4 for k in counters)
-    parameters = [k for k in after if not k.endswith(('running_mean', 'running_var',
-                                                      'num_batches_tracked'))]
+    parameters = [
+        k for k in after if not k.endswith(('running_mean', 'running_var', 'num_batches_tracked'))
+    ]
     changes = [float((after[k] - before[k]).abs().max()) for k in parameters]
     assert 0 < max(changes) < 0.01
 
@@ -171,11 +182,29 @@ def test_checkpoints_save_resume_and_load(tiny: dict, monkeypatch: pytest.Monkey
 
 def test_table3_layout_from_indoor_metric_results() -> None:
     test_tool = load_tool('test')
-    metrics = {'table_AP_0.25': 0.96, 'chair_AP_0.25': 0.72, 'mAP_0.25': 0.84,
-               'table_AP_0.50': 0.87, 'chair_AP_0.50': 0.45, 'mAP_0.50': 0.66}
+    metrics = {
+        'table_AP_0.25': 0.96,
+        'chair_AP_0.25': 0.72,
+        'mAP_0.25': 0.84,
+        'table_AP_0.50': 0.87,
+        'chair_AP_0.50': 0.45,
+        'mAP_0.50': 0.66
+    }
     rows = test_tool.table3(metrics, ['table', 'chair', 'yumi'])
-    assert rows == {'mAP@0.25': {'table': 0.96, 'chair': 0.72, 'yumi': None, 'mean': 0.84},
-                    'mAP@0.5': {'table': 0.87, 'chair': 0.45, 'yumi': None, 'mean': 0.66}}
+    assert rows == {
+        'mAP@0.25': {
+            'table': 0.96,
+            'chair': 0.72,
+            'yumi': None,
+            'mean': 0.84
+        },
+        'mAP@0.5': {
+            'table': 0.87,
+            'chair': 0.45,
+            'yumi': None,
+            'mean': 0.66
+        }
+    }
     text = test_tool.format_table3(rows).splitlines()
     assert text[0].split() == ['metric', 'table', 'chair', 'yumi', 'mean']
     assert text[1].split() == ['mAP@0.25', '0.960', '0.720', '-', '0.840']
@@ -251,10 +280,9 @@ def test_predict_writes_detections_in_each_scan_frame(tiny: dict) -> None:
     # Same points in another frame: the same detections, moved by the frame difference.
     raw, shifted = documents['office_1']['detections'], documents['office_1_shifted']['detections']
     assert [d['class'] for d in raw] == [d['class'] for d in shifted]
-    np.testing.assert_allclose([d['score'] for d in raw], [d['score'] for d in shifted],
-                               atol=1e-5)
-    np.testing.assert_allclose(centres('office_1') - room_min, centres('office_1_shifted'),
-                               atol=1e-4)
+    np.testing.assert_allclose([d['score'] for d in raw], [d['score'] for d in shifted], atol=1e-5)
+    np.testing.assert_allclose(
+        centres('office_1') - room_min, centres('office_1_shifted'), atol=1e-4)
 
 
 def test_count_table_counts_correct_and_incorrect_detections(tmp_path: Path) -> None:
@@ -268,45 +296,82 @@ def test_count_table_counts_correct_and_incorrect_detections(tmp_path: Path) -> 
         # rotated by 90 degrees: its axis-aligned box is 0.7 x 1.2
         ('table_1', 'table', [2.0, 3.0, 0.375], [1.2, 0.7, 0.75], np.pi / 2),
     ]
-    (room / 'meta.json').write_text(json.dumps({
-        'format': 'synthdet.room/1', 'seed': 0, 'generator': {},
-        'room': {'polygon': [[0, 0], [0, 5], [5, 5], [5, 0]], 'height': 3.0},
-        'objects': [{'instance': i, 'class': c, 'asset': f'{c}/x', 'params': {},
-                     'box': {'center': ctr, 'size': size, 'yaw': yaw}, 'on': None}
-                    for i, c, ctr, size, yaw in objects]}))
+    (room / 'meta.json').write_text(
+        json.dumps({
+            'format':
+            'synthdet.room/1',
+            'seed':
+            0,
+            'generator': {},
+            'room': {
+                'polygon': [[0, 0], [0, 5], [5, 5], [5, 0]],
+                'height': 3.0
+            },
+            'objects': [{
+                'instance': i,
+                'class': c,
+                'asset': f'{c}/x',
+                'params': {},
+                'box': {
+                    'center': ctr,
+                    'size': size,
+                    'yaw': yaw
+                },
+                'on': None
+            } for i, c, ctr, size, yaw in objects]
+        }))
 
     def det(cls, score, center, size):
         return {'class': cls, 'score': score, 'center': center, 'size': size, 'yaw': 0.0}
 
     predictions = {
-        'sd': (['table', 'chair', 'sofa', 'yumi', '3dprinter'], [
-            det('chair', 0.9, [1.02, 1.0, 0.45], [0.5, 0.5, 0.9]),  # correct
-            det('chair', 0.8, [1.0, 1.02, 0.45], [0.5, 0.5, 0.9]),  # duplicate: incorrect
-            det('chair', 0.2, [3.0, 1.0, 0.45], [0.5, 0.5, 0.9]),  # below 0.3: ignored
-            det('table', 0.7, [2.0, 3.0, 0.375], [0.7, 1.2, 0.75]),  # correct (enclosing box)
-            det('yumi', 0.5, [4.0, 4.0, 0.5], [0.5, 0.5, 1.0]),  # no yumi: incorrect
-        ]),
-        'baseline': (['table', 'chair', 'sofa', 'bookcase', 'board'], [
-            det('table', 0.9, [2.0, 3.0, 0.375], [1.2, 0.7, 0.75]),  # IoU 0.41: correct
-            det('chair', 0.9, [3.25, 1.0, 0.45], [0.5, 0.5, 0.9]),  # IoU 0.33: correct
-            det('chair', 0.9, [1.4, 1.0, 0.45], [0.5, 0.5, 0.9]),  # IoU 0.11: incorrect
-        ]),
+        'sd': (
+            ['table', 'chair', 'sofa', 'yumi', '3dprinter'],
+            [
+                det('chair', 0.9, [1.02, 1.0, 0.45], [0.5, 0.5, 0.9]),  # correct
+                det('chair', 0.8, [1.0, 1.02, 0.45], [0.5, 0.5, 0.9]),  # duplicate: incorrect
+                det('chair', 0.2, [3.0, 1.0, 0.45], [0.5, 0.5, 0.9]),  # below 0.3: ignored
+                det('table', 0.7, [2.0, 3.0, 0.375], [0.7, 1.2, 0.75]),  # correct (enclosing box)
+                det('yumi', 0.5, [4.0, 4.0, 0.5], [0.5, 0.5, 1.0]),  # no yumi: incorrect
+            ]),
+        'baseline': (
+            ['table', 'chair', 'sofa', 'bookcase', 'board'],
+            [
+                det('table', 0.9, [2.0, 3.0, 0.375], [1.2, 0.7, 0.75]),  # IoU 0.41: correct
+                det('chair', 0.9, [3.25, 1.0, 0.45], [0.5, 0.5, 0.9]),  # IoU 0.33: correct
+                det('chair', 0.9, [1.4, 1.0, 0.45], [0.5, 0.5, 0.9]),  # IoU 0.11: incorrect
+            ]),
     }
     for model, (classes, detections) in predictions.items():
         (tmp_path / model).mkdir()
-        (tmp_path / model / 'lab_1.pred.json').write_text(json.dumps({
-            'format': 'synthdet.predictions/1', 'scan': 'Area_9/lab_1/lab_1.txt',
-            'model': model, 'classes': classes, 'detections': detections}))
+        (tmp_path / model / 'lab_1.pred.json').write_text(
+            json.dumps({
+                'format': 'synthdet.predictions/1',
+                'scan': 'Area_9/lab_1/lab_1.txt',
+                'model': model,
+                'classes': classes,
+                'detections': detections
+            }))
     out = tmp_path / 'table4.json'
-    table = count_table.main([str(tmp_path / 'sd'), str(tmp_path / 'baseline'), '--scan-root',
-                              str(tmp_path), '--out', str(out)])
+    table = count_table.main([
+        str(tmp_path / 'sd'),
+        str(tmp_path / 'baseline'), '--scan-root',
+        str(tmp_path), '--out',
+        str(out)
+    ])
     assert json.loads(out.read_text()) == table
     assert table['format'] == 'synthdet.table4/1'
-    assert table['classes'] == ['table', 'chair', 'sofa', 'bookcase', 'board', 'yumi',
-                                '3dprinter']
-    (row,) = table['scans']
-    assert row['truth'] == {'table': 1, 'chair': 2, 'sofa': 0, 'bookcase': 0, 'board': 0,
-                            'yumi': 0, '3dprinter': 0}
+    assert table['classes'] == ['table', 'chair', 'sofa', 'bookcase', 'board', 'yumi', '3dprinter']
+    (row, ) = table['scans']
+    assert row['truth'] == {
+        'table': 1,
+        'chair': 2,
+        'sofa': 0,
+        'bookcase': 0,
+        'board': 0,
+        'yumi': 0,
+        '3dprinter': 0
+    }
     sd, baseline = row['models']['sd'], row['models']['baseline']
     assert sd['chair'] == {'correct': 1, 'incorrect': 1}
     assert sd['table'] == {'correct': 1, 'incorrect': 0}
@@ -330,11 +395,21 @@ def test_count_table_reads_ground_truth_from_info_pickles(tiny: dict, tmp_path: 
     boxes = truth['Area_1_office_1.bin']
     expected = tiny['truth']['office_1']
     assert sorted(c for c, _ in boxes) == sorted(b['class'] for b in expected)
-    detections = [{'class': c, 'score': 0.9, 'center': b[:3], 'size': b[3:], 'yaw': 0.0}
-                  for c, b in boxes]
-    (tmp_path / 'Area_1_office_1.pred.json').write_text(json.dumps({
-        'format': 'synthdet.predictions/1', 'scan': 'data/s3dis/points/Area_1_office_1.bin',
-        'model': 'tiny', 'classes': TINY_CLASSES, 'detections': detections}))
+    detections = [{
+        'class': c,
+        'score': 0.9,
+        'center': b[:3],
+        'size': b[3:],
+        'yaw': 0.0
+    } for c, b in boxes]
+    (tmp_path / 'Area_1_office_1.pred.json').write_text(
+        json.dumps({
+            'format': 'synthdet.predictions/1',
+            'scan': 'data/s3dis/points/Area_1_office_1.bin',
+            'model': 'tiny',
+            'classes': TINY_CLASSES,
+            'detections': detections
+        }))
     table = count_table.main([str(tmp_path), '--infos', str(info_file)])
     cells = table['scans'][0]['models']['tiny']
     for cls in TINY_CLASSES:

@@ -44,8 +44,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description="The paper's Table 4 from predictions.")
     parser.add_argument('predictions', nargs='+', help='.pred.json files or directories')
     parser.add_argument('--infos', nargs='+', help='info pickles holding the ground truth')
-    parser.add_argument('--scan-root', default='.',
-                        help='directory that relative "scan" paths are relative to')
+    parser.add_argument(
+        '--scan-root', default='.', help='directory that relative "scan" paths are relative to')
     parser.add_argument('--score-thr', type=float, default=0.3)
     parser.add_argument('--iou-thr', type=float, default=0.25)
     parser.add_argument('--out', help='write the table as JSON (synthdet.table4/1)')
@@ -85,9 +85,12 @@ def truth_from_infos(paths: list[str]) -> dict[str, list[tuple[str, list[float]]
         with open(path, 'rb') as f:
             infos = pickle.load(f)
         categories = infos.get('metainfo', {}).get('categories') or {
-            name: i for i, name in enumerate(DETECTION_CLASSES)}
+            name: i
+            for i, name in enumerate(DETECTION_CLASSES)
+        }
         for info in infos['data_list']:
-            truth[Path(info['lidar_points']['lidar_path']).name] = boxes_from_info(info, categories)
+            truth[Path(info['lidar_points']['lidar_path']).name] = boxes_from_info(
+                info, categories)
     return truth
 
 
@@ -114,8 +117,8 @@ def _depth_boxes(boxes: list[list[float]], yaws: list[float]) -> DepthInstance3D
     return DepthInstance3DBoxes(tensor.reshape(-1, 7), origin=(0.5, 0.5, 0.5))
 
 
-def count_class(truth: list[list[float]], detections: list[dict], iou_thr: float
-                ) -> tuple[int, int]:
+def count_class(truth: list[list[float]], detections: list[dict],
+                iou_thr: float) -> tuple[int, int]:
     """``(correct, incorrect)`` for one class of one scan under the rule in the module doc."""
     if not detections:
         return 0, 0
@@ -159,8 +162,14 @@ def count_table(documents: list[dict], truth_of: dict[str, list], score_thr: flo
             correct, incorrect = count_class([b for name, b in boxes if name == c], dets, iou_thr)
             cells[c] = {'correct': correct, 'incorrect': incorrect}
         row['models'][d['model']] = cells
-    return {'format': TABLE4_FORMAT, 'score_thr': score_thr, 'iou_thr': iou_thr,
-            'classes': classes, 'models': models, 'scans': list(scans.values())}
+    return {
+        'format': TABLE4_FORMAT,
+        'score_thr': score_thr,
+        'iou_thr': iou_thr,
+        'classes': classes,
+        'models': models,
+        'scans': list(scans.values())
+    }
 
 
 def format_count_table(table: dict) -> str:
@@ -171,15 +180,16 @@ def format_count_table(table: dict) -> str:
     lines = ['model'.ljust(label) + ''.join(c.rjust(width) for c in classes)]
     for row in table['scans']:
         lines.append(f'scan {row["scan"]}')
-        lines.append('truth'.ljust(label) + ''.join(
-            str(row['truth'][c]).rjust(width) for c in classes))
+        lines.append('truth'.ljust(label) +
+                     ''.join(str(row['truth'][c]).rjust(width) for c in classes))
         for model in models:
             if model not in row['models']:
                 continue
             cells = row['models'][model]
-            lines.append(model.ljust(label) + ''.join(
-                ('-' if cells[c] is None else f'{cells[c]["correct"]}({cells[c]["incorrect"]})'
-                 ).rjust(width) for c in classes))
+            lines.append(
+                model.ljust(label) + ''.join(
+                    ('-' if cells[c] is None else f'{cells[c]["correct"]}({cells[c]["incorrect"]})'
+                     ).rjust(width) for c in classes))
     return '\n'.join(lines)
 
 

@@ -42,12 +42,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('checkpoint', help='checkpoint file')
     parser.add_argument('points', nargs='+', help='scans: .bin (float32 N x 6), .txt or .ply')
     parser.add_argument('--out', required=True, help='output directory for <scan>.pred.json')
-    parser.add_argument('--score-thr', type=float, default=0.3,
-                        help='keep detections with at least this score (default 0.3)')
+    parser.add_argument(
+        '--score-thr',
+        type=float,
+        default=0.3,
+        help='keep detections with at least this score (default 0.3)')
     parser.add_argument('--device', default='cuda:0' if torch.cuda.is_available() else 'cpu')
     parser.add_argument('--seed', type=int, default=0, help='seed of the point sampling')
-    parser.add_argument('--cfg-options', nargs='+', action=DictAction,
-                        help='override config keys')
+    parser.add_argument('--cfg-options', nargs='+', action=DictAction, help='override config keys')
     return parser.parse_args(argv)
 
 
@@ -56,8 +58,7 @@ def output_path(scan: Path, out_dir: Path) -> Path:
     return out_dir / f'{scan.stem}.pred.json'
 
 
-def detect(model: torch.nn.Module, points: np.ndarray, score_thr: float,
-           seed: int) -> list[dict]:
+def detect(model: torch.nn.Module, points: np.ndarray, score_thr: float, seed: int) -> list[dict]:
     """Run the model on an ``(N, 6)`` scan (colours 0-255); detections in the scan's frame."""
     shift = points[:, :3].min(axis=0)
     shifted = points.astype(np.float32)

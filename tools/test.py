@@ -43,7 +43,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         action=DictAction,
         help='override config keys, e.g. test_dataloader.dataset.ann_file=...')
     parser.add_argument(
-        '--launcher', choices=['none', 'pytorch', 'slurm', 'mpi'], default='none',
+        '--launcher',
+        choices=['none', 'pytorch', 'slurm', 'mpi'],
+        default='none',
         help='job launcher for distributed testing')
     parser.add_argument('--local-rank', '--local_rank', type=int, default=0)
     args = parser.parse_args(argv)
@@ -51,7 +53,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
-def table3(metrics: dict, classes: list[str],
+def table3(metrics: dict,
+           classes: list[str],
            iou_thresholds: tuple[float, ...] = IOU_THRESHOLDS) -> dict[str, dict]:
     """Arrange IndoorMetric results as Table 3: ``{'mAP@0.25': {class: AP, ..., 'mean': mAP}}``.
 
@@ -104,7 +107,10 @@ def main(argv: list[str] | None = None) -> dict:
         'test_set': str(cfg.test_dataloader.dataset.get('ann_file', '')),
         'classes': classes,
         'rows': rows,
-        'metrics': {k: float(v) for k, v in metrics.items()},
+        'metrics': {
+            k: float(v)
+            for k, v in metrics.items()
+        },
     }
     if is_main_process():
         out = Path(args.out) if args.out else Path(cfg.work_dir) / 'table3.json'

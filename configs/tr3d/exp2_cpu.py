@@ -63,14 +63,15 @@ train_dataloader = dict(
     dataset=dict(
         times=2,
         dataset=dict(datasets=[
-            dict(_base_.train_area_dataset, pipeline=train_pipeline,
-                 ann_file=f's3dis_infos_Area_{area}.pkl', metainfo=metainfo)
-            for area in train_area
+            dict(
+                _base_.train_area_dataset,
+                pipeline=train_pipeline,
+                ann_file=f's3dis_infos_Area_{area}.pkl',
+                metainfo=metainfo) for area in train_area
         ])))
 val_dataloader = dict(
     dataset=dict(
-        ann_file=f's3dis_infos_Area_{test_area}.pkl', metainfo=metainfo,
-        pipeline=test_pipeline))
+        ann_file=f's3dis_infos_Area_{test_area}.pkl', metainfo=metainfo, pipeline=test_pipeline))
 test_dataloader = val_dataloader
 
 default_hooks = dict(logger=dict(interval=10))

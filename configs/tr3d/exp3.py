@@ -12,8 +12,10 @@ model = dict(bbox_head=dict(num_classes=5, label2level=(1, 0, 1, 0, 0)))
 train_dataloader = dict(
     dataset=dict(
         dataset=dict(datasets=[
-            dict(_base_.train_area_dataset, ann_file=f's3dis_infos_Area_{area}.pkl',
-                 metainfo=metainfo) for area in train_area
+            dict(
+                _base_.train_area_dataset,
+                ann_file=f's3dis_infos_Area_{area}.pkl',
+                metainfo=metainfo) for area in train_area
         ])))
 val_dataloader = dict(
     dataset=dict(ann_file=f's3dis_infos_Area_{test_area}.pkl', metainfo=metainfo))

@@ -51,9 +51,12 @@ train_dataloader = dict(
     dataset=dict(
         times=1,
         dataset=dict(datasets=[
-            dict(_base_.train_area_dataset, data_root=data_root, pipeline=train_pipeline,
-                 ann_file=f's3dis_infos_Area_{area}.pkl', metainfo=metainfo)
-            for area in train_area
+            dict(
+                _base_.train_area_dataset,
+                data_root=data_root,
+                pipeline=train_pipeline,
+                ann_file=f's3dis_infos_Area_{area}.pkl',
+                metainfo=metainfo) for area in train_area
         ])))
 val_dataloader = dict(
     num_workers=0,

@@ -52,10 +52,6 @@ test_cfg = dict(type='TestLoop')
 
 default_hooks = dict(
     checkpoint=dict(
-        type='CheckpointHook',
-        interval=1,
-        max_keep_ckpts=1,
-        save_best='mAP_0.25',
-        rule='greater'))
+        type='CheckpointHook', interval=1, max_keep_ckpts=1, save_best='mAP_0.25', rule='greater'))
 custom_hooks = [dict(type='EmptyCacheHook', after_iter=True)]
 randomness = dict(seed=0)

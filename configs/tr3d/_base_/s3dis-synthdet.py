@@ -63,10 +63,6 @@ train_dataloader = dict(
     num_workers=8,
     persistent_workers=True,
     sampler=dict(type='DefaultSampler', shuffle=True),
-    dataset=dict(
-        type='RepeatDataset',
-        times=13,
-        dataset=dict(type='ConcatDataset', datasets=[])))
-val_dataloader = dict(
-    dataset=dict(type=dataset_type, data_root=data_root, pipeline=test_pipeline))
+    dataset=dict(type='RepeatDataset', times=13, dataset=dict(type='ConcatDataset', datasets=[])))
+val_dataloader = dict(dataset=dict(type=dataset_type, data_root=data_root, pipeline=test_pipeline))
 test_dataloader = val_dataloader
