@@ -18,10 +18,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--preview', help='optional PNG: the points from above with the outline')
     parser.add_argument(
         '--min-edge',
-        type=float,
+        type=_positive_metres,
         default=CornerParams.min_edge,
         help='walls shorter than this (m) are merged into their neighbours '
         '(default: %(default)s)')
+
+
+def _positive_metres(text: str) -> float:
+    value = float(text)
+    if not 0 < value < 10:
+        raise argparse.ArgumentTypeError(f'expected a length in metres in (0, 10), got {text}')
+    return value
 
 
 def run(args: argparse.Namespace) -> int:
