@@ -34,7 +34,10 @@ EXPERIMENTS = {
     'exp1': ([1, 2, 3, 4, 6], 5, ('table', 'chair', 'sofa', 'bookcase', 'board')),
     'exp2': ([7, 8], 9, SYNTHETIC_CLASSES),
     'exp3': ([1, 2, 3, 4, 6, 7, 8, 9], 5, SYNTHETIC_CLASSES),
+    'exp2_paper': ([1, 2, 3, 7, 8], 9, SYNTHETIC_CLASSES),  # the paper's Table 2 lists these
+    'exp2_cpu': ([7, 8], 9, SYNTHETIC_CLASSES),
 }
+FULL_SCALE = ('exp1', 'exp2', 'exp3', 'exp2_paper')  # TR3D's published S3DIS settings
 
 
 def load_tool(name: str) -> ModuleType:
@@ -111,27 +114,35 @@ def test_registry_builds_the_model_of_every_config(path: Path) -> None:
     assert all(d.type == 'SynthdetS3DISDataset'
                for d in [*train_sets, cfg.test_dataloader.dataset])
     assert cfg.val_evaluator.type == 'IndoorMetric'
-    experiment = path.stem.split('_')[0]
-    if experiment in EXPERIMENTS:
-        train_areas, test_area, expected_classes = EXPERIMENTS[experiment]
+    if path.stem in EXPERIMENTS:
+        train_areas, test_area, expected_classes = EXPERIMENTS[path.stem]
         assert [d.ann_file
                 for d in train_sets] == [f's3dis_infos_Area_{a}.pkl' for a in train_areas]
         assert cfg.test_dataloader.dataset.ann_file == f's3dis_infos_Area_{test_area}.pkl'
         assert cfg.val_dataloader.dataset.ann_file == f's3dis_infos_Area_{test_area}.pkl'
         assert classes == expected_classes
-    if path.stem in EXPERIMENTS:  # the full-scale configs: TR3D's published S3DIS settings
+    if path.stem in FULL_SCALE:
         assert cfg.model.voxel_size == model.bbox_head.voxel_size == 0.01
         assert cfg.train_dataloader.batch_size == 16 and cfg.train_dataloader.dataset.times == 13
         assert cfg.train_cfg.max_epochs == 5 and cfg.train_cfg.val_interval == 1
-        sample = [t for t in train_sets[0].pipeline if t.type == 'PointSample']
-        assert sample[0].num_points == 100000
+    if path.stem == 'exp2_cpu':  # the documented CPU-scale differences, same schedule
+        assert cfg.model.voxel_size == model.bbox_head.voxel_size == 0.02
+        assert cfg.train_dataloader.batch_size == 4 and cfg.train_dataloader.dataset.times == 2
+        assert cfg.train_cfg.max_epochs == 5 and cfg.train_cfg.val_interval == 1
+    points = {
+        t.num_points
+        for d in [*train_sets, cfg.test_dataloader.dataset]
+        for t in d.pipeline if t.type == 'PointSample'
+    }
+    expected_points = {'exp2_cpu': 40000, 'tiny': 10000}.get(path.stem, 100000)
+    assert points == {expected_points}  # training and testing sample alike
 
 
 def test_full_scale_experiments_share_one_architecture() -> None:
     from mmdet3d.registry import MODELS
 
     counts = {}
-    for name in EXPERIMENTS:
+    for name in FULL_SCALE:
         cfg = Config.fromfile(str(CONFIG_DIR / f'{name}.py'))
         init_default_scope(cfg.default_scope)
         counts[name] = sum(p.numel() for p in MODELS.build(cfg.model).parameters())

@@ -1,0 +1,18 @@
+# Experiment 2 as the paper's Table 2 lists it: the real S3DIS areas 1, 2, 3 and the generated
+# areas 7, 8 for training, the generated area 9 for testing (exp2.py, after issue 5, trains on
+# 7 and 8 only and so needs no real data). Everything else is exp2.py: classes table, chair,
+# sofa, yumi, 3dprinter (the real areas' bookcases and boards are not trained on), TR3D's
+# published model and data settings, 5 epochs keeping the best validation mAP@0.25.
+_base_ = ['./exp2.py']
+
+metainfo = dict(classes=('table', 'chair', 'sofa', 'yumi', '3dprinter'))
+train_area = [1, 2, 3, 7, 8]
+
+train_dataloader = dict(
+    dataset=dict(
+        dataset=dict(datasets=[
+            dict(
+                _base_.train_area_dataset,
+                ann_file=f's3dis_infos_Area_{area}.pkl',
+                metainfo=metainfo) for area in train_area
+        ])))
