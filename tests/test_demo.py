@@ -39,8 +39,13 @@ json.dump({'objects': len(doc.Objects), 'groups': groups, 'parts': parts,
 
 
 def run_demo(work: Path, *extra: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, 'tools/demo.py', '--size', 'tiny', '--threads', '1',
-                           '--work-dir', str(work), *extra], cwd=REPO, capture_output=True, text=True,
+    return subprocess.run([
+        sys.executable, 'tools/demo.py', '--size', 'tiny', '--threads', '1', '--work-dir',
+        str(work), *extra
+    ],
+                          cwd=REPO,
+                          capture_output=True,
+                          text=True,
                           timeout=900)
 
 
@@ -60,8 +65,10 @@ def test_tables_hold_numbers(demo):
     table1 = (demo / 'table1.txt').read_text()
     header = next(line for line in table1.splitlines() if 'chair' in line)
     assert header.split() == ['chair', 'table', 'sofa', 'bookcase', 'board', 'yumi', '3dprinter']
-    area_rows = {int(m.group(1)): line.split()[2:] for line in table1.splitlines()
-                 if (m := re.match(r'Area (\d+)\s', line))}
+    area_rows = {
+        int(m.group(1)): line.split()[2:]
+        for line in table1.splitlines() if (m := re.match(r'Area (\d+)\s', line))
+    }
     assert sorted(area_rows) == [7, 8, 9]
     # area 9's counts equal the converted pickle's instances
     with open(demo / 'data/s3dis_infos_Area_9.pkl', 'rb') as handle:
@@ -119,8 +126,8 @@ def test_freecad_documents_reopen(demo, tmp_path):
     script.write_text(REOPEN_SCRIPT)
     for name in rooms(demo):
         result = tmp_path / f'{name}.json'
-        env = dict(os.environ, DEMO_FCSTD=str(demo / f'rooms/{name}.FCStd'),
-                   DEMO_RESULT=str(result))
+        env = dict(
+            os.environ, DEMO_FCSTD=str(demo / f'rooms/{name}.FCStd'), DEMO_RESULT=str(result))
         subprocess.run(['freecadcmd', str(script)], env=env, capture_output=True, timeout=300)
         assert result.is_file(), 'FreeCAD could not reopen the document'
         found = json.loads(result.read_text())
@@ -148,10 +155,17 @@ def test_second_run_skips_every_step_and_guards_the_work_dir(demo):
     proc = run_demo(demo)
     assert proc.returncode == 0, proc.stderr[-2000:]
     skipped = re.findall(r'\[demo \d+/\d+\] (\w+): outputs exist, skipped', proc.stdout)
-    assert skipped == ['generate', 'convert', 'table1', 'train', 'test', 'predict', 'table4',
-                       'corners', 'freecad', 'pictures']
-    other = subprocess.run([sys.executable, 'tools/demo.py', '--size', 'demo', '--work-dir',
-                            str(demo)], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert skipped == [
+        'generate', 'convert', 'table1', 'train', 'test', 'predict', 'table4', 'corners',
+        'freecad', 'pictures'
+    ]
+    other = subprocess.run(
+        [sys.executable, 'tools/demo.py', '--size', 'demo', '--work-dir',
+         str(demo)],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120)
     assert other.returncode == 1 and 'choose another --work-dir' in other.stderr
 
 
@@ -170,18 +184,31 @@ def write_room(root: Path) -> Path:
     annotations = root / 'Area_9/lab_1/Annotations'
     annotations.mkdir(parents=True)
     floor = np.c_[rng.uniform(0, 4, (500, 2)), np.zeros(500), np.full((500, 3), 128)]
-    chair = np.c_[rng.uniform(1, 1.5, (200, 2)), rng.uniform(0, 0.9, 200),
+    chair = np.c_[rng.uniform(1, 1.5, (200, 2)),
+                  rng.uniform(0, 0.9, 200),
                   np.tile([200, 50, 50], (200, 1))]
     for name, points in (('floor_1', floor), ('chair_1', chair)):
         np.savetxt(annotations / f'{name}.txt', points, fmt='%.3f %.3f %.3f %d %d %d')
     room = annotations.parent / 'lab_1.txt'
     np.savetxt(room, np.vstack([floor, chair]), fmt='%.3f %.3f %.3f %d %d %d')
-    (annotations.parent / 'meta.json').write_text(json.dumps({
-        'format': 'synthdet.room/1', 'room': {'polygon': [[0, 0], [0, 4], [4, 4], [4, 0]],
-                                              'height': 3.0},
-        'objects': [{'instance': 'chair_1', 'class': 'chair',
-                     'box': {'center': [1.25, 1.25, 0.45], 'size': [0.5, 0.5, 0.9],
-                             'yaw': 0.3}}]}))
+    (annotations.parent / 'meta.json').write_text(
+        json.dumps({
+            'format':
+            'synthdet.room/1',
+            'room': {
+                'polygon': [[0, 0], [0, 4], [4, 4], [4, 0]],
+                'height': 3.0
+            },
+            'objects': [{
+                'instance': 'chair_1',
+                'class': 'chair',
+                'box': {
+                    'center': [1.25, 1.25, 0.45],
+                    'size': [0.5, 0.5, 0.9],
+                    'yaw': 0.3
+                }
+            }]
+        }))
     return room
 
 
@@ -201,10 +228,23 @@ def test_boxes_from_meta_info_and_predictions(tmp_path):
     room = write_room(tmp_path)
     [box] = boxes_from_meta(room.parent / 'meta.json')
     assert box.label == 'chair' and box.yaw == pytest.approx(0.3)
-    info = {'metainfo': {'categories': {'table': 0, 'chair': 1}},
-            'data_list': [{'lidar_points': {'lidar_path': 'Area_9_lab_1.bin'},
-                           'instances': [{'bbox_3d': [1, 2, 0.4, 2, 1, 0.8],
-                                          'bbox_label_3d': 0}]}]}
+    info = {
+        'metainfo': {
+            'categories': {
+                'table': 0,
+                'chair': 1
+            }
+        },
+        'data_list': [{
+            'lidar_points': {
+                'lidar_path': 'Area_9_lab_1.bin'
+            },
+            'instances': [{
+                'bbox_3d': [1, 2, 0.4, 2, 1, 0.8],
+                'bbox_label_3d': 0
+            }]
+        }]
+    }
     with open(tmp_path / 'infos.pkl', 'wb') as handle:
         pickle.dump(info, handle)
     [box] = boxes_from_info(tmp_path / 'infos.pkl', 'Area_9_lab_1.bin')
@@ -212,9 +252,22 @@ def test_boxes_from_meta_info_and_predictions(tmp_path):
     with pytest.raises(ValueError, match='no room with lidar_path'):
         boxes_from_info(tmp_path / 'infos.pkl', 'Area_9_lab_2.bin')
     predictions = tmp_path / 'p.json'
-    predictions.write_text(json.dumps({'format': 'synthdet.predictions/1', 'detections': [
-        {'class': 'chair', 'score': 0.9, 'center': [1, 1, 0.4], 'size': [0.5, 0.5, 0.8]},
-        {'class': 'chair', 'score': 0.1, 'center': [3, 3, 0.4], 'size': [0.5, 0.5, 0.8]}]}))
+    predictions.write_text(
+        json.dumps({
+            'format':
+            'synthdet.predictions/1',
+            'detections': [{
+                'class': 'chair',
+                'score': 0.9,
+                'center': [1, 1, 0.4],
+                'size': [0.5, 0.5, 0.8]
+            }, {
+                'class': 'chair',
+                'score': 0.1,
+                'center': [3, 3, 0.4],
+                'size': [0.5, 0.5, 0.8]
+            }]
+        }))
     assert len(boxes_from_predictions(predictions, 0.3)) == 1
     predictions.write_text('{"format": "synthdet.predictions/2"}')
     with pytest.raises(ValueError, match='p.json: expected "format"'):
@@ -242,10 +295,17 @@ def test_top_view_draws_class_colours_and_boxes(tmp_path):
 
 def test_visualize_cli_writes_png_and_ply_and_names_bad_files(tmp_path):
     room = write_room(tmp_path)
-    proc = subprocess.run([sys.executable, 'tools/visualize.py', str(room), '--gt',
-                           str(room.parent / 'meta.json'), '--out', str(tmp_path / 'v.png'),
-                           '--ply', str(tmp_path / 'v.ply')], cwd=REPO, capture_output=True,
-                          text=True, timeout=120)
+    proc = subprocess.run([
+        sys.executable, 'tools/visualize.py',
+        str(room), '--gt',
+        str(room.parent / 'meta.json'), '--out',
+        str(tmp_path / 'v.png'), '--ply',
+        str(tmp_path / 'v.ply')
+    ],
+                          cwd=REPO,
+                          capture_output=True,
+                          text=True,
+                          timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert '700 points, 1 ground-truth' in proc.stdout
     with Image.open(tmp_path / 'v.png') as image:
@@ -253,7 +313,14 @@ def test_visualize_cli_writes_png_and_ply_and_names_bad_files(tmp_path):
     assert PlyData.read(str(tmp_path / 'v.ply'))['vertex'].count == 700
     bad = tmp_path / 'bad.pred.json'
     bad.write_text('{"format": "synthdet.predictions/1", "detections": [{"class": "chair"}]}')
-    proc = subprocess.run([sys.executable, 'tools/visualize.py', str(room), '--pred', str(bad),
-                           '--out', str(tmp_path / 'w.png')], cwd=REPO, capture_output=True,
-                          text=True, timeout=120)
+    proc = subprocess.run([
+        sys.executable, 'tools/visualize.py',
+        str(room), '--pred',
+        str(bad), '--out',
+        str(tmp_path / 'w.png')
+    ],
+                          cwd=REPO,
+                          capture_output=True,
+                          text=True,
+                          timeout=120)
     assert proc.returncode == 1 and 'bad.pred.json: detections[0] is not valid' in proc.stderr

@@ -37,7 +37,8 @@ ARGUMENTS = {
 WHAT = {
     'scanner': 'ray casting: per-ray bpy `scene.ray_cast` loop vs batched Embree scanner',
     'writer': 'S3DIS text formatting: per-line Python vs vectorised writer',
-    'generate': 'generation wall time, 3 areas x 50 rooms x 1M points, 2 workers, vs the 10 min goal',
+    'generate':
+    'generation wall time, 3 areas x 50 rooms x 1M points, 2 workers, vs the 10 min goal',
     'convert': 'conversion: mmdet3d collect + S3DISData vs synthdet convert_s3dis',
     'model': 'TR3D train step, inference and peak memory, 1 cm vs 2 cm voxels',
     'corners': 'room corners: traced outline vs convex-hull baseline (error, count, time)',
@@ -69,9 +70,14 @@ def run_benchmark(name: str, log_dir: Path) -> dict:
     load_before = os.getloadavg()
     start = time.monotonic()
     output = []
-    with subprocess.Popen(command, cwd=REPO_ROOT, stdout=subprocess.PIPE,
-                          stderr=subprocess.STDOUT, text=True, bufsize=1,
-                          env=dict(os.environ, PYTHONUNBUFFERED='1')) as process:
+    with subprocess.Popen(
+            command,
+            cwd=REPO_ROOT,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            bufsize=1,
+            env=dict(os.environ, PYTHONUNBUFFERED='1')) as process:
         for line in process.stdout:
             output.append(line)
             sys.stdout.write(line)
@@ -109,13 +115,15 @@ def machine() -> str:
 def render(records: list[dict], not_run: list[str]) -> str:
     """docs/benchmarks.md from the benchmark records (and the benchmarks without one)."""
     lines = [
-        '# Benchmarks', '',
+        '# Benchmarks',
+        '',
         'Written by `make bench` (`tools/collect_benchmarks.py`), which runs every '
         '`benchmarks/bench_*.py` one after the other and collects the last line of each. Every '
         'benchmark measures both sides of its comparison in the same run, on the same input. '
         f'Machine: {machine()}. Load average = 1/5/15-minute load before and after the run; the '
         'project machine is shared with other jobs, so absolute times vary with it more than '
-        'the ratios do.', '',
+        'the ratios do.',
+        '',
         '| benchmark | what | result (last line) | goal | wall s | load before | load after | '
         'finished |',
         '|---|---|---|---|---|---|---|---|',
@@ -137,8 +145,8 @@ def render(records: list[dict], not_run: list[str]) -> str:
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--only', nargs='+', metavar='NAME',
-                        help='run only these benchmarks (bench_<NAME>.py)')
+    parser.add_argument(
+        '--only', nargs='+', metavar='NAME', help='run only these benchmarks (bench_<NAME>.py)')
     parser.add_argument('--out', type=Path, default=REPO_ROOT / 'docs/benchmarks.md')
     parser.add_argument('--log-dir', type=Path, default=REPO_ROOT / 'work_dirs/bench')
     return parser.parse_args(argv)
@@ -149,8 +157,10 @@ def main(argv: list[str] | None = None) -> int:
     names = discover()
     unknown = sorted(set(args.only or []) - set(names))
     if unknown:
-        print(f'collect_benchmarks: no benchmarks/bench_{unknown[0]}.py (have: '
-              f'{", ".join(names)})', file=sys.stderr)
+        print(
+            f'collect_benchmarks: no benchmarks/bench_{unknown[0]}.py (have: '
+            f'{", ".join(names)})',
+            file=sys.stderr)
         return 2
     records = []
     for name in names:
@@ -161,8 +171,9 @@ def main(argv: list[str] | None = None) -> int:
             continue
         print(f'[bench] {name}: {" ".join(command_of(name))}', flush=True)
         records.append(run_benchmark(name, args.log_dir))
-        print(f'[bench] {name}: {records[-1]["seconds"]} s, exit {records[-1]["returncode"]}',
-              flush=True)
+        print(
+            f'[bench] {name}: {records[-1]["seconds"]} s, exit {records[-1]["returncode"]}',
+            flush=True)
     done = {r['name'] for r in records}
     args.out.write_text(render(records, [n for n in names if n not in done]))
     print(f'[bench] wrote {args.out}')

@@ -31,6 +31,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
@@ -60,15 +61,34 @@ class Size:
 SIZES = {
     # the smoke test: minutes on 2 cores; the model is far from converged, so its weak
     # detections are kept (score >= 0.05) to exercise the CAD and drawing steps
-    'tiny': Size(rooms_per_area=2, points=30_000, num_points=4_000, epochs=1, repeats=1,
-                 batch_size=2, loader_workers=0, predict_rooms=1, workers=1, log_interval=1,
-                 score_thr=0.05),
+    'tiny':
+    Size(
+        rooms_per_area=2,
+        points=30_000,
+        num_points=4_000,
+        epochs=1,
+        repeats=1,
+        batch_size=2,
+        loader_workers=0,
+        predict_rooms=1,
+        workers=1,
+        log_interval=1,
+        score_thr=0.05),
     # make demo: about 30 minutes on 2 free cores
-    'demo': Size(rooms_per_area=12, points=200_000, num_points=40_000, epochs=5, repeats=2,
-                 batch_size=4, loader_workers=1, predict_rooms=3, workers=2, log_interval=4,
-                 score_thr=0.3),
+    'demo':
+    Size(
+        rooms_per_area=12,
+        points=200_000,
+        num_points=40_000,
+        epochs=5,
+        repeats=2,
+        batch_size=4,
+        loader_workers=1,
+        predict_rooms=3,
+        workers=2,
+        log_interval=4,
+        score_thr=0.3),
 }
-
 
 # Stop-gaps for checkouts whose `python -m configurator` cannot dispatch yet because one of its
 # sub-command modules is missing: the same sub-command module run on its own, and the corners
@@ -92,7 +112,10 @@ write_corners(out, corners)
 save_preview(preview, read_scan(scan), np.array(corners['corners']))
 print(f'{out}: {len(corners["corners"])} corners')
 '''
-CONFIGURATOR_MODULES = {'corners': 'configurator.corners_cli', 'freecad': 'configurator.freecad_cli'}
+CONFIGURATOR_MODULES = {
+    'corners': 'configurator.corners_cli',
+    'freecad': 'configurator.freecad_cli'
+}
 
 
 class StepError(RuntimeError):
@@ -102,8 +125,12 @@ class StepError(RuntimeError):
 class Demo:
     """The pipeline's steps over one work directory."""
 
-    def __init__(self, work_dir: Path, size_name: str, seed: int = 0,
-                 threads: int | None = None, python: str = sys.executable) -> None:
+    def __init__(self,
+                 work_dir: Path,
+                 size_name: str,
+                 seed: int = 0,
+                 threads: int | None = None,
+                 python: str = sys.executable) -> None:
         self.work = work_dir.resolve()
         self.size_name = size_name
         self.size = SIZES[size_name]
@@ -118,8 +145,8 @@ class Demo:
         self.config = self.work / f'exp2_cpu_{size_name}.py'  # its stem names the model
         self.train_dir = self.work / 'train'
         self.durations_file = self.work / 'durations.json'
-        self.durations: dict[str, float] = (json.loads(self.durations_file.read_text())
-                                            if self.durations_file.is_file() else {})
+        self.durations: dict[str, float] = (
+            json.loads(self.durations_file.read_text()) if self.durations_file.is_file() else {})
 
     # ------------------------------------------------------------------ running commands
     def run(self, name: str, *args: str | os.PathLike) -> str:
@@ -128,11 +155,14 @@ class Demo:
         self.logs.mkdir(parents=True, exist_ok=True)
         log_path = self.logs / f'{name}.log'
         command = [self.python, *map(str, args)]
-        env = dict(os.environ, PYTHONUNBUFFERED='1', PYTHONWARNINGS='ignore',
-                   # mmengine's checkpoint loader calls torch.load without weights_only, which
-                   # torch >= 2.6 turns into a weights-only load that rejects its own
-                   # checkpoints (HistoryBuffer); these checkpoints are the demo's own files
-                   TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD='1')
+        env = dict(
+            os.environ,
+            PYTHONUNBUFFERED='1',
+            PYTHONWARNINGS='ignore',
+            # mmengine's checkpoint loader calls torch.load without weights_only, which
+            # torch >= 2.6 turns into a weights-only load that rejects its own
+            # checkpoints (HistoryBuffer); these checkpoints are the demo's own files
+            TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD='1')
         if self.threads:
             env['OMP_NUM_THREADS'] = str(self.threads)
         chunks = []
@@ -151,7 +181,7 @@ class Demo:
         return b''.join(chunks).decode(errors='replace')
 
     # ------------------------------------------------------------------ the steps
-    def steps(self) -> list[tuple[str, callable, callable]]:
+    def steps(self) -> list[tuple[str, Callable[[], bool], Callable[[], None]]]:
         """(name, outputs-exist check, action) of every step, in order."""
         return [
             ('generate', self.generated, self.generate),
@@ -182,8 +212,8 @@ class Demo:
 
     def all_exist(self, suffix: str) -> bool:
         rooms = self.held_out_rooms()
-        return bool(rooms) and all((self.rooms_dir / f'{room}{suffix}').is_file()
-                                   for room in rooms)
+        return bool(rooms) and all(
+            (self.rooms_dir / f'{room}{suffix}').is_file() for room in rooms)
 
     def generated(self) -> bool:
         return all(len(self.room_names(area)) >= self.size.rooms_per_area for area in AREAS)
@@ -198,9 +228,8 @@ class Demo:
         return all((self.data / f's3dis_infos_Area_{area}.pkl').is_file() for area in AREAS)
 
     def convert(self) -> None:
-        self.run('convert', 'tools/create_data.py', 's3dis', '--root-path', self.data,
-                 '--out-dir', self.data, '--areas', *map(str, AREAS), '--workers',
-                 str(self.size.workers))
+        self.run('convert', 'tools/create_data.py', 's3dis', '--root-path', self.data, '--out-dir',
+                 self.data, '--areas', *map(str, AREAS), '--workers', str(self.size.workers))
 
     def table1(self) -> None:
         output = self.run('table1', 'tools/dataset_stats.py', self.data, '--areas',
@@ -215,8 +244,7 @@ class Demo:
         cfg = Config.fromfile(BASE_CONFIG)
         size = self.size
         data_root = f'{self.data}/'
-        loader = dict(num_workers=size.loader_workers,
-                      persistent_workers=size.loader_workers > 0)
+        loader = dict(num_workers=size.loader_workers, persistent_workers=size.loader_workers > 0)
         for dataset in cfg.train_dataloader.dataset.dataset.datasets:
             dataset.data_root = data_root
             _set_num_points(dataset.pipeline, size.num_points)
@@ -261,8 +289,8 @@ class Demo:
 
     def predicted(self) -> bool:
         rooms = self.held_out_rooms()
-        return bool(rooms) and all((self.predictions / f'{room}.pred.json').is_file()
-                                   for room in rooms)
+        return bool(rooms) and all(
+            (self.predictions / f'{room}.pred.json').is_file() for room in rooms)
 
     def predict(self) -> None:
         self.run('predict', 'tools/predict.py', self.config, self.best_checkpoint(),
@@ -276,6 +304,7 @@ class Demo:
 
     def configurator(self, log: str, command: str, *args: str | os.PathLike) -> None:
         """Run ``python -m configurator COMMAND ARGS`` (or its stop-gap, see above)."""
+
         def present(module: str) -> bool:
             return (REPO_ROOT / (module.replace('.', '/') + '.py')).is_file()
 
@@ -298,21 +327,22 @@ class Demo:
     def freecad(self) -> None:
         for room in self.held_out_rooms():
             self.configurator(f'freecad_{room}', 'freecad', '--scan', self.scan(room),
-                              '--predictions', self.predictions / f'{room}.pred.json',
-                              '--corners', self.rooms_dir / f'{room}.corners.json', '--out',
+                              '--predictions', self.predictions / f'{room}.pred.json', '--corners',
+                              self.rooms_dir / f'{room}.corners.json', '--out',
                               self.rooms_dir / f'{room}.FCStd', '--min-score',
                               str(self.size.score_thr))
 
     def pictures(self) -> None:
         for room in self.held_out_rooms():
-            self.run(f'visualize_{room}', 'tools/visualize.py', self.scan(room), '--gt',
-                     self.scan(room).parent / 'meta.json', '--pred',
-                     self.predictions / f'{room}.pred.json', '--corners',
-                     self.rooms_dir / f'{room}.corners.json', '--out',
-                     self.rooms_dir / f'{room}.png', '--ply', self.rooms_dir / f'{room}.ply',
-                     '--min-score', str(self.size.score_thr), '--title',
-                     f'Area_{TEST_AREA}/{room}: ground truth (solid), predictions with score >= '
-                     f'{self.size.score_thr} (dashed), room corners (black)')
+            self.run(
+                f'visualize_{room}', 'tools/visualize.py', self.scan(room), '--gt',
+                self.scan(room).parent / 'meta.json', '--pred',
+                self.predictions / f'{room}.pred.json', '--corners',
+                self.rooms_dir / f'{room}.corners.json', '--out', self.rooms_dir / f'{room}.png',
+                '--ply', self.rooms_dir / f'{room}.ply', '--min-score', str(self.size.score_thr),
+                '--title',
+                f'Area_{TEST_AREA}/{room}: ground truth (solid), predictions with score >= '
+                f'{self.size.score_thr} (dashed), room corners (black)')
 
     def report(self) -> None:
         (self.work / 'REPORT.md').write_text(self.report_text())
@@ -322,22 +352,37 @@ class Demo:
         """REPORT.md: the tables, the pictures, the corners and the FreeCAD documents."""
         size = self.size
         lines = [
-            f'# synthdet demo report ({self.size_name})', '',
+            f'# synthdet demo report ({self.size_name})',
+            '',
             f'Generated areas 7, 8, 9 with {size.rooms_per_area} rooms each and {size.points:,} '
             f'points per room (seed {self.seed}); TR3D trained on areas 7 and 8 with '
             f'`{self.config.name}` (configs/tr3d/exp2_cpu.py with {size.num_points:,} sampled '
             f'points, {size.epochs} epoch(s), areas repeated {size.repeats}x), tested on area 9. '
-            f'Data: `{self.data}`. Logs of every step: `logs/`.', '',
-            '## Table 1: instances per class and area', '',
-            '```', (self.work / 'table1.txt').read_text().rstrip(), '```', '',
-            '## Table 3: test on area 9', '',
+            f'Data: `{self.data}`. Logs of every step: `logs/`.',
+            '',
+            '## Table 1: instances per class and area',
+            '',
+            '```',
+            (self.work / 'table1.txt').read_text().rstrip(),
+            '```',
+            '',
+            '## Table 3: test on area 9',
+            '',
             f'Checkpoint `{self.best_checkpoint().relative_to(self.work)}` (best validation '
-            'mAP@0.25). JSON: [table3.json](table3.json).', '',
-            _table3_markdown(json.loads((self.work / 'table3.json').read_text())), '',
-            f'## Table 4: objects per held-out room (score >= {size.score_thr})', '',
+            'mAP@0.25). JSON: [table3.json](table3.json).',
+            '',
+            _table3_markdown(json.loads((self.work / 'table3.json').read_text())),
+            '',
+            f'## Table 4: objects per held-out room (score >= {size.score_thr})',
+            '',
             'True objects, then correct(incorrect) detections. JSON: [table4.json](table4.json).',
-            '', '```', (self.work / 'table4.txt').read_text().rstrip(), '```', '',
-            '## Held-out rooms of area 9', '',
+            '',
+            '```',
+            (self.work / 'table4.txt').read_text().rstrip(),
+            '```',
+            '',
+            '## Held-out rooms of area 9',
+            '',
         ]
         for room in self.held_out_rooms():
             corners = json.loads((self.rooms_dir / f'{room}.corners.json').read_text())
@@ -345,23 +390,26 @@ class Demo:
             detections = json.loads((self.predictions / f'{room}.pred.json').read_text())
             fcstd = self.rooms_dir / f'{room}.FCStd'
             lines += [
-                f'### {room}', '',
-                f'![{room}: top view with boxes](rooms/{room}.png)', '',
+                f'### {room}',
+                '',
+                f'![{room}: top view with boxes](rooms/{room}.png)',
+                '',
                 f'- scan: `{self.scan(room)}`',
                 f'- detections (score >= {size.score_thr}): {len(detections["detections"])}; '
                 f'ground-truth '
                 f'objects: {len(meta["objects"])} ([predictions]'
                 f'(predictions/{room}.pred.json))',
-                f'- corners ({len(corners["corners"])}, clockwise, metres): '
-                + ', '.join(f'({x:.2f}, {y:.2f})' for x, y in corners['corners']),
+                f'- corners ({len(corners["corners"])}, clockwise, metres): ' +
+                ', '.join(f'({x:.2f}, {y:.2f})' for x, y in corners['corners']),
                 f'- true floor polygon ({len(meta["room"]["polygon"])} corners, '
-                f'{meta["room"].get("shape", "?")}): '
-                + ', '.join(f'({x:.2f}, {y:.2f})' for x, y in meta['room']['polygon']),
+                f'{meta["room"].get("shape", "?")}): ' +
+                ', '.join(f'({x:.2f}, {y:.2f})' for x, y in meta['room']['polygon']),
                 f'- floor z {corners["floor_z"]:.3f} m, ceiling z {corners["ceiling_z"]:.3f} m '
                 f'(true height {meta["room"]["height"]:.2f} m); corner preview: '
                 f'[{room}.corners.png](rooms/{room}.corners.png)',
                 f'- FreeCAD document: [`{fcstd}`](rooms/{room}.FCStd)',
-                f'- point cloud for CloudCompare: [rooms/{room}.ply](rooms/{room}.ply)', '',
+                f'- point cloud for CloudCompare: [rooms/{room}.ply](rooms/{room}.ply)',
+                '',
             ]
         if self.durations:
             lines += ['## Wall time per step', '', '| step | seconds |', '|---|---|']
@@ -399,8 +447,9 @@ class Demo:
             self.durations[name] = time.monotonic() - began
             self.durations_file.write_text(json.dumps(self.durations, indent=1) + '\n')
             print(f'{prefix}: done in {self.durations[name]:.0f} s', flush=True)
-        print(f'[demo] finished in {time.monotonic() - start:.0f} s: {self.work / "REPORT.md"}',
-              flush=True)
+        print(
+            f'[demo] finished in {time.monotonic() - start:.0f} s: {self.work / "REPORT.md"}',
+            flush=True)
 
 
 def _set_num_points(pipeline: list, num_points: int) -> None:
@@ -437,14 +486,19 @@ def _table3_markdown(table3: dict) -> str:
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--size', choices=sorted(SIZES), default='demo',
-                        help='tiny: smoke test (minutes); demo: about 30 min on 2 cores')
+    parser.add_argument(
+        '--size',
+        choices=sorted(SIZES),
+        default='demo',
+        help='tiny: smoke test (minutes); demo: about 30 min on 2 cores')
     parser.add_argument('--work-dir', type=Path, default=REPO_ROOT / 'work_dirs/demo')
     parser.add_argument('--seed', type=int, default=0, help='generator and training seed')
     parser.add_argument('--force', action='store_true', help='rerun steps whose outputs exist')
-    parser.add_argument('--threads', type=int,
-                        help='OpenMP threads per step (OMP_NUM_THREADS); 1 is much faster on a '
-                        'machine busy with other work')
+    parser.add_argument(
+        '--threads',
+        type=int,
+        help='OpenMP threads per step (OMP_NUM_THREADS); 1 is much faster on a '
+        'machine busy with other work')
     return parser.parse_args(argv)
 
 

@@ -21,16 +21,25 @@ SEMANTIC_CLASSES = ('ceiling', 'floor', 'wall', 'beam', 'column', 'window', 'doo
                     'chair', 'sofa', 'bookcase', 'board', 'clutter', 'yumi', '3dprinter')
 # Colours (0-255) per class: structure in greys, the detection classes in strong hues.
 CLASS_COLOURS = {
-    'ceiling': (222, 222, 222), 'floor': (196, 196, 196), 'wall': (158, 158, 158),
-    'beam': (140, 140, 120), 'column': (120, 120, 140), 'window': (120, 190, 235),
-    'door': (176, 140, 104), 'clutter': (112, 112, 112),
-    'table': (31, 119, 180), 'chair': (255, 127, 14), 'sofa': (44, 160, 44),
-    'bookcase': (140, 86, 75), 'board': (227, 119, 194),
-    'yumi': (214, 39, 40), '3dprinter': (148, 103, 189),
+    'ceiling': (222, 222, 222),
+    'floor': (196, 196, 196),
+    'wall': (158, 158, 158),
+    'beam': (140, 140, 120),
+    'column': (120, 120, 140),
+    'window': (120, 190, 235),
+    'door': (176, 140, 104),
+    'clutter': (112, 112, 112),
+    'table': (31, 119, 180),
+    'chair': (255, 127, 14),
+    'sofa': (44, 160, 44),
+    'bookcase': (140, 86, 75),
+    'board': (227, 119, 194),
+    'yumi': (214, 39, 40),
+    '3dprinter': (148, 103, 189),
 }
 UNKNOWN_COLOUR = (60, 60, 60)
-STRUCTURE_CLASSES = frozenset(('ceiling', 'floor', 'wall', 'beam', 'column', 'window', 'door',
-                               'clutter'))
+STRUCTURE_CLASSES = frozenset(
+    ('ceiling', 'floor', 'wall', 'beam', 'column', 'window', 'door', 'clutter'))
 
 
 @dataclass(frozen=True)
@@ -94,8 +103,10 @@ def load_scan(path: str | os.PathLike) -> Scan:
     if path.suffix.lower() == '.txt' and annotations.is_dir():
         files = sorted(annotations.glob('*.txt'), key=_natural_key)
         parts = [read_scan(file) for file in files]
-        labels = np.concatenate([np.full(len(part), _annotation_class(file), dtype=object)
-                                 for part, file in zip(parts, files)])
+        labels = np.concatenate([
+            np.full(len(part), _annotation_class(file), dtype=object)
+            for part, file in zip(parts, files)
+        ])
         return Scan(np.concatenate(parts), labels, str(path))
     points = read_scan(path)
     mask = path.parent.parent / 'semantic_mask' / path.name
@@ -103,7 +114,7 @@ def load_scan(path: str | os.PathLike) -> Scan:
         ids = np.fromfile(mask, dtype=np.int64)
         if len(ids) != len(points):
             raise ValueError(f'{mask}: {len(ids)} labels for the {len(points)} points of {path}')
-        names = np.array(SEMANTIC_CLASSES + ('unknown',), dtype=object)
+        names = np.array(SEMANTIC_CLASSES + ('unknown', ), dtype=object)
         return Scan(points, names[np.clip(ids, 0, len(SEMANTIC_CLASSES))], str(path))
     return Scan(points, None, str(path))
 
@@ -116,8 +127,9 @@ def boxes_from_meta(path: str | os.PathLike) -> list[Box]:
     for index, item in enumerate(meta.get('objects', [])):
         try:
             box = item['box']
-            boxes.append(Box(item['class'], tuple(map(float, box['center'])),
-                             tuple(map(float, box['size'])), float(box.get('yaw', 0.0))))
+            boxes.append(
+                Box(item['class'], tuple(map(float, box['center'])),
+                    tuple(map(float, box['size'])), float(box.get('yaw', 0.0))))
         except (KeyError, TypeError, ValueError) as error:
             raise ValueError(f'{path}: objects[{index}] is not a valid box ({error})') from None
     return boxes
@@ -133,9 +145,12 @@ def boxes_from_info(path: str | os.PathLike, scan_name: str) -> list[Box]:
     names = {index: name for name, index in categories.items()}
     for entry in infos['data_list']:
         if Path(entry['lidar_points']['lidar_path']).name == scan_name:
-            return [Box(names.get(int(item['bbox_label_3d']), 'unknown'),
-                        tuple(map(float, item['bbox_3d'][:3])),
-                        tuple(map(float, item['bbox_3d'][3:6]))) for item in entry['instances']]
+            return [
+                Box(
+                    names.get(int(item['bbox_label_3d']), 'unknown'),
+                    tuple(map(float, item['bbox_3d'][:3])),
+                    tuple(map(float, item['bbox_3d'][3:6]))) for item in entry['instances']
+            ]
     raise ValueError(f'{path}: no room with lidar_path {scan_name!r}')
 
 
@@ -205,9 +220,15 @@ def default_colouring(scan: Scan) -> str:
     return 'rgb' if np.ptp(scan.points[:, 3:6]) > 0 else 'height'
 
 
-def draw_top_view(out: str | os.PathLike, scan: Scan, gt: list[Box] = (), pred: list[Box] = (),
-                  corners: np.ndarray | None = None, colour_by: str | None = None,
-                  title: str = '', max_points: int = 400_000, seed: int = 0) -> None:
+def draw_top_view(out: str | os.PathLike,
+                  scan: Scan,
+                  gt: list[Box] = (),
+                  pred: list[Box] = (),
+                  corners: np.ndarray | None = None,
+                  colour_by: str | None = None,
+                  title: str = '',
+                  max_points: int = 400_000,
+                  seed: int = 0) -> None:
     """Save a PNG of the scan seen from above: points (ceiling removed), ground-truth boxes as
     solid outlines, predicted boxes dashed with their scores, the corner polygon in black."""
     import matplotlib
@@ -228,8 +249,8 @@ def draw_top_view(out: str | os.PathLike, scan: Scan, gt: list[Box] = (), pred: 
     points = points[keep]
     labels = labels[keep] if labels is not None else None
     if len(points) > max_points:
-        chosen = np.sort(np.random.default_rng(seed).choice(len(points), max_points,
-                                                            replace=False))
+        chosen = np.sort(
+            np.random.default_rng(seed).choice(len(points), max_points, replace=False))
         points, colours = points[chosen], colours[chosen]
         labels = labels[chosen] if labels is not None else None
     order = np.argsort(points[:, 2], kind='stable')  # higher points on top, as seen from above
@@ -242,47 +263,79 @@ def draw_top_view(out: str | os.PathLike, scan: Scan, gt: list[Box] = (), pred: 
     figure, axes = plt.subplots(figsize=(width + 2.6, height), dpi=110)
     # marker area (pt^2) from the point density, so sparse and dense scans both read well
     marker = float(np.clip(0.12 * (72 * width) * (72 * height) / max(len(points), 1), 0.25, 8))
-    axes.scatter(points[order, 0], points[order, 1], c=colours[order], s=marker, linewidths=0,
-                 rasterized=True)
+    axes.scatter(
+        points[order, 0],
+        points[order, 1],
+        c=colours[order],
+        s=marker,
+        linewidths=0,
+        rasterized=True)
     for box in gt:
         colour = np.array(CLASS_COLOURS.get(box.label, UNKNOWN_COLOUR)) / 255.0
-        axes.add_patch(Polygon(box.footprint(), closed=True, fill=False, edgecolor=colour,
-                               linewidth=2.2))
+        axes.add_patch(
+            Polygon(box.footprint(), closed=True, fill=False, edgecolor=colour, linewidth=2.2))
     for box in pred:
         colour = np.array(CLASS_COLOURS.get(box.label, UNKNOWN_COLOUR)) / 255.0
-        axes.add_patch(Polygon(box.footprint(), closed=True, fill=False, edgecolor='black',
-                               linewidth=1.6, linestyle=(0, (3, 2))))
-        axes.add_patch(Polygon(box.footprint(), closed=True, fill=False, edgecolor=colour,
-                               linewidth=1.0, linestyle=(3, (3, 2))))
+        axes.add_patch(
+            Polygon(
+                box.footprint(),
+                closed=True,
+                fill=False,
+                edgecolor='black',
+                linewidth=1.6,
+                linestyle=(0, (3, 2))))
+        axes.add_patch(
+            Polygon(
+                box.footprint(),
+                closed=True,
+                fill=False,
+                edgecolor=colour,
+                linewidth=1.0,
+                linestyle=(3, (3, 2))))
         corner = box.footprint().max(axis=0)
-        axes.annotate(f'{box.label} {box.score:.2f}' if box.score is not None else box.label,
-                      (box.center[0], corner[1]), ha='center', va='bottom', fontsize=6.5,
-                      color='black', bbox=dict(boxstyle='round,pad=0.15', fc='white',
-                                               ec=colour, lw=0.8, alpha=0.85))
+        axes.annotate(
+            f'{box.label} {box.score:.2f}' if box.score is not None else box.label,
+            (box.center[0], corner[1]),
+            ha='center',
+            va='bottom',
+            fontsize=6.5,
+            color='black',
+            bbox=dict(boxstyle='round,pad=0.15', fc='white', ec=colour, lw=0.8, alpha=0.85))
     if corners is not None:
         ring = np.vstack([corners, corners[:1]])
         axes.plot(ring[:, 0], ring[:, 1], '-', color='black', linewidth=1.6)
         axes.plot(corners[:, 0], corners[:, 1], 'o', color='black', markersize=4)
         for index, (x, y) in enumerate(corners):
-            axes.annotate(str(index), (x, y), textcoords='offset points', xytext=(4, 4),
-                          fontsize=8)
+            axes.annotate(
+                str(index), (x, y), textcoords='offset points', xytext=(4, 4), fontsize=8)
 
     handles = []
     shown = set(labels.astype(str)) if labels is not None else set()
     shown |= {box.label for box in (*gt, *pred)}
     if colour_by == 'class':
-        handles += [Patch(color=np.array(CLASS_COLOURS.get(name, UNKNOWN_COLOUR)) / 255, label=name)
-                    for name in CLASS_COLOURS if name in shown]
+        handles += [
+            Patch(color=np.array(CLASS_COLOURS.get(name, UNKNOWN_COLOUR)) / 255, label=name)
+            for name in CLASS_COLOURS if name in shown
+        ]
     if gt:
         handles.append(Line2D([], [], color='grey', lw=2.2, label='ground truth'))
     if pred:
         handles.append(Line2D([], [], color='black', lw=1.6, ls=(0, (3, 2)), label='prediction'))
     if corners is not None:
-        handles.append(Line2D([], [], color='black', lw=1.6, marker='o', ms=4,
-                              label=f'corners ({len(corners)})'))
+        handles.append(
+            Line2D([], [],
+                   color='black',
+                   lw=1.6,
+                   marker='o',
+                   ms=4,
+                   label=f'corners ({len(corners)})'))
     if handles:
-        axes.legend(handles=handles, loc='upper left', bbox_to_anchor=(1.01, 1.0), fontsize=8,
-                    frameon=False)
+        axes.legend(
+            handles=handles,
+            loc='upper left',
+            bbox_to_anchor=(1.01, 1.0),
+            fontsize=8,
+            frameon=False)
     margin = 0.3
     axes.set_xlim(lo[0] - margin, hi[0] + margin)
     axes.set_ylim(lo[1] - margin, hi[1] + margin)
@@ -314,7 +367,8 @@ def write_ply(out: str | os.PathLike, scan: Scan) -> None:
         index = {name: i for i, name in enumerate(SEMANTIC_CLASSES)}
         unique, inverse = np.unique(scan.labels.astype(str), return_inverse=True)
         vertex['class'] = np.array([index.get(name, -1) for name in unique])[inverse]
-        header.append('comment class ' + ' '.join(f'{i}={n}' for i, n in enumerate(SEMANTIC_CLASSES)))
+        header.append('comment class ' + ' '.join(f'{i}={n}'
+                                                  for i, n in enumerate(SEMANTIC_CLASSES)))
     types = {'<f4': 'float', 'u1': 'uchar', '<i4': 'int'}
     header.append(f'element vertex {len(vertex)}')
     header += [f'property {types[kind]} {name}' for name, kind in fields]

@@ -18,8 +18,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from anywhere
 
-from tools.visualization import (boxes_from_predictions, draw_top_view,  # noqa: E402
-                                 load_corners, load_ground_truth, load_scan, write_ply)
+from tools.visualization import (
+    boxes_from_predictions,
+    draw_top_view,  # noqa: E402
+    load_corners,
+    load_ground_truth,
+    load_scan,
+    write_ply)
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -30,10 +35,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('--corners', help='corners JSON (synthdet.corners/1)')
     parser.add_argument('--out', required=True, help='output PNG')
     parser.add_argument('--ply', help='also write the scan as PLY (with class indices)')
-    parser.add_argument('--colour-by', choices=('class', 'rgb', 'height'),
-                        help='point colours (default: class if annotated, else rgb/height)')
-    parser.add_argument('--min-score', type=float, default=0.3,
-                        help='draw predictions scoring at least this (default 0.3)')
+    parser.add_argument(
+        '--colour-by',
+        choices=('class', 'rgb', 'height'),
+        help='point colours (default: class if annotated, else rgb/height)')
+    parser.add_argument(
+        '--min-score',
+        type=float,
+        default=0.3,
+        help='draw predictions scoring at least this (default 0.3)')
     parser.add_argument('--title', default='', help='figure title (default: the scan name)')
     return parser.parse_args(argv)
 
