@@ -90,33 +90,6 @@ SIZES = {
         score_thr=0.3),
 }
 
-# Stop-gaps for checkouts whose `python -m configurator` cannot dispatch yet because one of its
-# sub-command modules is missing: the same sub-command module run on its own, and the corners
-# step through the public functions that `configurator corners` wraps.
-SUBCOMMAND_SCRIPT = '''
-import argparse, importlib, sys
-module = importlib.import_module(sys.argv[1])
-parser = argparse.ArgumentParser(prog='python -m configurator ' + sys.argv[1])
-module.add_arguments(parser)
-sys.exit(module.run(parser.parse_args(sys.argv[2:])))
-'''
-CORNERS_SCRIPT = '''
-import sys
-import numpy as np
-from configurator.corners import corners_for_scan, write_corners
-from configurator.preview import save_preview
-from configurator.scan_io import read_scan
-scan, out, preview = sys.argv[1:4]
-corners = corners_for_scan(scan)
-write_corners(out, corners)
-save_preview(preview, read_scan(scan), np.array(corners['corners']))
-print(f'{out}: {len(corners["corners"])} corners')
-'''
-CONFIGURATOR_MODULES = {
-    'corners': 'configurator.corners_cli',
-    'freecad': 'configurator.freecad_cli'
-}
-
 
 class StepError(RuntimeError):
     """A pipeline step failed; the message names the step and its log file."""
@@ -303,19 +276,8 @@ class Demo:
         (self.work / 'table4.txt').write_text(_table_lines(output, 'Table 4'))
 
     def configurator(self, log: str, command: str, *args: str | os.PathLike) -> None:
-        """Run ``python -m configurator COMMAND ARGS`` (or its stop-gap, see above)."""
-
-        def present(module: str) -> bool:
-            return (REPO_ROOT / (module.replace('.', '/') + '.py')).is_file()
-
-        if all(map(present, CONFIGURATOR_MODULES.values())):
-            self.run(log, '-m', 'configurator', command, *args)
-        elif present(CONFIGURATOR_MODULES[command]):
-            self.run(log, '-c', SUBCOMMAND_SCRIPT, CONFIGURATOR_MODULES[command], *args)
-        elif command == 'corners':
-            self.run(log, '-c', CORNERS_SCRIPT, args[0], args[2], args[4])
-        else:
-            raise StepError(f'{CONFIGURATOR_MODULES[command]} is missing')
+        """Run ``python -m configurator COMMAND ARGS``."""
+        self.run(log, '-m', 'configurator', command, *args)
 
     def corners(self) -> None:
         self.rooms_dir.mkdir(parents=True, exist_ok=True)
