@@ -224,11 +224,18 @@ def test_table3_layout_from_indoor_metric_results() -> None:
         test_tool.table3({'mAP_0.25': 0.5}, ['table'])
 
 
-def test_test_tool_prints_and_writes_table3(tiny: dict) -> None:
+def test_test_tool_prints_and_writes_table3(tiny: dict, monkeypatch: pytest.MonkeyPatch,
+                                            capsys: pytest.CaptureFixture) -> None:
+    # In this process (the tool's own code, without a second start-up of the stack).
+    monkeypatch.setenv('TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD', '1')  # as the tool sets it
     out_dir = tiny['root'] / 'test_out'
     checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
-    proc = run_tool('tools/test.py', TINY, checkpoint, '--work-dir', out_dir, '--cfg-options',
-                    *data_options(tiny['data']))
+    document = load_tool('test').main([
+        str(TINY),
+        str(checkpoint), '--work-dir',
+        str(out_dir), '--cfg-options', *data_options(tiny['data'])
+    ])
+    stdout = capsys.readouterr().out
     table = json.loads((out_dir / 'table3.json').read_text())
     assert table['format'] == 'synthdet.table3/1' and table['classes'] == TINY_CLASSES
     assert list(table['rows']) == ['mAP@0.25', 'mAP@0.5']
@@ -238,7 +245,8 @@ def test_test_tool_prints_and_writes_table3(tiny: dict) -> None:
         assert all(0.0 <= row[c] <= 1.0 for c in TINY_CLASSES)
         assert row['mean'] == pytest.approx(np.mean([row[c] for c in TINY_CLASSES]))
         assert row['mean'] == table['metrics'][f'mAP_{thr}']
-    lines = proc.stdout.splitlines()
+    assert json.loads((out_dir / 'table3.json').read_text()) == document
+    lines = stdout.splitlines()
     header = next(i for i, line in enumerate(lines) if line.split()[:1] == ['metric'])
     assert lines[header].split() == ['metric', *TINY_CLASSES, 'mean']
     assert lines[header + 1].split()[0] == 'mAP@0.25'
@@ -247,7 +255,9 @@ def test_test_tool_prints_and_writes_table3(tiny: dict) -> None:
     assert lines[header + 2].split()[0] == 'mAP@0.5'
 
 
-def test_predict_writes_detections_in_each_scan_frame(tiny: dict) -> None:
+def test_predict_writes_detections_in_each_scan_frame(tiny: dict,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv('TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD', '1')  # as the tool sets it
     room_txt = tiny['raw'] / 'office_1' / 'office_1.txt'
     converted_bin = tiny['data'] / 'points' / 'Area_1_office_1.bin'
     scans = tiny['root'] / 'scans'
@@ -260,8 +270,11 @@ def test_predict_writes_detections_in_each_scan_frame(tiny: dict) -> None:
     write_scan(room_ply, points)
     out = tiny['root'] / 'pred'
     checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
-    run_tool('tools/predict.py', TINY, checkpoint, room_txt, shifted_bin, room_ply, converted_bin,
-             '--out', out, '--score-thr', '0', '--cfg-options', 'model.test_cfg.score_thr=0.0')
+    written = load_tool('predict').main(
+        [str(p) for p in (TINY, checkpoint, room_txt, shifted_bin, room_ply, converted_bin)] +
+        ['--out',
+         str(out), '--score-thr', '0', '--cfg-options', 'model.test_cfg.score_thr=0.0'])
+    assert len(written) == 4
     documents = {}
     for scan in (room_txt, shifted_bin, room_ply, converted_bin):
         document = json.loads((out / f'{scan.stem}.pred.json').read_text())
