@@ -2,7 +2,9 @@
 
 A module fixture writes two small generated rooms (tests/s3dis_fixtures.py), converts them with
 the real converter and trains the tiny config for one epoch (2 iterations) with tools/train.py;
-the tests then resume, test, predict and count with that checkpoint.
+the tests then resume (tools/train.py --resume), test, predict and count with that checkpoint.
+Training runs as a subprocess with one OpenMP thread; the test, predict and count tools' ``main``
+run in this process with command-line arguments.
 """
 import importlib.util
 import json
