@@ -53,6 +53,7 @@ class CornerParams:
     inlier_width: float = 0.03  # half width of the slab of points that belong to a wall plane
     on_polygon_tol: float = 0.05  # quality: wall points this close to the outline are on it
     min_wall_support: float = 0.4  # fraction of the outline that must be backed by wall points
+    min_line_support: float = 0.15  # edges with less of their length backed are no walls
     max_fit_points: int = 300_000  # wall points used for the fits (every k-th point)
     max_quality_points: int = 50_000  # wall points used for the quality figures
 
@@ -118,6 +119,7 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
         raise CornerDetectionError(
             f'no walls found: wall points back only {supported / perimeter:.0%} of the room '
             f'outline (need {params.min_wall_support:.0%})')
+    lines = _drop_wall_less_bumps(lines, params)
     lines = _snap_directions(lines, params.snap_angle)
     corners = _intersect_lines(lines, params.min_edge, params.min_turn)
     if len(corners) < 3:
@@ -533,6 +535,41 @@ def _fit_wall_lines(outline: np.ndarray, walls: np.ndarray, band: float,
     return lines
 
 
+def _drop_wall_less_bumps(lines: list[_WallLine], params: CornerParams) -> list[_WallLine]:
+    """Drop runs of edges without wall points that bulge out of one straight wall.
+
+    Such a bump is floor or clutter seen through a door. It is recognised by its neighbours,
+    which are the two halves of one wall (parallel and within 10 cm). An unsupported run
+    between different walls, such as a sparsely scanned arm, is kept.
+    """
+    weak = [line.support < params.min_line_support for line in lines]
+    if all(weak) or not any(weak):
+        return lines
+    count = len(lines)
+    drop = np.zeros(count, dtype=bool)
+    start = next(i for i in range(count) if not weak[i])  # begin the walk at a supported line
+    i = start
+    for _ in range(count):
+        j = (i + 1) % count
+        if not weak[i] and weak[j]:
+            end = j
+            while weak[end]:
+                end = (end + 1) % count
+            before, after = lines[i], lines[end]
+            sine = abs(before.direction[0] * after.direction[1] -
+                       before.direction[1] * after.direction[0])
+            normal = np.array([-before.direction[1], before.direction[0]])
+            offset = abs(float((after.point - before.point) @ normal))
+            if sine < math.sin(params.min_turn) and offset < 0.1 and \
+                    before.direction @ after.direction > 0:
+                k = j
+                while k != end:
+                    drop[k] = True
+                    k = (k + 1) % count
+        i = j
+    return [line for line, dropped in zip(lines, drop) if not dropped]
+
+
 class _BucketIndex:
     """2D points sorted into square buckets, for fast bounding-box queries."""
 
@@ -699,7 +736,7 @@ def _quality(corners: np.ndarray, xyz: np.ndarray, floor_z: float, ceiling_z: fl
     on = distance < params.on_polygon_tol
     outside = ~points_in_polygon(xyz[:, :2], corners) & \
         (distance_to_polygon(xyz[:, :2], corners) > params.on_polygon_tol)
-    supports = [line.support for line in lines if line.inliers]
+    supports = [line.support for line in lines]
     return {
         'wall_points_on_polygon':
         float(on.mean()) if len(on) else 0.0,

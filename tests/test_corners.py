@@ -79,6 +79,22 @@ def test_sparsely_scanned_arm_of_a_u_room():
     assert matched_error(outline.corners, room.polygon) < 0.03
 
 
+def test_floor_seen_through_a_door_is_not_part_of_the_room():
+    """A patch of floor outside one wall (seen through a door) has no walls of its own."""
+    room = make_room('rect', n_points=200_000, seed=1)
+    a, b = room.polygon[0], room.polygon[1]
+    along = (b - a) / np.linalg.norm(b - a)
+    outward = np.array([-along[1], along[0]])  # left of a clockwise edge
+    rng = np.random.default_rng(0)
+    start = 0.4 * np.linalg.norm(b - a)
+    xy = a + (start + rng.uniform(0, 1.0, (3000, 1))) * along + \
+        rng.uniform(0.05, 1.5, (3000, 1)) * outward
+    patch = np.column_stack([xy, np.full(3000, room.floor_z), np.zeros((3000, 3))])
+    outline = detect_corners(np.vstack([room.points, patch]))
+    assert matched_error(outline.corners, room.polygon) < 0.03
+    assert outline.quality['points_outside_polygon'] > 0.01  # the patch is reported
+
+
 def test_corners_start_near_the_lower_left_and_go_clockwise():
     room = make_room('rect', n_points=80_000, seed=2, rotate=False)
     corners = detect_corners(room.points).corners
