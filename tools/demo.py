@@ -358,8 +358,9 @@ class Demo:
                 '',
                 f'- scan: `{self.scan(room)}`',
                 f'- detections (score >= {size.score_thr}): {len(detections["detections"])}; '
-                f'ground-truth '
-                f'objects: {len(meta["objects"])} ([predictions]'
+                f'true objects of these classes: '
+                f'{sum(o["class"] in detections["classes"] for o in meta["objects"])} '
+                f'([predictions]'
                 f'(predictions/{room}.pred.json))',
                 f'- corners ({len(corners["corners"])}, clockwise, metres): ' +
                 ', '.join(f'({x:.2f}, {y:.2f})' for x, y in corners['corners']),
