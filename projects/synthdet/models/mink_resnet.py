@@ -8,6 +8,17 @@ from mmengine.model import BaseModule
 from torch import nn
 
 
+def init_minkowski_weights(root: nn.Module) -> None:
+    """Kaiming-normal kernels for every sparse convolution in ``root``, unit BatchNorm scale and
+    zero shift (TR3D's initialisation of its backbone and neck)."""
+    for module in root.modules():
+        if isinstance(module, ME.MinkowskiConvolution):
+            ME.utils.kaiming_normal_(module.kernel, mode='fan_out', nonlinearity='relu')
+        if isinstance(module, ME.MinkowskiBatchNorm):
+            nn.init.constant_(module.bn.weight, 1)
+            nn.init.constant_(module.bn.bias, 0)
+
+
 @MODELS.register_module()
 class TR3DMinkResNet(BaseModule):
     """Sparse ResNet with BasicBlocks and narrow stages, as published for TR3D.
@@ -61,12 +72,7 @@ class TR3DMinkResNet(BaseModule):
 
     def init_weights(self) -> None:
         """Kaiming-normal convolution kernels, unit BatchNorm scale and zero shift."""
-        for module in self.modules():
-            if isinstance(module, ME.MinkowskiConvolution):
-                ME.utils.kaiming_normal_(module.kernel, mode='fan_out', nonlinearity='relu')
-            if isinstance(module, ME.MinkowskiBatchNorm):
-                nn.init.constant_(module.bn.weight, 1)
-                nn.init.constant_(module.bn.bias, 0)
+        init_minkowski_weights(self)
 
     def forward(self, x: ME.SparseTensor) -> list[ME.SparseTensor]:
         """Return the output of every stage (tensor strides 8, 16, 32, 64 voxels)."""

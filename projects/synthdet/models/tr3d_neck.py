@@ -6,6 +6,8 @@ from mmdet3d.registry import MODELS
 from mmengine.model import BaseModule
 from torch import nn
 
+from .mink_resnet import init_minkowski_weights
+
 
 @MODELS.register_module()
 class TR3DNeck(BaseModule):
@@ -50,12 +52,7 @@ class TR3DNeck(BaseModule):
 
     def init_weights(self) -> None:
         """Kaiming-normal convolution kernels, unit BatchNorm scale and zero shift."""
-        for module in self.modules():
-            if isinstance(module, ME.MinkowskiConvolution):
-                ME.utils.kaiming_normal_(module.kernel, mode='fan_out', nonlinearity='relu')
-            if isinstance(module, ME.MinkowskiBatchNorm):
-                nn.init.constant_(module.bn.weight, 1)
-                nn.init.constant_(module.bn.bias, 0)
+        init_minkowski_weights(self)
 
     def forward(self, feats: Sequence[ME.SparseTensor]) -> list[ME.SparseTensor]:
         """Map backbone stage outputs to ``num_levels`` output levels, finest first."""
