@@ -26,9 +26,6 @@ demo: setup
 # finished rooms are kept, training continues from the newest checkpoint of work_dirs/exp2_cpu.
 EXP2_DATA ?= data/s3dis
 EXP2_WORK ?= work_dirs/exp2_cpu
-# mmengine loads checkpoints with torch.load's default, weights-only since torch 2.6, which
-# rejects mmengine's own checkpoints; these are the run's own files.
-exp2-cpu: export TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD = 1
 # One OpenMP thread per process by default: on a busy machine torch's default (all cores) runs
 # 3x slower from oversubscription (measured: 27 s vs 8 s per tiny iteration at load 6 on 2
 # cores). Set EXP2_THREADS=2 on an idle 2-core machine.

@@ -128,14 +128,7 @@ class Demo:
         self.logs.mkdir(parents=True, exist_ok=True)
         log_path = self.logs / f'{name}.log'
         command = [self.python, *map(str, args)]
-        env = dict(
-            os.environ,
-            PYTHONUNBUFFERED='1',
-            PYTHONWARNINGS='ignore',
-            # mmengine's checkpoint loader calls torch.load without weights_only, which
-            # torch >= 2.6 turns into a weights-only load that rejects its own
-            # checkpoints (HistoryBuffer); these checkpoints are the demo's own files
-            TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD='1')
+        env = dict(os.environ, PYTHONUNBUFFERED='1', PYTHONWARNINGS='ignore')
         if self.threads:
             env['OMP_NUM_THREADS'] = str(self.threads)
         chunks = []
