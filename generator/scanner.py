@@ -4,7 +4,8 @@ Knows nothing of Blender: it takes triangle arrays (world frame) where every tri
 colour and the index of the part (annotated element) it belongs to.
 
 Paper, Sec. 3.1: the sensor moves along two crossing segments covering 80 % of the room, in a
-random direction, at 2/3 of the room height; ray directions are uniformly random; rays first go
+random direction, at 2/3 of the room height (L-, U- and T-shaped rooms get such a cross in each
+cell of their grid, see :func:`sensor_path`); ray directions are uniformly random; rays first go
 to the movable objects only (the room excluded) until the requested share of object points is
 reached, then to the structure (objects still occlude it, so no wall points appear behind a sofa).
 
@@ -46,19 +47,18 @@ class ScanResult:
     object_points: int
 
 
-def _interior_point(polygon: np.ndarray) -> np.ndarray:
-    """Centre of the bounding box if it lies in the room, else the centre of the largest cell."""
-    centre = (polygon.min(axis=0) + polygon.max(axis=0)) / 2
-    if points_in_polygon(centre[None], polygon)[0]:
-        return centre
+def grid_cells(polygon: np.ndarray) -> list[np.ndarray]:
+    """Rectangles (4, 2) of the grid through the corner coordinates whose centres lie in the room.
+
+    A rectangle has one cell, an L-shaped room three, a U- or T-shaped room five.
+    """
     xs, ys = np.unique(polygon[:, 0]), np.unique(polygon[:, 1])
-    best, best_area = centre, -1.0
+    cells = []
     for x0, x1 in zip(xs[:-1], xs[1:]):
         for y0, y1 in zip(ys[:-1], ys[1:]):
-            c = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
-            if (x1 - x0) * (y1 - y0) > best_area and points_in_polygon(c[None], polygon)[0]:
-                best, best_area = c, (x1 - x0) * (y1 - y0)
-    return best
+            if points_in_polygon(np.array([[(x0 + x1) / 2, (y0 + y1) / 2]]), polygon)[0]:
+                cells.append(np.array([[x0, y0], [x0, y1], [x1, y1], [x1, y0]]))
+    return cells
 
 
 def _chord(polygon: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> tuple[float, float]:
@@ -81,25 +81,31 @@ def sensor_path(polygon: np.ndarray,
                 coverage: float = 0.8,
                 height_fraction: float = 2 / 3,
                 steps: int = 512) -> tuple[np.ndarray, np.ndarray]:
-    """Sensor positions (steps, 3) on two crossing segments, and their end points (2, 2, 2).
+    """Sensor positions (steps, 3) and the segments (S, 2, 2) they run along, in order.
 
-    The segments cross at an interior point, at a random angle and at right angles to each other;
-    each spans ``coverage`` of the room's extent along its line.
+    The paper's path: two segments at right angles, crossing at the centre at a random angle,
+    each spanning ``coverage`` of the room's extent along its line. A rectangle gets exactly
+    that. An L-, U- or T-shaped room gets such a cross in every cell of :func:`grid_cells`, so
+    that the sensor also walks into the arms (a single cross leaves an arm's inner walls
+    unscanned). Each segment is clipped to the room; the steps are shared equally by the
+    segments.
     """
-    origin = _interior_point(polygon)
-    angle = rng.uniform(0.0, np.pi)
     segments = []
-    for a in (angle, angle + np.pi / 2):
-        direction = np.array([np.cos(a), np.sin(a)])
-        t0, t1 = _chord(polygon, origin, direction)
-        mid, half = (t0 + t1) / 2, coverage * (t1 - t0) / 2
-        segments.append([origin + direction * (mid - half), origin + direction * (mid + half)])
+    for cell in grid_cells(polygon):
+        origin = (cell.min(axis=0) + cell.max(axis=0)) / 2
+        angle = rng.uniform(0.0, np.pi)
+        for a in (angle, angle + np.pi / 2):
+            direction = np.array([np.cos(a), np.sin(a)])
+            c0, c1 = _chord(cell, origin, direction)
+            r0, r1 = _chord(polygon, origin, direction)
+            t0, t1 = max(c0, r0), min(c1, r1)
+            mid, half = (t0 + t1) / 2, coverage * (t1 - t0) / 2
+            segments.append([origin + direction * (mid - half), origin + direction * (mid + half)])
     segments = np.array(segments)
-    n1 = steps // 2
-    t = np.concatenate([np.linspace(0, 1, n1), np.linspace(0, 1, steps - n1)])[:, None]
+    counts = [len(chunk) for chunk in np.array_split(np.arange(steps), len(segments))]
     xy = np.concatenate([
-        segments[0, 0] + t[:n1] * (segments[0, 1] - segments[0, 0]),
-        segments[1, 0] + t[n1:] * (segments[1, 1] - segments[1, 0])
+        start + np.linspace(0, 1, n)[:, None] * (end - start)
+        for (start, end), n in zip(segments, counts)
     ])
     z = np.full((steps, 1), height_fraction * height)
     return np.concatenate([xy, z], axis=1), segments
