@@ -243,6 +243,58 @@ def test_optional_outputs_in_l_and_u_rooms(asset_cache, tmp_path):
             for o in meta['objects']} | {'floor_1', 'ceiling_1', 'wall_1'} <= set(names)
 
 
+def _points_on_edge(xyz: np.ndarray, a: np.ndarray, b: np.ndarray, height: float) -> int:
+    """Scan points on the wall above floor edge a-b (within 1 cm, away from its ends)."""
+    length = float(np.linalg.norm(b - a))
+    along = (xyz[:, :2] - a) @ (b - a) / length
+    across = np.abs(np.cross(b - a, xyz[:, :2] - a)) / length
+    wall = (xyz[:, 2] > 0.1) & (xyz[:, 2] < height - 0.1)
+    return int(np.sum(wall & (across < 0.01) & (along > 0.05) & (along < length - 0.05)))
+
+
+@pytest.mark.parametrize('polygon', [
+    [(0, 0), (0, 6), (2, 6), (2, 3), (4, 3), (4, 6), (7, 6), (7, 0)],  # U
+    [(0, 0), (0, 6), (3, 6), (3, 3), (7, 3), (7, 0)],  # L
+    [(0, 0), (0, 4), (6, 4), (6, 0)],  # box: the paper's single cross
+])
+def test_sensor_path_crosses_every_cell_of_the_room(polygon):
+    from generator.scanner import grid_cells
+    polygon = np.array(polygon, float)
+    path, segments = sensor_path(polygon, 3.0, np.random.default_rng(3), steps=500)
+    cells = grid_cells(polygon)
+    assert len(segments) == 2 * len(cells) and len(path) == 500
+    assert points_in_polygon(path[:, :2], polygon).all()
+    for cell, pair in zip(cells, segments.reshape(-1, 2, 2, 2)):
+        d1, d2 = pair[0, 1] - pair[0, 0], pair[1, 1] - pair[1, 0]
+        assert abs(np.dot(d1, d2)) < 1e-9  # each cell's cross is at right angles
+        lo, hi = cell.min(axis=0), cell.max(axis=0)
+        inside = np.all((path[:, :2] > lo) & (path[:, :2] < hi), axis=1)
+        assert inside.sum() >= 500 // len(segments)  # the sensor walks through every cell
+
+
+def test_every_wall_of_generated_u_rooms_is_scanned(asset_cache, tmp_path):
+    # A single cross through the base of a U left an arm's inner wall without a point.
+    config = tmp_path / 'u.yaml'
+    config.write_text('room:\n  shapes: {U: 1.0}\n')
+    out = tmp_path / 'u'
+    assert main([
+        '--out',
+        str(out), '--areas', '9', '--rooms-per-area', '3', '--points', '20000', '--seed', '2',
+        '--asset-cache',
+        str(asset_cache), '--config',
+        str(config), '--quiet'
+    ]) == 0
+    for room in _rooms(out):
+        meta = json.loads((room / 'meta.json').read_text())
+        polygon, height = np.asarray(meta['room']['polygon']), meta['room']['height']
+        xyz, _ = parse_lines(room / f'{room.name}.txt')
+        counts = [
+            _points_on_edge(xyz, a, b, height)
+            for a, b in zip(polygon, np.roll(polygon, -1, axis=0))
+        ]
+        assert min(counts) >= 20, (room.name, counts)
+
+
 def _box_room_scene() -> tuple[TriangleScene, np.ndarray]:
     """A 6 x 4 x 3 m box room (2 parts) with a 1 m cube (movable part 2) on the floor."""
 
