@@ -252,11 +252,13 @@ def _points_on_edge(xyz: np.ndarray, a: np.ndarray, b: np.ndarray, height: float
     return int(np.sum(wall & (across < 0.01) & (along > 0.05) & (along < length - 0.05)))
 
 
-@pytest.mark.parametrize('polygon', [
-    [(0, 0), (0, 6), (2, 6), (2, 3), (4, 3), (4, 6), (7, 6), (7, 0)],  # U
-    [(0, 0), (0, 6), (3, 6), (3, 3), (7, 3), (7, 0)],  # L
-    [(0, 0), (0, 4), (6, 4), (6, 0)],  # box: the paper's single cross
-])
+@pytest.mark.parametrize(
+    'polygon',
+    [
+        [(0, 0), (0, 6), (2, 6), (2, 3), (4, 3), (4, 6), (7, 6), (7, 0)],  # U
+        [(0, 0), (0, 6), (3, 6), (3, 3), (7, 3), (7, 0)],  # L
+        [(0, 0), (0, 4), (6, 4), (6, 0)],  # box: the paper's single cross
+    ])
 def test_sensor_path_crosses_every_cell_of_the_room(polygon):
     from generator.scanner import grid_cells
     polygon = np.array(polygon, float)
