@@ -79,6 +79,50 @@ def test_sparsely_scanned_arm_of_a_u_room():
     assert matched_error(outline.corners, room.polygon) < 0.03
 
 
+@pytest.fixture(scope='module')
+def generator_rooms(tmp_path_factory) -> list:
+    """Rooms made by ``python -m generator`` (real bpy scenes and ray casting): 2 box, 2 L and
+    2 U rooms without noise and the same again with the generator's noise models."""
+    from generator.__main__ import main
+    work = tmp_path_factory.mktemp('generated')
+    rooms = []
+    for noisy in (False, True):
+        for shape in ('box', 'L', 'U'):
+            settings = {'room': {'shapes': {shape: 1.0}}}
+            if noisy:
+                settings['scanner'] = {'range_noise': 0.01, 'angular_jitter': 0.001, 'dropout': 0.1}
+            config = work / f'{shape}_{noisy}.json'
+            config.write_text(json.dumps(settings))
+            out = work / config.stem
+            assert main([
+                '--out',
+                str(out), '--areas', '9', '--rooms-per-area', '2', '--points', '150000',
+                '--seed', '7', '--config',
+                str(config), '--asset-cache',
+                str(work / 'assets'), '--quiet'
+            ]) == 0
+            rooms += [(shape, noisy, meta.parent) for meta in sorted(out.rglob('meta.json'))]
+    return rooms
+
+
+@pytest.mark.parametrize('noisy', [False, True], ids=['clean', 'noisy'])
+def test_corners_of_generated_rooms_of_each_shape(generator_rooms, noisy):
+    """The issue's goal on the generator's own rooms: the right corner count and a mean error
+    under 3 cm (5 cm with its noise models) against the polygon in meta.json."""
+    shapes = set()
+    for shape, room_noisy, room in generator_rooms:
+        if room_noisy != noisy:
+            continue
+        meta = json.loads((room / 'meta.json').read_text())
+        assert meta['room']['shape'] == shape
+        outline = detect_corners(read_scan(room / f'{room.name}.txt'))
+        truth = np.asarray(meta['room']['polygon'], dtype=float)
+        assert matched_error(outline.corners, truth) < (0.05 if noisy else 0.03), room
+        assert abs(outline.ceiling_z - outline.floor_z - meta['room']['height']) < 0.02
+        shapes.add(shape)
+    assert shapes == {'box', 'L', 'U'}
+
+
 def test_floor_seen_through_a_door_is_not_part_of_the_room():
     """A patch of floor outside one wall (seen through a door) has no walls of its own."""
     room = make_room('rect', n_points=200_000, seed=1)
