@@ -213,9 +213,13 @@ def main() -> None:
 
     error = {name: np.nanmean([e for e, _ in totals[name]]) * 100 for name in METHODS}
     correct = {name: np.mean([ok for _, ok in totals[name]]) for name in METHODS}
-    clean, noisy = summary(results, False), summary(results, True)
-    print(f'corners, generator rooms: traced {clean[0]:.2f} cm / {clean[1]:.0%} right count, '
-          f'noisy {noisy[0]:.2f} cm / {noisy[1]:.0%}; all rooms: traced {error["traced"]:.2f} cm '
+    generated = [
+        f'{name} {err:.2f} cm / {ok:.0%} right count'
+        for name, (err, ok) in (('clean', summary(results, False)),
+                                ('noisy', summary(results, True))) if not np.isnan(err)
+    ]
+    print(f'corners, generator rooms: traced {", ".join(generated) or "none"}; all rooms: '
+          f'traced {error["traced"]:.2f} cm '
           f'/ {correct["traced"]:.0%} vs convex hull {error["hull"]:.2f} cm / '
           f'{correct["hull"]:.0%}: hull error {error["hull"] / error["traced"]:.1f}x traced; '
           f'time per 1M points traced '
