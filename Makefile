@@ -23,7 +23,8 @@ demo: setup
 
 # Experiment 2 at CPU scale (docs/results.md): 3 generated areas x 50 rooms x 1M points in
 # data/s3dis, train areas 7, 8 and test area 9 with configs/tr3d/exp2_cpu.py. Every step resumes:
-# finished rooms are kept, training continues from the newest checkpoint of work_dirs/exp2_cpu.
+# finished rooms are kept, training continues from the newest checkpoint of work_dirs/exp2_cpu,
+# and the test uses the final epoch's checkpoint (named in last_checkpoint).
 EXP2_DATA ?= data/s3dis
 EXP2_WORK ?= work_dirs/exp2_cpu
 # One OpenMP thread per process by default: on a busy machine torch's default (all cores) runs
@@ -38,7 +39,7 @@ exp2-cpu: setup
 	$(PY) tools/dataset_stats.py $(EXP2_DATA) --areas 7 8 9
 	$(PY) tools/train.py configs/tr3d/exp2_cpu.py --work-dir $(EXP2_WORK) \
 	    $$(ls $(EXP2_WORK)/epoch_*.pth >/dev/null 2>&1 && echo --resume)
-	$(PY) tools/test.py configs/tr3d/exp2_cpu.py $$(ls -t $(EXP2_WORK)/best_*.pth | head -n 1) \
+	$(PY) tools/test.py configs/tr3d/exp2_cpu.py $$(cat $(EXP2_WORK)/last_checkpoint) \
 	    --work-dir $(EXP2_WORK)/test
 
 # Every benchmarks/bench_*.py, one after the other; their last lines go to docs/benchmarks.md.

@@ -142,6 +142,7 @@ def test_report_links_every_artefact(demo):
     for heading in ('Table 1', 'Table 3', 'Table 4'):
         assert f'## {heading}' in report
     assert re.search(r'\| mAP@0\.25 \| (\d\.\d{3}|-) \|', report)
+    assert 'Checkpoint `train/epoch_1.pth` (the final epoch)' in report  # tiny trains 1 epoch
     links = re.findall(r'\]\(([^)]+)\)', report)
     for name in rooms(demo):
         for suffix in ('.png', '.corners.png', '.FCStd', '.ply'):

@@ -104,7 +104,9 @@ def test_registry_builds_the_model_of_every_config(path: Path) -> None:
     model = MODELS.build(cfg.model)
     assert isinstance(model, TR3DDetector)
     assert model.bbox_head.num_classes == len(cfg.model.bbox_head.label2level)
-    assert cfg.default_hooks.checkpoint.save_best == 'mAP_0.25'
+    # The paper reports its best epoch; exp2_cpu tests its final one (area 9 validates and tests).
+    best_metric = None if path.stem == 'exp2_cpu' else 'mAP_0.25'
+    assert cfg.default_hooks.checkpoint.save_best == best_metric
     assert cfg.optim_wrapper.optimizer == dict(type='AdamW', lr=0.001, weight_decay=0.0001)
     assert cfg.optim_wrapper.clip_grad.max_norm == 10
     if 'test_dataloader' not in cfg:  # tr3d.py: the model base without data

@@ -12,7 +12,7 @@ Steps and outputs (``WORK`` = the work directory):
  1. generate areas 7-9          WORK/data/Stanford3dDataset_v1.2_Aligned_Version/Area_{7,8,9}
  2. convert                     WORK/data/s3dis_infos_Area_{7,8,9}.pkl, points/, masks
  3. Table 1                     WORK/table1.txt
- 4. train (exp2_cpu, resized)   WORK/exp2_cpu_<size>.py, WORK/train/epoch_N.pth, best_*.pth
+ 4. train (exp2_cpu, resized)   WORK/exp2_cpu_<size>.py, WORK/train/epoch_N.pth (the last one is tested)
  5. test, Table 3               WORK/table3.json, WORK/table3.txt
  6. predict held-out rooms of 9 WORK/predictions/<room>.pred.json
  7. Table 4                     WORK/table4.json, WORK/table4.txt
@@ -241,15 +241,15 @@ class Demo:
         resume = ['--resume'] if list(self.train_dir.glob('epoch_*.pth')) else []
         self.run('train', 'tools/train.py', self.config, '--work-dir', self.train_dir, *resume)
 
-    def best_checkpoint(self) -> Path:
-        """The checkpoint with the best validation mAP@0.25 (the paper's best epoch)."""
-        best = sorted(self.train_dir.glob('best_*.pth'), key=lambda p: p.stat().st_mtime)
-        if not best:
-            raise StepError(f'no best_*.pth in {self.train_dir}: run the train step first')
-        return best[-1]
+    def final_checkpoint(self) -> Path:
+        """The last epoch's checkpoint: area 9 validates and tests, so no epoch is picked on it."""
+        final = self.train_dir / f'epoch_{self.size.epochs}.pth'
+        if not final.is_file():
+            raise StepError(f'no {final}: run the train step first')
+        return final
 
     def test(self) -> None:
-        output = self.run('test', 'tools/test.py', self.config, self.best_checkpoint(),
+        output = self.run('test', 'tools/test.py', self.config, self.final_checkpoint(),
                           '--work-dir', self.work / 'test', '--out', self.work / 'table3.json')
         (self.work / 'table3.txt').write_text(_table_lines(output, 'Table 3'))
 
@@ -259,7 +259,7 @@ class Demo:
             (self.predictions / f'{room}.pred.json').is_file() for room in rooms)
 
     def predict(self) -> None:
-        self.run('predict', 'tools/predict.py', self.config, self.best_checkpoint(),
+        self.run('predict', 'tools/predict.py', self.config, self.final_checkpoint(),
                  *[self.scan(room) for room in self.held_out_rooms()], '--out', self.predictions,
                  '--seed', str(self.seed), '--score-thr', str(self.size.score_thr))
 
@@ -323,8 +323,8 @@ class Demo:
             '',
             '## Table 3: test on area 9',
             '',
-            f'Checkpoint `{self.best_checkpoint().relative_to(self.work)}` (best validation '
-            'mAP@0.25). JSON: [table3.json](table3.json).',
+            f'Checkpoint `{self.final_checkpoint().relative_to(self.work)}` (the final '
+            'epoch). JSON: [table3.json](table3.json).',
             '',
             _table3_markdown(json.loads((self.work / 'table3.json').read_text())),
             '',
