@@ -418,14 +418,16 @@ def _set_num_points(pipeline: list, num_points: int) -> None:
 
 
 def _table_lines(output: str, name: str) -> str:
-    """The table a tool printed: its output without log, warning and progress lines."""
-    keep = []
-    for line in output.replace('\r', '\n').splitlines():
-        if not line.strip() or ' - mmengine - ' in line or 'Warning' in line \
-                or line.startswith(('  warnings.warn', '  sp = ', '$ ')) or '%|' in line:
-            continue
-        keep.append(line.rstrip())
-    if not any(any(ch.isdigit() for ch in line) for line in keep):
+    """The table a tool printed: from its last line starting with NAME (e.g. ``Table 3``) to the
+    end, without log, warning and progress lines (mmengine's config dump comes before it)."""
+    lines = output.replace('\r', '\n').splitlines()
+    starts = [i for i, line in enumerate(lines) if line.startswith(name)]
+    if not starts:
+        raise StepError(f'{name}: the tool printed no table:\n{output[-2000:]}')
+    keep = [line.rstrip() for line in lines[starts[-1]:]
+            if line.strip() and ' - mmengine - ' not in line and 'Warning' not in line
+            and not line.startswith(('  warnings.warn', '  sp = ', '$ ')) and '%|' not in line]
+    if not any(any(ch.isdigit() for ch in line) for line in keep[1:]):
         raise StepError(f'{name}: the tool printed no table:\n{output[-2000:]}')
     return '\n'.join(keep) + '\n'
 

@@ -26,7 +26,8 @@ train_area = [7, 8]
 test_area = 9
 num_points = 40000
 
-model = dict(voxel_size=0.02)
+voxel_size = 0.02
+model = dict(voxel_size=voxel_size)
 
 train_pipeline = [
     dict(

@@ -16,7 +16,8 @@ train_area = [1]
 test_area = 1
 num_points = 10000
 
-model = dict(voxel_size=0.02)
+voxel_size = 0.02
+model = dict(voxel_size=voxel_size)
 
 train_pipeline = [
     dict(
