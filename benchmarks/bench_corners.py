@@ -141,11 +141,31 @@ def summary(results: dict[str, dict[str, list]], noisy: bool) -> tuple[float, fl
     return np.nanmean([e for e, _ in runs]) * 100, float(np.mean([ok for _, ok in runs]))
 
 
+def time_methods(rooms: int) -> dict[str, float]:
+    """Median wall seconds per noisy 1M-point room for each method; prints wall and CPU time."""
+    wall = {name: [] for name in METHODS}
+    cpu = {name: [] for name in METHODS}
+    for seed in range(rooms):
+        room = make_room(
+            SHAPES[seed % len(SHAPES)], 1_000_000, seed=2000 + seed, noise=NoiseModel())
+        for name, method in METHODS.items():
+            start, start_cpu = time.perf_counter(), time.process_time()
+            method(room.points)
+            wall[name].append(time.perf_counter() - start)
+            cpu[name].append(time.process_time() - start_cpu)
+    seconds = {name: float(np.median(values)) for name, values in wall.items()}
+    cpu_seconds = {name: float(np.median(values)) for name, values in cpu.items()}
+    print(f'time per 1M-point room (median of {rooms}), wall / CPU: traced '
+          f'{seconds["traced"]:.3f} / {cpu_seconds["traced"]:.3f} s, hull '
+          f'{seconds["hull"]:.3f} / {cpu_seconds["hull"]:.3f} s')
+    return seconds
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rooms', type=int, default=10, help='rooms per shape and noise')
     parser.add_argument('--points', type=int, default=300_000, help='points per room')
-    parser.add_argument('--timing-rooms', type=int, default=3, help='1M-point rooms timed')
+    parser.add_argument('--timing-rooms', type=int, default=3, help='1M-point rooms timed (0: no timing)')
     parser.add_argument(
         '--generated',
         type=Path,
@@ -195,21 +215,11 @@ def main() -> None:
             row += f' {np.nanmean(errors) * 100:>{width}.2f} {correct:>9.0%} |'
         print(row.rstrip(' |'))
 
-    wall = {name: [] for name in METHODS}
-    cpu = {name: [] for name in METHODS}
-    for seed in range(args.timing_rooms):
-        room = make_room(
-            SHAPES[seed % len(SHAPES)], 1_000_000, seed=2000 + seed, noise=NoiseModel())
-        for name, method in METHODS.items():
-            start, start_cpu = time.perf_counter(), time.process_time()
-            method(room.points)
-            wall[name].append(time.perf_counter() - start)
-            cpu[name].append(time.process_time() - start_cpu)
-    seconds = {name: float(np.median(values)) for name, values in wall.items()}
-    cpu_seconds = {name: float(np.median(values)) for name, values in cpu.items()}
-    print(f'time per 1M-point room (median of {args.timing_rooms}), wall / CPU: traced '
-          f'{seconds["traced"]:.3f} / {cpu_seconds["traced"]:.3f} s, hull '
-          f'{seconds["hull"]:.3f} / {cpu_seconds["hull"]:.3f} s')
+    timing = ''
+    if args.timing_rooms > 0:
+        seconds = time_methods(args.timing_rooms)
+        timing = (f'; time per 1M points traced {seconds["traced"]:.2f} s vs hull '
+                  f'{seconds["hull"]:.2f} s ({seconds["traced"] / seconds["hull"]:.1f}x)')
 
     error = {name: np.nanmean([e for e, _ in totals[name]]) * 100 for name in METHODS}
     correct = {name: np.mean([ok for _, ok in totals[name]]) for name in METHODS}
@@ -221,10 +231,8 @@ def main() -> None:
     print(f'corners, generator rooms: traced {", ".join(generated) or "none"}; all rooms: '
           f'traced {error["traced"]:.2f} cm '
           f'/ {correct["traced"]:.0%} vs convex hull {error["hull"]:.2f} cm / '
-          f'{correct["hull"]:.0%}: hull error {error["hull"] / error["traced"]:.1f}x traced; '
-          f'time per 1M points traced '
-          f'{seconds["traced"]:.2f} s vs hull {seconds["hull"]:.2f} s '
-          f'({seconds["traced"] / seconds["hull"]:.1f}x)')
+          f'{correct["hull"]:.0%}: hull error {error["hull"] / error["traced"]:.1f}x traced'
+          f'{timing}')
     workspace.cleanup()
 
 
