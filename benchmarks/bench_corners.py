@@ -165,7 +165,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rooms', type=int, default=10, help='rooms per shape and noise')
     parser.add_argument('--points', type=int, default=300_000, help='points per room')
-    parser.add_argument('--timing-rooms', type=int, default=3, help='1M-point rooms timed (0: no timing)')
+    parser.add_argument(
+        '--timing-rooms', type=int, default=3, help='1M-point rooms timed (0: no timing)')
     parser.add_argument(
         '--generated',
         type=Path,

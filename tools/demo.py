@@ -422,11 +422,10 @@ def _table_lines(output: str, name: str) -> str:
     end, without log, warning and progress lines (mmengine's config dump comes before it)."""
     lines = output.replace('\r', '\n').splitlines()
     starts = [i for i, line in enumerate(lines) if line.startswith(name)]
-    if not starts:
-        raise StepError(f'{name}: the tool printed no table:\n{output[-2000:]}')
     keep = [line.rstrip() for line in lines[starts[-1]:]
             if line.strip() and ' - mmengine - ' not in line and 'Warning' not in line
-            and not line.startswith(('  warnings.warn', '  sp = ', '$ ')) and '%|' not in line]
+            and not line.startswith(('  warnings.warn', '  sp = ', '$ ')) and '%|' not in line
+            ] if starts else []
     if not any(any(ch.isdigit() for ch in line) for line in keep[1:]):
         raise StepError(f'{name}: the tool printed no table:\n{output[-2000:]}')
     return '\n'.join(keep) + '\n'
