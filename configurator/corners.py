@@ -56,6 +56,8 @@ class CornerParams:
     min_line_support: float = 0.15  # edges with less of their length backed are no walls
     max_fit_points: int = 300_000  # wall points used for the fits (every k-th point)
     max_quality_points: int = 50_000  # wall points used for the quality figures
+    cluster_gap: float = 2.0  # points beyond an empty gap this wide (x or y) are far outliers
+    min_floor_prominence: float = 3.0  # the floor level is this many times denser than walls
 
 
 @dataclass
@@ -93,6 +95,12 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
     if bad.any():
         raise CornerDetectionError(f'the scan has {int(bad.sum())} points with non-finite '
                                    f'coordinates (first at row {int(np.flatnonzero(bad)[0])})')
+    # far outliers cost nothing: every grid below spans only the room's own cluster of points,
+    # in float64 relative to a local origin (georeferenced coordinates keep their precision)
+    keep = main_cluster(xyz[:, :2], params.cluster_gap)
+    far_points = 1.0 - len(keep) / len(xyz)
+    origin = np.floor(xyz[keep, :2].min(axis=0))
+    xyz = xyz[keep] - np.array([origin[0], origin[1], 0.0])
 
     floor_z, ceiling_z = find_levels(xyz[:, 2], params)
     in_band = (xyz[:, 2] > floor_z + params.wall_margin) & \
@@ -132,8 +140,16 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
     corners = corners @ _rotation(angle).T
     corners = _canonical_order(corners)
     quality = _quality(corners, xyz, floor_z, ceiling_z, lines, params)
+    quality['far_points'] = far_points
+    quality['floor_prominence'] = floor_prominence(xyz[:, 2], floor_z, ceiling_z, params)
+    if quality['floor_prominence'] < params.min_floor_prominence:
+        raise CornerDetectionError(
+            f'no floor found: the lowest level (z={floor_z + 0.0:.2f}) is only '
+            f'{quality["floor_prominence"]:.1f} times as dense as the walls (a floor is at least '
+            f'{params.min_floor_prominence:g} times); the scan has no floor, so its levels are '
+            'unknown')
     return RoomOutline(
-        corners=corners,
+        corners=corners + origin,
         floor_z=floor_z,
         ceiling_z=ceiling_z,
         wall_angle=float(angle % (math.pi / 2)),
@@ -219,6 +235,42 @@ def find_levels(z: np.ndarray, params: CornerParams | None = None) -> tuple[floa
     else:
         ceiling_z = float(high)
     return floor_z, ceiling_z
+
+
+def main_cluster(xy: np.ndarray, gap: float) -> np.ndarray:
+    """Indices of the points of the biggest cluster, split at empty gaps wider than ``gap``.
+
+    The x and then the y coordinates of the kept points are sorted; a gap wider than ``gap``
+    between consecutive values splits them, and the part with most points is kept; repeated
+    until nothing changes. Time O(N log N) and memory O(N), whatever the coordinates' range.
+    """
+    keep = np.arange(len(xy))
+    changed = True
+    while changed:
+        changed = False
+        for axis in (0, 1):
+            order = np.argsort(xy[keep, axis], kind='stable')
+            values = xy[keep[order], axis]
+            cuts = np.flatnonzero(np.diff(values) > gap) + 1
+            if len(cuts):
+                bounds = np.concatenate([[0], cuts, [len(values)]])
+                biggest = int(np.argmax(np.diff(bounds)))
+                keep = np.sort(keep[order[bounds[biggest]:bounds[biggest + 1]]])
+                changed = True
+    return keep
+
+
+def floor_prominence(z: np.ndarray, floor_z: float, ceiling_z: float,
+                     params: CornerParams) -> float:
+    """How many times denser the floor level is than the walls: points within 2 cm of
+    ``floor_z`` over the mean count of a 4 cm slab between floor and ceiling (margins off).
+    """
+    slab = 2 * params.level_bin
+    at_floor = int(np.count_nonzero(np.abs(z - floor_z) < slab))
+    low, high = floor_z + params.wall_margin, ceiling_z - params.wall_margin
+    between = int(np.count_nonzero((z > low) & (z < high)))
+    per_slab = between * 2 * slab / max(high - low, 2 * slab)
+    return at_floor / max(per_slab, 1.0)
 
 
 def _level_at(z: np.ndarray, peak: float, level_bin: float) -> float:

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 SCAN_SUFFIXES = ('.txt', '.bin', '.ply')
+MAX_FLOAT32_RESOLUTION = 0.01  # metres between neighbouring float32 coordinates of a scan
 
 
 class ScanFormatError(ValueError):
@@ -47,7 +48,8 @@ def write_scan(path: str | os.PathLike, points: np.ndarray) -> None:
     """Write an ``(N, 6)`` (or ``(N, 3)``) array as ``.txt``, ``.bin`` or ``.ply`` by suffix.
 
     The file is written next to its destination and renamed into place, so readers never
-    see a partial file.
+    see a partial file. Non-finite points, and coordinates too large for float32 in a
+    ``.bin``, raise ``ValueError``; a ``.ply`` holds them as float64.
     """
     path = Path(path)
     points = np.asarray(points, dtype=np.float64)
@@ -55,7 +57,14 @@ def write_scan(path: str | os.PathLike, points: np.ndarray) -> None:
         raise ValueError(f'{path}: points must be (N, 3) or (N, 6), got {points.shape}')
     if points.shape[1] == 3:
         points = np.hstack([points, np.zeros((len(points), 3))])
+    if not np.isfinite(points).all():
+        raise ValueError(f'{path}: points must be finite')
     suffix = path.suffix.lower()
+    largest, resolution = _float32_resolution(points[:, :3])
+    if suffix == '.bin' and not resolution <= MAX_FLOAT32_RESOLUTION:
+        raise ValueError(f'{path}: float32 .bin coordinates up to {largest:.0f} m would be only '
+                         f'{resolution:g} m apart; subtract a local origin or write .ply/.txt')
+    coordinate_type = 'f4' if resolution <= MAX_FLOAT32_RESOLUTION else 'f8'
     tmp = path.with_name(path.name + '.tmp')
     if suffix == '.txt':
         colours = np.clip(np.rint(points[:, 3:]), 0, 255)
@@ -66,8 +75,8 @@ def write_scan(path: str | os.PathLike, points: np.ndarray) -> None:
         from plyfile import PlyData, PlyElement
         vertex = np.empty(
             len(points),
-            dtype=[('x', 'f4'), ('y', 'f4'), ('z', 'f4'), ('red', 'u1'), ('green', 'u1'),
-                   ('blue', 'u1')])
+            dtype=[('x', coordinate_type), ('y', coordinate_type), ('z', coordinate_type),
+                   ('red', 'u1'), ('green', 'u1'), ('blue', 'u1')])
         for i, name in enumerate(('x', 'y', 'z')):
             vertex[name] = points[:, i]
         for i, name in enumerate(('red', 'green', 'blue')):
@@ -131,7 +140,23 @@ def _read_bin(path: Path) -> np.ndarray:
     if size % (6 * 4):
         raise ScanFormatError(f'{path}: {size} bytes is not a whole number of float32 rows of '
                               f'6 values (x y z r g b)')
-    return np.fromfile(path, dtype=np.float32).reshape(-1, 6).astype(np.float64)
+    points = np.fromfile(path, dtype=np.float32).reshape(-1, 6)
+    _check_float32_resolution(path, points)
+    return points.astype(np.float64)
+
+
+def _float32_resolution(xyz: np.ndarray) -> tuple[float, float]:
+    """The largest absolute coordinate and the float32 spacing there (NaN if not finite)."""
+    largest = float(np.abs(xyz).max()) if len(xyz) else 0.0
+    return largest, float(np.spacing(np.float32(largest)))
+
+
+def _check_float32_resolution(path: Path, points: np.ndarray) -> None:
+    largest, resolution = _float32_resolution(points[:, :3])
+    if resolution > MAX_FLOAT32_RESOLUTION:  # NaN for inf: the finite check reports that
+        raise ScanFormatError(f'{path}: float32 coordinates up to {largest:.0f} m are only '
+                              f'{resolution:g} m apart; store a georeferenced scan with a local '
+                              'origin (subtract a point near the room) or as float64 .ply/.txt')
 
 
 def _read_ply(path: Path) -> np.ndarray:
@@ -149,6 +174,8 @@ def _read_ply(path: Path) -> np.ndarray:
     points = np.zeros((len(vertex), 6))
     for i, name in enumerate(('x', 'y', 'z')):
         points[:, i] = vertex[name]
+    if vertex['x'].dtype.itemsize < 8:
+        _check_float32_resolution(path, points)
     for colour_names in (('red', 'green', 'blue'), ('r', 'g', 'b'),
                          ('diffuse_red', 'diffuse_green', 'diffuse_blue')):
         if set(colour_names) <= set(names):

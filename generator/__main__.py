@@ -123,8 +123,20 @@ def main(argv: list[str] | None = None) -> int:
     tasks = plan_tasks(args.areas, args.rooms_per_area, args.seed, shard)
     start = time.perf_counter()
     written = 0
-    for _, status, _ in run(tasks, options, workers=args.workers, progress=not args.quiet):
-        written += status == 'written'
+    from synthdet.processes import Interrupted, stop_on_signals
+    try:
+        with stop_on_signals():
+            for _, status, _ in run(tasks, options, workers=args.workers,
+                                    progress=not args.quiet):
+                written += status == 'written'
+    except Interrupted as stop:
+        print(f'generator: stopped by {stop} after {written} room(s); finished rooms are kept, '
+              'the same command completes the run', file=sys.stderr)
+        return stop.exit_code
+    except OSError as error:
+        print(f'generator: error: {error.filename or args.out}: {error.strerror or error}',
+              file=sys.stderr)
+        return 1
     print(
         f'generator: {written} room(s) written, {len(tasks) - written} already present, '
         f'{time.perf_counter() - start:.1f} s, output in {args.out}',

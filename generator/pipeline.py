@@ -168,9 +168,11 @@ _WORKER: RoomGenerator | None = None
 _WORKER_ERROR: BaseException | None = None
 
 
-def _init_worker(options: RunOptions) -> None:
+def _init_worker(options: RunOptions, parent_pid: int) -> None:
     # an exception here would make the pool restart the worker forever: keep it for the tasks
     global _WORKER, _WORKER_ERROR
+    from synthdet.processes import die_with_parent
+    die_with_parent(parent_pid)  # nothing is generated or published for a dead parent
     try:
         _WORKER = RoomGenerator(options)
     except Exception as err:  # reported by the first task, in the parent process
@@ -205,6 +207,9 @@ def run(tasks: list[RoomTask],
         progress: bool = True) -> Iterator[tuple[RoomTask, str, float]]:
     """Generate ``tasks`` with ``workers`` processes ('spawn'); yield results as rooms finish."""
     from tqdm import tqdm
+    from generator.writer import remove_orphaned_tmp
+    for area in sorted({t.area for t in tasks}):  # leftovers of killed runs
+        remove_orphaned_tmp(Path(options.out) / f'Area_{area}')
     todo = [t for t in tasks if not (Path(options.out) / f'Area_{t.area}' / t.name).exists()]
     bar = tqdm(
         total=len(tasks),
@@ -224,7 +229,7 @@ def run(tasks: list[RoomTask],
         import multiprocessing
         context = multiprocessing.get_context('spawn')
         with _spawn_safe_sys_path():
-            pool = context.Pool(workers, initializer=_init_worker, initargs=(options, ))
+            pool = context.Pool(workers, initializer=_init_worker, initargs=(options, os.getpid()))
         with pool:
             for result in pool.imap_unordered(_run_task, todo):
                 bar.update(1)

@@ -190,7 +190,32 @@ def clean_stale(area_dir: Path, room: str) -> None:
     area_dir = Path(area_dir)
     if area_dir.is_dir():
         for path in area_dir.glob(f'{TMP_PREFIX}{room}.*'):
-            if path.is_dir():
-                shutil.rmtree(path)
-            else:
-                path.unlink()
+            _remove(path)
+
+
+def remove_orphaned_tmp(area_dir: Path) -> None:
+    """Remove temporary folders and files (``.tmp.<room>.<pid>...``) of processes that ended."""
+    area_dir = Path(area_dir)
+    if not area_dir.is_dir():
+        return
+    for path in area_dir.glob(f'{TMP_PREFIX}*'):
+        pid = path.name[len(TMP_PREFIX):].split('.')[1:2]
+        if pid and pid[0].isdigit() and not _process_exists(int(pid[0])):
+            _remove(path)
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir():
+        shutil.rmtree(path)
+    else:
+        path.unlink()
+
+
+def _process_exists(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True

@@ -276,7 +276,7 @@ def test_cli_reports_errors_and_summaries(tmp_path):
         str(tmp_path / 'out')
     ]
     failed = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path)
-    assert failed.returncode == 1, failed.stderr
+    assert failed.returncode == 2, failed.stderr  # bad input
     assert f'{chair.parent}/board_1.txt:1: file is empty' in failed.stderr
     done = subprocess.run(
         command + ['--on-error', 'skip', '--areas', '1'],

@@ -6,9 +6,14 @@ Example::
 """
 import argparse
 import sys
+from pathlib import Path
 
-from projects.synthdet.datasets.point_text import PointFileError
-from projects.synthdet.datasets.s3dis_converter import S3DISLayoutError, convert_s3dis
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages
+
+from projects.synthdet.datasets.point_text import PointFileError  # noqa: E402
+from projects.synthdet.datasets.s3dis_converter import (  # noqa: E402
+    OutputOverflowError, S3DISLayoutError, convert_s3dis)
+from synthdet.processes import Interrupted, stop_on_signals  # noqa: E402
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -31,18 +36,31 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Convert; exit 0, 2 for bad input (or nothing converted), 1 for a failure while writing."""
     args = parse_args(argv)
     try:
-        summary = convert_s3dis(
-            args.root_path,
-            args.out_dir,
-            areas=args.areas,
-            workers=args.workers,
-            on_error=args.on_error)
-    except (PointFileError, S3DISLayoutError) as error:
+        with stop_on_signals():
+            summary = convert_s3dis(
+                args.root_path,
+                args.out_dir,
+                areas=args.areas,
+                workers=args.workers,
+                on_error=args.on_error)
+    except (PointFileError, S3DISLayoutError, OutputOverflowError) as error:
         print(f'create_data: error: {error}', file=sys.stderr)
+        return 2
+    except OSError as error:
+        print(f'create_data: error: {error.filename or args.out_dir}: '
+              f'{error.strerror or error}', file=sys.stderr)
         return 1
+    except Interrupted as stop:
+        print(f'create_data: stopped by {stop}; no partial output is left', file=sys.stderr)
+        return stop.exit_code
     print(summary.report())
+    if not sum(summary.rooms_per_area.values()):
+        print(f'create_data: error: {args.root_path}: no room could be converted',
+              file=sys.stderr)
+        return 2
     return 0
 
 

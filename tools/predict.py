@@ -8,10 +8,13 @@ POINTS are ``.bin`` (float32 N x 6), S3DIS ``.txt`` or ``.ply`` scans (x y z r g
 is at the origin, like the converted training data, and passed through the config's test
 pipeline with mmdet3d's inference API; the detections are shifted back, so they are in the
 input scan's own frame (``"format": "synthdet.predictions/1"``, see docs/training.md).
+
+Every scan is read and checked before the model is loaded; the checkpoint is loaded weights-only
+(``projects/synthdet/checkpoint.py``). Bad scans, refused checkpoints and clashing outputs end
+with one line naming the file and exit code 2.
 """
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
@@ -20,17 +23,14 @@ from tqdm import tqdm
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))  # the configs' custom_imports load `projects.synthdet`
-# mmengine 0.10's checkpoints hold numpy arrays and its HistoryBuffer, which torch >= 2.6 refuses
-# to unpickle by default (open-mmlab/mmengine#1655): load them fully, as torch < 2.6 did. A
-# checkpoint is a pickle, so only resume from, test or predict with checkpoints you trust.
-os.environ.setdefault('TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD', '1')
 
 import torch  # noqa: E402
 from mmdet3d.apis import inference_detector, init_model  # noqa: E402
 from mmengine.config import Config, DictAction  # noqa: E402
 from mmengine.runner import set_random_seed  # noqa: E402
 
-from configurator.scan_io import read_scan  # noqa: E402
+from configurator.scan_io import ScanFormatError, read_scan  # noqa: E402
+from projects.synthdet.checkpoint import CheckpointError, load_model_weights  # noqa: E402
 
 PREDICTIONS_FORMAT = 'synthdet.predictions/1'
 
@@ -74,6 +74,8 @@ def detect(model: torch.nn.Module, points: np.ndarray, score_thr: float, seed: i
     scores = pred.scores_3d[keep].cpu().numpy()
     labels = pred.labels_3d[keep].cpu().numpy()
     classes = model.dataset_meta['classes']
+    if not all(np.isfinite(a).all() for a in (centres, sizes, yaws, scores)):
+        raise ValueError('the model returned non-finite boxes or scores')
     order = np.argsort(-scores, kind='stable')
     return [{
         'class': classes[labels[i]],
@@ -84,28 +86,56 @@ def detect(model: torch.nn.Module, points: np.ndarray, score_thr: float, seed: i
     } for i in order]
 
 
-def main(argv: list[str] | None = None) -> list[Path]:
-    """Predict every scan and write its JSON; returns the written paths."""
-    args = parse_args(argv)
-    scans = [Path(p) for p in args.points]
-    out_dir = Path(args.out)
+class BadInput(ValueError):
+    """A scan, checkpoint or argument predict cannot use; the message names the file."""
+
+
+def check_scans(scans: list[Path], out_dir: Path) -> dict[Path, Path]:
+    """Read every scan once (errors name the file) and map each output path to its scan."""
     targets: dict[Path, Path] = {}
     for scan in scans:
         target = output_path(scan, out_dir)
         if target in targets:
-            raise SystemExit(f'{scan} and {targets[target]} would both be written to {target}; '
-                             'predict them into different --out directories')
+            raise BadInput(f'{scan} and {targets[target]} would both be written to {target}; '
+                           'predict them into different --out directories')
+        try:
+            read_scan(scan)
+        except (ScanFormatError, OSError) as error:
+            raise BadInput(str(error)) from None
         targets[target] = scan
+    return targets
 
+
+def load_model(cfg: Config, checkpoint: str, device: str) -> torch.nn.Module:
+    """Build the config's model and load the checkpoint's weights weights-only."""
+    model = init_model(cfg, None, device=device)
+    try:
+        meta = load_model_weights(model, checkpoint)
+    except CheckpointError as error:
+        raise BadInput(str(error)) from None
+    if not isinstance(meta.get('dataset_meta'), dict) or 'classes' not in meta['dataset_meta']:
+        raise BadInput(f'{checkpoint}: the checkpoint\'s meta names no classes (dataset_meta)')
+    model.dataset_meta = meta['dataset_meta']
+    return model
+
+
+def main(argv: list[str] | None = None) -> list[Path]:
+    """Predict every scan and write its JSON; returns the written paths."""
+    args = parse_args(argv)
+    out_dir = Path(args.out)
+    targets = check_scans([Path(p) for p in args.points], out_dir)
     cfg = Config.fromfile(args.config)
     if args.cfg_options:
         cfg.merge_from_dict(args.cfg_options)
-    model = init_model(cfg, args.checkpoint, device=args.device)
+    model = load_model(cfg, args.checkpoint, args.device)
     model_name = Path(args.config).stem
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     for target, scan in tqdm(targets.items(), desc='predict', unit='scan'):
-        detections = detect(model, read_scan(scan), args.score_thr, args.seed)
+        try:
+            detections = detect(model, read_scan(scan), args.score_thr, args.seed)
+        except ValueError as error:
+            raise RuntimeError(f'{scan}: {error}') from None
         document = {
             'format': PREDICTIONS_FORMAT,
             'scan': str(scan),
@@ -121,4 +151,11 @@ def main(argv: list[str] | None = None) -> list[Path]:
 
 
 if __name__ == '__main__':
-    main()
+    try:
+        main()
+    except BadInput as error:
+        print(f'predict.py: error: {error}', file=sys.stderr)
+        sys.exit(2)
+    except (RuntimeError, OSError) as error:
+        print(f'predict.py: error: {error}', file=sys.stderr)
+        sys.exit(1)

@@ -7,7 +7,8 @@ The numbers are mmdet3d's IndoorMetric (per-class average precision at 3D IoU 0.
 their mean over the evaluated classes). The table has a row per IoU threshold and a column per
 class plus the mean; a class the test set neither contains nor predicts is shown as "-" (null
 in the JSON), as in the paper. The JSON (`"format": "synthdet.table3/1"`) goes to
-`<work_dir>/table3.json` unless --out is given.
+`<work_dir>/table3.json` unless --out is given. The checkpoint is loaded weights-only
+(``projects/synthdet/checkpoint.py``): one that holds anything else is refused (exit 2).
 """
 import argparse
 import json
@@ -17,14 +18,13 @@ from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))  # the configs' custom_imports load `projects.synthdet`
-# mmengine 0.10's checkpoints hold numpy arrays and its HistoryBuffer, which torch >= 2.6 refuses
-# to unpickle by default (open-mmlab/mmengine#1655): load them fully, as torch < 2.6 did. A
-# checkpoint is a pickle, so only resume from, test or predict with checkpoints you trust.
-os.environ.setdefault('TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD', '1')
 
 from mmengine.config import Config, DictAction  # noqa: E402
 from mmengine.dist import is_main_process  # noqa: E402
+from mmengine.model import is_model_wrapper  # noqa: E402
 from mmengine.runner import Runner  # noqa: E402
+
+from projects.synthdet.checkpoint import CheckpointError, load_model_weights  # noqa: E402
 
 TABLE3_FORMAT = 'synthdet.table3/1'
 IOU_THRESHOLDS = (0.25, 0.5)
@@ -94,9 +94,11 @@ def main(argv: list[str] | None = None) -> dict:
         cfg.work_dir = args.work_dir
     elif cfg.get('work_dir') is None:
         cfg.work_dir = str(Path('work_dirs') / Path(args.config).stem)
-    cfg.load_from = args.checkpoint
+    cfg.load_from = None  # the weights come from the weights-only load below
 
     runner = Runner.from_cfg(cfg)
+    model = runner.model.module if is_model_wrapper(runner.model) else runner.model
+    load_model_weights(model, args.checkpoint)
     metrics = runner.test()
     classes = list(runner.test_dataloader.dataset.metainfo['classes'])
     rows = table3(metrics, classes)
@@ -123,4 +125,8 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 if __name__ == '__main__':
-    main()
+    try:
+        main()
+    except CheckpointError as error:
+        print(f'test.py: error: {error}', file=sys.stderr)
+        sys.exit(2)

@@ -11,6 +11,9 @@ and writes, in ``out_dir``, for every room:
 
 and per area ``s3dis_infos_Area_N.pkl`` in the format mmdet3d 1.4's ``update_infos_to_v2``
 writes for S3DIS. Boxes are the axis-aligned min/max of each detection instance's points.
+An annotation file's class is its name minus the ``_<index>.txt`` suffix (matched without
+regard to case). The pickles do not depend on the number of workers; worker processes end with
+their parent, and leftover ``.partial`` files of the converted areas are removed at the start.
 Importing this module needs numpy and numba only (no torch, no mmdet3d).
 """
 import os
@@ -26,6 +29,7 @@ from typing import Iterable, Iterator, Sequence
 import numpy as np
 from tqdm import tqdm
 
+from synthdet.processes import die_with_parent
 from .point_text import PointFileError, compile_parser, max_rows, read_point_file
 from .s3dis_classes import DETECTION_CLASSES, FALLBACK_CLASS, SEMANTIC_CLASSES
 
@@ -35,10 +39,15 @@ PARTIAL_SUFFIX = '.partial'
 ON_ERROR_CHOICES = ('raise', 'skip')
 _SEMANTIC_ID = {name: i for i, name in enumerate(SEMANTIC_CLASSES)}
 _DETECTION_LABEL = {name: i for i, name in enumerate(DETECTION_CLASSES)}
+_ANNOTATION_NAME = re.compile(r'(?P<cls>.+)_\d+\.txt', re.IGNORECASE)
 
 
 class S3DISLayoutError(ValueError):
     """The input folder does not have the S3DIS layout; the message names the path."""
+
+
+class OutputOverflowError(ValueError):
+    """Finite input values that are not finite once written as float32; names the file."""
 
 
 class UnknownClassWarning(UserWarning):
@@ -113,9 +122,18 @@ def list_rooms(area_dir: Path) -> list[str]:
         key=_natural_key)
 
 
-def annotation_class(path: Path) -> str:
-    """Class name of an annotation file: the file name before the first ``_``."""
-    return path.stem.split('_')[0]
+def annotation_class(path: Path) -> str | None:
+    """Class name of an annotation file ``<class>_<index>.txt``; None for other names."""
+    match = _ANNOTATION_NAME.fullmatch(path.name)
+    return match['cls'] if match else None
+
+
+def _annotation_files(ann_dir: Path) -> list[Path]:
+    """The ``.txt`` files (any case of the suffix) of an Annotations folder, natural order."""
+    if not ann_dir.is_dir():
+        return []
+    return sorted((p for p in ann_dir.iterdir() if p.suffix.lower() == '.txt' and p.is_file()),
+                  key=lambda p: _natural_key(p.name))
 
 
 def _partial_paths(out_dir: Path, name: str) -> list[Path]:
@@ -142,6 +160,7 @@ def _box(points: np.ndarray) -> list[float]:
 class _RoomPoints:
     points: np.ndarray  # float64 (N, 6), the annotation files one after the other
     classes: list[str]  # class of each annotation file kept
+    paths: list[Path]  # each annotation file kept
     counts: list[int]  # its number of points
     skipped: list[SkippedInput]
     unknown: dict[str, list[str]]
@@ -149,15 +168,20 @@ class _RoomPoints:
 
 def _read_room(room_dir: Path, skip: bool) -> _RoomPoints:
     ann_dir = room_dir / 'Annotations'
-    files = sorted(ann_dir.glob('*.txt'), key=lambda p: _natural_key(p.name)) \
-        if ann_dir.is_dir() else []
+    files = _annotation_files(ann_dir)
     if not files:
         raise S3DISLayoutError(f'{ann_dir}: no Annotations/<class>_<k>.txt files')
     sizes = [path.stat().st_size for path in files]
     buffer = np.empty((sum(max_rows(size) for size in sizes), 6))  # one array, no concatenation
-    room = _RoomPoints(buffer, [], [], [], {})
+    room = _RoomPoints(buffer, [], [], [], [], {})
     for path in files:
         class_name = annotation_class(path)
+        if class_name is None:
+            reason = 'annotation file name is not <class>_<index>.txt'
+            if not skip:
+                raise S3DISLayoutError(f'{path}: {reason}')
+            room.skipped.append(SkippedInput(str(path), None, f'file left out: {reason}'))
+            continue
         if class_name not in _SEMANTIC_ID:
             room.unknown.setdefault(class_name, []).append(str(path))
             class_name = FALLBACK_CLASS
@@ -171,6 +195,7 @@ def _read_room(room_dir: Path, skip: bool) -> _RoomPoints:
             continue
         room.skipped += [SkippedInput(str(b.path), b.line, b.reason) for b in bad_lines]
         room.classes.append(class_name)
+        room.paths.append(path)
         room.counts.append(len(points))
     room.points = buffer[:sum(room.counts)]
     return room
@@ -202,9 +227,32 @@ def convert_room(room_dir: Path, name: str, out_dir: Path, skip: bool) -> RoomRe
         'bbox_3d': _box(points[start:end]),
         'bbox_label_3d': _DETECTION_LABEL[c]
     } for c, start, end in zip(room.classes, starts[:-1], starts[1:]) if c in _DETECTION_LABEL]
+    try:
+        _check_float32(points, instances, room)
+    except OutputOverflowError as error:
+        if not skip:
+            raise
+        room.skipped.append(SkippedInput(str(room_dir), None, f'room left out: {error}'))
+        return RoomResult(name, 0, [], room.skipped, room.unknown)
     for array, path in zip((points, instance, semantic), _partial_paths(out_dir, name)):
         array.tofile(path)
     return RoomResult(name, len(points), instances, room.skipped, room.unknown)
+
+
+def _check_float32(points: np.ndarray, instances: list[dict], room: _RoomPoints) -> None:
+    """Raise :class:`OutputOverflowError` naming the file of the first non-finite point or box."""
+    ends = np.cumsum(room.counts)
+    bad = np.flatnonzero(~np.isfinite(points[:, :3]).all(axis=1))
+    if len(bad):
+        k = int(np.searchsorted(ends, bad[0], side='right'))
+        raise OutputOverflowError(
+            f'{room.paths[k]}: point {int(bad[0] - ends[k] + room.counts[k]) + 1} overflows '
+            'float32 once the room is shifted to its minimum (|value| > 3.4e38)')
+    detection_files = [p for p, c in zip(room.paths, room.classes) if c in _DETECTION_LABEL]
+    for path, inst in zip(detection_files, instances):
+        if not np.isfinite(inst['bbox_3d']).all():
+            raise OutputOverflowError(f'{path}: its box overflows float32 (the points span more '
+                                      'than 3.4e38)')
 
 
 def _convert_room_task(task: tuple[Path, str, Path, bool]) -> RoomResult:
@@ -219,7 +267,10 @@ def _info(sample_idx: int, result: RoomResult) -> dict:
             'num_pts_feats': 6,
             'lidar_path': file_name
         },
-        'instances': result.instances,
+        'instances': [{  # new dicts: the pickle's bytes must not depend on the worker count
+            'bbox_3d': list(inst['bbox_3d']),
+            'bbox_label_3d': inst['bbox_label_3d']
+        } for inst in result.instances],
         'pts_semantic_mask_path': file_name,
         'pts_instance_mask_path': file_name
     }
@@ -270,6 +321,14 @@ def _convert_area(area: int, rooms: list[str], data_dir: Path, out_dir: Path, sk
     return results
 
 
+def _remove_partials_of_areas(out_dir: Path, areas: Iterable[int]) -> None:
+    for area in areas:
+        for sub in OUTPUT_DIRS:
+            for partial in (out_dir / sub).glob(f'Area_{area}_*.bin{PARTIAL_SUFFIX}'):
+                partial.unlink(missing_ok=True)
+        (out_dir / f's3dis_infos_Area_{area}.pkl{PARTIAL_SUFFIX}').unlink(missing_ok=True)
+
+
 def _remove_partials(out_dir: Path, names: Iterable[str]) -> None:
     for name in names:
         for partial in _partial_paths(out_dir, name):
@@ -312,7 +371,9 @@ def convert_s3dis(root_path: str | Path,
         (out_dir / sub).mkdir(parents=True, exist_ok=True)
     summary = ConversionSummary()
     compile_parser()  # once here rather than in every worker
-    pool = ProcessPoolExecutor(workers) if workers > 1 else None
+    _remove_partials_of_areas(out_dir, areas)  # leftovers of a killed run
+    pool = ProcessPoolExecutor(
+        workers, initializer=die_with_parent, initargs=(os.getpid(), )) if workers > 1 else None
     try:
         with tqdm(
                 total=sum(map(len, rooms.values())), desc='convert S3DIS rooms',

@@ -1,0 +1,161 @@
+"""Checkpoints that cannot run code: weights-only loads, inference checkpoints, trusted resume.
+
+A checkpoint is a pickle, and a pickle can run any code when it is loaded. Every load here uses
+``torch.load(weights_only=True)``: tensors, plain containers and numbers, plus the few data-only
+types an mmengine training checkpoint holds (numpy arrays and scalars, mmengine's
+``HistoryBuffer``), listed in :data:`TRAINING_CHECKPOINT_TYPES`. Anything else (such as a
+``__reduce__`` that calls a function) is refused with :class:`CheckpointError`, before it runs.
+
+An inference checkpoint (:func:`inference_checkpoint`, written at the end of training and by
+``tools/publish_model.py``) keeps only ``state_dict`` and plain-typed ``meta``, like mmdet's
+``publish_model``: it loads with ``weights_only=True`` and no extra type at all.
+
+Full unpickling exists for one case only: ``tools/train.py --resume CKPT --trust-checkpoint``,
+for a checkpoint inside the run's own work directory, through the ``trusted://`` prefix that
+:func:`trusted_resume_path` gives that single path.
+"""
+from __future__ import annotations
+import hashlib
+import os
+import pickle
+from pathlib import Path
+
+import numpy as np
+import torch
+
+TRUSTED_PREFIX = 'trusted://'
+_DROP = object()  # marks values an inference checkpoint leaves out
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be loaded safely or is not a checkpoint; names the file."""
+
+
+def _training_checkpoint_types() -> list:
+    from mmengine.logging.history_buffer import HistoryBuffer
+    numpy_types = [np.ndarray, np.dtype, np.core.multiarray._reconstruct, np.core.multiarray.scalar]
+    dtype_classes = [type(np.dtype(name)) for name in ('f2', 'f4', 'f8', 'i1', 'i2', 'i4', 'i8',
+                                                        'u1', 'u2', 'u4', 'u8', '?')]
+    return [HistoryBuffer, *numpy_types, *dtype_classes]
+
+
+TRAINING_CHECKPOINT_TYPES = _training_checkpoint_types()
+
+
+def load_checkpoint_file(path: str | os.PathLike) -> dict:
+    """Load a checkpoint with ``weights_only=True``; returns its dictionary.
+
+    Raises :class:`CheckpointError` naming the file if it is missing, not a PyTorch checkpoint,
+    has no ``state_dict``, or holds a type outside :data:`TRAINING_CHECKPOINT_TYPES`.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f'{path}: checkpoint file not found')
+    try:
+        with torch.serialization.safe_globals(TRAINING_CHECKPOINT_TYPES):
+            checkpoint = torch.load(path, map_location='cpu', weights_only=True)
+    except pickle.UnpicklingError as error:
+        raise refused(path, error, 'load only checkpoints from a source you trust') from None
+    except (RuntimeError, EOFError, OSError, ValueError) as error:
+        raise CheckpointError(f'{path}: not a PyTorch checkpoint ({error})') from None
+    if not isinstance(checkpoint, dict) or not isinstance(checkpoint.get('state_dict'), dict):
+        raise CheckpointError(f'{path}: not an mmengine checkpoint (no "state_dict")')
+    return checkpoint
+
+
+def refused(path: str | os.PathLike, error: pickle.UnpicklingError, hint: str) -> CheckpointError:
+    """The one-line error for a checkpoint the weights-only unpickler refused."""
+    reason = str(error).split('\n\n')[-1].split('. ')[0].strip()
+    return CheckpointError(f'{path}: refused: the checkpoint holds more than weights and data '
+                           f'({reason}); {hint} (README "Safety")')
+
+
+def load_model_weights(model: torch.nn.Module, path: str | os.PathLike) -> dict:
+    """Load a checkpoint's weights into ``model`` (every key must match); returns its ``meta``."""
+    checkpoint = load_checkpoint_file(path)
+    state_dict = {key.removeprefix('module.'): value
+                  for key, value in checkpoint['state_dict'].items()}
+    try:
+        model.load_state_dict(state_dict, strict=True)
+    except RuntimeError as error:
+        first = str(error).splitlines()[1].strip() if '\n' in str(error) else str(error)
+        raise CheckpointError(f'{path}: weights do not fit the config\'s model ({first})') from None
+    meta = checkpoint.get('meta')
+    return meta if isinstance(meta, dict) else {}
+
+
+def _plain(value: object) -> object:
+    """``value`` as str/int/float/bool/None, lists, tuples and str-keyed dicts; else ``_DROP``.
+
+    numpy scalars become Python numbers; other types (and containers holding them) are dropped.
+    """
+    if isinstance(value, np.generic):
+        value = value.item()
+    if value is None:
+        return value
+    for base in (bool, int, float, str):  # subclasses (an IntEnum, say) become the base type
+        if isinstance(value, base):
+            return base(value)
+    if isinstance(value, (list, tuple)):
+        items = [_plain(item) for item in value]
+        return _DROP if any(item is _DROP for item in items) else type(value)(items)
+    if isinstance(value, dict) and all(isinstance(key, str) for key in value):
+        kept = {key: _plain(item) for key, item in value.items()}
+        return {key: item for key, item in kept.items() if item is not _DROP}
+    return _DROP
+
+
+def inference_checkpoint(checkpoint: dict) -> dict:
+    """``state_dict`` and the plain-typed part of ``meta`` of a training checkpoint."""
+    meta = _plain(checkpoint.get('meta') or {})
+    return {'meta': meta if isinstance(meta, dict) else {}, 'state_dict': checkpoint['state_dict']}
+
+
+def save_inference_checkpoint(checkpoint: dict, out: str | os.PathLike) -> Path:
+    """Write :func:`inference_checkpoint` of ``checkpoint`` to ``out`` atomically; returns it.
+
+    The file is reloaded with plain ``weights_only=True`` before it is renamed into place.
+    """
+    out = Path(out)
+    partial = out.with_name(out.name + '.partial')
+    torch.save(inference_checkpoint(checkpoint), partial)
+    try:
+        torch.load(partial, map_location='cpu', weights_only=True)
+    except Exception:
+        partial.unlink(missing_ok=True)
+        raise
+    os.replace(partial, out)
+    return out
+
+
+def sha256_prefix(path: str | os.PathLike, length: int = 8) -> str:
+    """The first ``length`` hex digits of the file's SHA-256 (mmdet's published-model suffix)."""
+    digest = hashlib.sha256()
+    with open(path, 'rb') as stream:
+        for block in iter(lambda: stream.read(1 << 20), b''):
+            digest.update(block)
+    return digest.hexdigest()[:length]
+
+
+def trusted_resume_path(checkpoint: str | os.PathLike, work_dir: str | os.PathLike) -> str:
+    """``trusted://<checkpoint>`` after checking that it lies inside ``work_dir``.
+
+    Registers the ``trusted://`` loader with mmengine: it unpickles fully, and only the path
+    returned here carries the prefix. Raises :class:`CheckpointError` for a checkpoint outside
+    the work directory.
+    """
+    checkpoint, work_dir = Path(checkpoint).resolve(), Path(work_dir).resolve()
+    if not checkpoint.is_relative_to(work_dir):
+        raise CheckpointError(f'{checkpoint}: --trust-checkpoint resumes only from a checkpoint '
+                              f'inside the work directory {work_dir}')
+    if not checkpoint.is_file():
+        raise CheckpointError(f'{checkpoint}: checkpoint file not found')
+    from mmengine.runner.checkpoint import CheckpointLoader
+    CheckpointLoader.register_scheme(TRUSTED_PREFIX, _load_trusted, force=True)
+    return TRUSTED_PREFIX + str(checkpoint)
+
+
+def _load_trusted(filename: str, map_location: object = None) -> dict:
+    """Full unpickling of the one checkpoint the user vouched for (``trusted://`` paths)."""
+    return torch.load(filename[len(TRUSTED_PREFIX):], map_location=map_location,
+                      weights_only=False)
