@@ -10,6 +10,7 @@ checked.
 import argparse
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -65,14 +66,7 @@ def _run_freecad(job: dict, work_dir: Path, freecadcmd: str, timeout: float) -> 
     job_path.write_text(json.dumps(job, indent=1), encoding='utf-8')
     env = dict(os.environ, SYNTHDET_JOB=str(job_path), SYNTHDET_RESULT=str(result_path))
     try:
-        process = subprocess.run([freecadcmd, str(MACRO)],
-                                 env=env,
-                                 cwd=work_dir,
-                                 timeout=timeout,
-                                 stdout=subprocess.PIPE,
-                                 stderr=subprocess.PIPE,
-                                 text=True,
-                                 errors='replace')
+        process = _run_process_group([freecadcmd, str(MACRO)], env, work_dir, timeout)
     except FileNotFoundError:
         raise FreecadFailed(f'{freecadcmd!r} not found: install FreeCAD (apt-get install '
                             'freecad) or pass --freecadcmd') from None
@@ -87,7 +81,34 @@ def _run_freecad(job: dict, work_dir: Path, freecadcmd: str, timeout: float) -> 
         raise FreecadFailed(f'{result_path}: not a {RESULT_FORMAT} result')
     if result.get('status') != 'ok':
         raise FreecadFailed(f'FreeCAD import failed: {result.get("error")}')
+    for key in ('warnings', 'objects'):
+        if not isinstance(result.get(key), list):
+            raise FreecadFailed(f'{result_path}: the {RESULT_FORMAT} result has no "{key}" list')
     return result
+
+
+def _run_process_group(command: list[str], env: dict, cwd: Path,
+                       timeout: float) -> subprocess.CompletedProcess:
+    """Run ``command`` in its own process group; a timeout or an interruption kills the group.
+
+    FreeCAD may start helper processes: killing only ``freecadcmd`` would leave them running.
+    """
+    process = subprocess.Popen(
+        command,
+        env=env,
+        cwd=cwd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        errors='replace',
+        start_new_session=True)
+    try:
+        stdout, stderr = process.communicate(timeout=timeout)
+    except BaseException:  # TimeoutExpired, Ctrl-C, SIGTERM turned into an exception
+        os.killpg(process.pid, signal.SIGKILL)
+        process.communicate()
+        raise
+    return subprocess.CompletedProcess(command, process.returncode, stdout, stderr)
 
 
 def build_document(scan: Path,
@@ -139,13 +160,26 @@ def build_document(scan: Path,
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the sub-command; prints warnings and a summary, returns the exit code."""
+    """Run the sub-command; prints warnings and a summary, returns the exit code.
+
+    2 for bad inputs (the message names the file), 1 when FreeCAD fails, 128 + the signal
+    number when interrupted; the previous document at ``--out`` is kept in every case.
+    """
+    from synthdet.processes import Interrupted, stop_on_signals
     try:
-        result = build_document(args.scan, args.predictions, args.out, args.corners, args.library,
-                                args.min_score, args.wall_thickness, args.freecadcmd, args.timeout)
-    except (ValueError, FreecadFailed) as error:
+        with stop_on_signals():
+            result = build_document(args.scan, args.predictions, args.out, args.corners,
+                                    args.library, args.min_score, args.wall_thickness,
+                                    args.freecadcmd, args.timeout)
+    except ValueError as error:  # SchemaError, ScanFormatError, CornerDetectionError too
+        print(f'error: {error}', file=sys.stderr)
+        return 2
+    except (FreecadFailed, OSError) as error:
         print(f'error: {error}', file=sys.stderr)
         return 1
+    except Interrupted as stop:
+        print(f'error: stopped by {stop}; FreeCAD was ended', file=sys.stderr)
+        return stop.exit_code
     for warning in result['warnings']:
         print(f'warning: {warning}', file=sys.stderr)
     groups = {}

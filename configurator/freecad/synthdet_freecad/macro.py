@@ -74,6 +74,32 @@ def write_result(path: str | None, result: dict) -> None:
     os.replace(temporary, path)
 
 
+def partial_path(out: str) -> str:
+    """The temporary file a document is saved to before it is renamed to ``out``."""
+    folder, name = os.path.split(out)
+    return os.path.join(folder, f'.{name[:-len(".FCStd")]}.partial.FCStd')  # FreeCAD wants it
+
+
+def save_atomically(doc, out: str) -> None:
+    """Save ``doc`` to a temporary file next to ``out`` and rename it into place.
+
+    A failing save leaves the previous ``out`` untouched; a temporary file left by a killed
+    run is removed first.
+    """
+    partial = partial_path(out)
+    if os.path.isfile(partial):
+        os.remove(partial)
+    try:
+        doc.saveCopy(partial)
+        if not os.path.isfile(partial):
+            raise OSError(f'FreeCAD did not write {partial!r}')
+        os.replace(partial, out)
+    except BaseException:
+        if os.path.isfile(partial):
+            os.remove(partial)
+        raise
+
+
 def run_headless() -> None:
     """Import from the environment's files into a new document and save it."""
     result_path = os.environ.get(ENV_RESULT)
@@ -90,9 +116,7 @@ def run_headless() -> None:
         except OSError as error:
             raise OSError(f'cannot create the output folder {os.path.dirname(out)!r}: '
                           f'{error.strerror}') from None
-        if os.path.exists(out):
-            os.remove(out)
-        doc.saveAs(out)
+        save_atomically(doc, out)
         App.closeDocument(doc.Name)
     except Exception as error:  # the process boundary: every failure goes to the result file
         if isinstance(error, EXPECTED_ERRORS):

@@ -16,6 +16,8 @@ RESULT_FORMAT = 'synthdet.freecad-result/1'
 MAX_NAME_LENGTH = 200
 MAX_DETECTIONS = 100000
 MAX_CORNERS = 10000
+MM = 1000.0  # FreeCAD lengths are millimetres
+DEGREES = 180.0 / math.pi  # and its angles degrees
 
 
 class SchemaError(ValueError):
@@ -60,18 +62,23 @@ def _object(value: object, source: str, where: str, required: tuple[str, ...]) -
     return value
 
 
-def _number(value: object, source: str, where: str) -> float:
+def _number(value: object, source: str, where: str, unit: float = 1.0) -> float:
+    """A finite number that stays finite in FreeCAD's units (``value * unit``: mm, degrees)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         _fail(source, where, f'expected a number, got {_describe(value)}')
     if not math.isfinite(value):
         _fail(source, where, f'expected a finite number, got {_describe(value)}')
+    if not math.isfinite(float(value) * unit):
+        _fail(source, where, f'{_describe(value)} is not finite once converted to FreeCAD\'s '
+              f'units (x {unit:g})')
     return float(value)
 
 
-def _vector(value: object, length: int, source: str, where: str) -> list[float]:
+def _vector(value: object, length: int, source: str, where: str,
+            unit: float = 1.0) -> list[float]:
     if not isinstance(value, list) or len(value) != length:
         _fail(source, where, f'expected a list of {length} numbers, got {_describe(value)}')
-    return [_number(item, source, f'{where}[{index}]') for index, item in enumerate(value)]
+    return [_number(item, source, f'{where}[{index}]', unit) for index, item in enumerate(value)]
 
 
 def _name(value: object, source: str, where: str) -> str:
@@ -123,15 +130,15 @@ def validate_predictions(data: object, source: str = '<predictions>') -> dict:
         score = _number(detection['score'], source, f'{where}.score')
         if not 0.0 <= score <= 1.0:
             _fail(source, f'{where}.score', f'expected a score in [0, 1], got {score}')
-        size = _vector(detection['size'], 3, source, f'{where}.size')
+        size = _vector(detection['size'], 3, source, f'{where}.size', MM)
         if min(size) <= 0.0:
             _fail(source, f'{where}.size', f'expected positive sizes, got {size}')
         checked.append({
             'class': _name(detection['class'], source, f'{where}.class'),
             'score': score,
-            'center': _vector(detection['center'], 3, source, f'{where}.center'),
+            'center': _vector(detection['center'], 3, source, f'{where}.center', MM),
             'size': size,
-            'yaw': _number(detection.get('yaw', 0.0), source, f'{where}.yaw'),
+            'yaw': _number(detection.get('yaw', 0.0), source, f'{where}.yaw', DEGREES),
         })
     return {
         'format': PREDICTIONS_FORMAT,
@@ -179,7 +186,7 @@ def validate_corners(data: object, source: str = '<corners>') -> dict:
         _fail(source, 'corners', f'expected a list of 3 to {MAX_CORNERS} [x, y] points, got '
               f'{_describe(corners)}')
     points = [
-        _vector(point, 2, source, f'corners[{index}]') for index, point in enumerate(corners)
+        _vector(point, 2, source, f'corners[{index}]', MM) for index, point in enumerate(corners)
     ]
     count = len(points)
     for index in range(count):
@@ -199,8 +206,8 @@ def validate_corners(data: object, source: str = '<corners>') -> dict:
     if area > 0:
         _fail(source, 'corners', 'the corners run counter-clockwise; the contract is clockwise '
               'seen from above')
-    floor_z = _number(data['floor_z'], source, 'floor_z')
-    ceiling_z = _number(data['ceiling_z'], source, 'ceiling_z')
+    floor_z = _number(data['floor_z'], source, 'floor_z', MM)
+    ceiling_z = _number(data['ceiling_z'], source, 'ceiling_z', MM)
     if ceiling_z <= floor_z:
         _fail(source, 'ceiling_z', f'ceiling_z {ceiling_z} is not above floor_z {floor_z}')
     return {
@@ -227,7 +234,8 @@ def validate_job(data: object, source: str = '<job>') -> dict:
     job['min_score'] = _number(data.get('min_score', 0.3), source, 'min_score')
     if not 0.0 <= job['min_score'] <= 1.0:
         _fail(source, 'min_score', f'expected a score in [0, 1], got {job["min_score"]}')
-    job['wall_thickness'] = _number(data.get('wall_thickness', 0.1), source, 'wall_thickness')
+    job['wall_thickness'] = _number(
+        data.get('wall_thickness', 0.1), source, 'wall_thickness', MM)
     if job['wall_thickness'] <= 0.0:
         _fail(source, 'wall_thickness', f'expected a positive thickness in metres, got '
               f'{job["wall_thickness"]}')
