@@ -88,7 +88,7 @@ def test_table1_rows_and_cli_on_known_counts(tmp_path):
     ],
                              capture_output=True,
                              text=True)
-    assert missing.returncode == 1
+    assert missing.returncode == 2  # bad input
     assert 's3dis_infos_Area_4.pkl: info pickle not found' in missing.stderr
 
 

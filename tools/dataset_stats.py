@@ -7,8 +7,12 @@ Counts come from the info pickles ``<data_root>/s3dis_infos_Area_N.pkl`` written
 """
 import argparse
 import sys
+from pathlib import Path
 
-from projects.synthdet.datasets.instance_counts import count_instances, format_table1
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages
+
+from projects.synthdet.datasets.instance_counts import (  # noqa: E402
+    InfoFileError, count_instances, format_table1)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -18,9 +22,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         counts = count_instances(args.data_root, args.areas)
-    except FileNotFoundError as error:
+    except (FileNotFoundError, InfoFileError) as error:
         print(f'dataset_stats: error: {error}', file=sys.stderr)
-        return 1
+        return 2
     print(f'Table 1: detection instances per class, counted from the info pickles in '
           f'{args.data_root}')
     print(format_table1(counts))

@@ -3,7 +3,8 @@
 A checkpoint is a pickle, and a pickle can run any code when it is loaded. Every load here uses
 ``torch.load(weights_only=True)``: tensors, plain containers and numbers, plus the few data-only
 types an mmengine training checkpoint holds (numpy arrays and scalars, mmengine's
-``HistoryBuffer``), listed in :data:`TRAINING_CHECKPOINT_TYPES`. Anything else (such as a
+``HistoryBuffer`` and a ``getattr`` limited to its four statistics methods), listed in
+:data:`TRAINING_CHECKPOINT_TYPES`. Anything else (such as a
 ``__reduce__`` that calls a function) is refused with :class:`CheckpointError`, before it runs.
 
 An inference checkpoint (:func:`inference_checkpoint`, written at the end of training and by
@@ -24,6 +25,7 @@ import numpy as np
 import torch
 
 TRUSTED_PREFIX = 'trusted://'
+_HISTORY_BUFFER_STATISTICS = ('min', 'max', 'current', 'mean')
 _DROP = object()  # marks values an inference checkpoint leaves out
 
 
@@ -31,12 +33,26 @@ class CheckpointError(ValueError):
     """A checkpoint that cannot be loaded safely or is not a checkpoint; names the file."""
 
 
+def _history_buffer_statistic(owner: object, name: str) -> object:
+    """The ``getattr`` a training checkpoint may call: HistoryBuffer's statistics methods only.
+
+    mmengine pickles ``HistoryBuffer._statistics_methods`` as ``getattr(HistoryBuffer, 'min')``
+    and so on; a general ``getattr`` would reach any attribute, so it is never allowed.
+    """
+    from mmengine.logging.history_buffer import HistoryBuffer
+    if owner is not HistoryBuffer or name not in _HISTORY_BUFFER_STATISTICS:
+        raise pickle.UnpicklingError(f'getattr({owner!r}, {name!r}) is not allowed')
+    return getattr(owner, name)
+
+
 def _training_checkpoint_types() -> list:
     from mmengine.logging.history_buffer import HistoryBuffer
     numpy_types = [np.ndarray, np.dtype, np.core.multiarray._reconstruct, np.core.multiarray.scalar]
     dtype_classes = [type(np.dtype(name)) for name in ('f2', 'f4', 'f8', 'i1', 'i2', 'i4', 'i8',
                                                         'u1', 'u2', 'u4', 'u8', '?')]
-    return [HistoryBuffer, *numpy_types, *dtype_classes]
+    getattr_names = [(_history_buffer_statistic, f'{module}.getattr')
+                     for module in ('builtins', '__builtin__')]
+    return [HistoryBuffer, *numpy_types, *dtype_classes, *getattr_names]
 
 
 TRAINING_CHECKPOINT_TYPES = _training_checkpoint_types()

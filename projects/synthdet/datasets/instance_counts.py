@@ -9,6 +9,31 @@ from .s3dis_classes import REAL_AREAS
 TABLE1_CLASSES = ('chair', 'table', 'sofa', 'bookcase', 'board', 'yumi', '3dprinter')
 
 
+class InfoFileError(ValueError):
+    """An info pickle that is empty, broken or not in the converter's format; names the file."""
+
+
+class _PlainUnpickler(pickle.Unpickler):
+    """Unpickles dicts, lists, strings and numbers only: an info pickle never runs code."""
+
+    def find_class(self, module: str, name: str) -> object:
+        raise pickle.UnpicklingError(f'{module}.{name} is not plain data')
+
+
+def load_info_pickle(path: str | Path) -> dict:
+    """Read an info pickle written by ``tools/create_data.py`` (plain data only)."""
+    try:
+        with open(path, 'rb') as f:
+            infos = _PlainUnpickler(f).load()
+    except (pickle.UnpicklingError, EOFError, ValueError, IndexError, KeyError) as error:
+        raise InfoFileError(f'{path}: not an info pickle of tools/create_data.py '
+                            f'({error or type(error).__name__})') from None
+    if not isinstance(infos, dict) or not {'metainfo', 'data_list'} <= set(infos):
+        raise InfoFileError(f'{path}: not an info pickle of tools/create_data.py (no metainfo '
+                            'and data_list)')
+    return infos
+
+
 def info_path(data_root: str | Path, area: int) -> Path:
     return Path(data_root) / f's3dis_infos_Area_{area}.pkl'
 
@@ -36,8 +61,7 @@ def count_instances(data_root: str | Path,
         path = info_path(data_root, area)
         if not path.is_file():
             raise FileNotFoundError(f'{path}: info pickle not found (run tools/create_data.py)')
-        with open(path, 'rb') as f:
-            infos = pickle.load(f)
+        infos = load_info_pickle(path)
         names = {label: name for name, label in infos['metainfo']['categories'].items()}
         counts[area] = Counter(names[inst['bbox_label_3d']] for info in infos['data_list']
                                for inst in info['instances'] if inst['bbox_label_3d'] >= 0)
