@@ -98,7 +98,7 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
     # far outliers cost nothing: every grid below spans only the room's own cluster of points,
     # in float64 relative to a local origin (georeferenced coordinates keep their precision)
     keep = main_cluster(xyz[:, :2], params.cluster_gap)
-    far_points = 1.0 - len(keep) / len(xyz)
+    far_points = float(len(xyz) - len(keep))
     origin = np.floor(xyz[keep, :2].min(axis=0))
     xyz = xyz[keep] - np.array([origin[0], origin[1], 0.0])
 

@@ -10,6 +10,7 @@ failure too; a headless failure also exits with code 1.
 import json
 import os
 import traceback
+import zipfile
 
 import FreeCAD as App
 
@@ -83,21 +84,32 @@ def partial_path(out: str) -> str:
 def save_atomically(doc, out: str) -> None:
     """Save ``doc`` to a temporary file next to ``out`` and rename it into place.
 
-    A failing save leaves the previous ``out`` untouched; a temporary file left by a killed
-    run is removed first.
+    A failing save (also one FreeCAD only reports on its console, such as a full disk, found by
+    reading the archive back) leaves the previous ``out`` untouched; a temporary file left by a
+    killed run is removed first.
     """
     partial = partial_path(out)
     if os.path.isfile(partial):
         os.remove(partial)
     try:
-        doc.saveCopy(partial)
-        if not os.path.isfile(partial):
-            raise OSError(f'FreeCAD did not write {partial!r}')
+        doc.saveCopy(partial)  # FreeCAD reports some write errors only on its console
+        if not _complete_document(partial):
+            raise OSError(f'FreeCAD could not write a complete document to {partial!r} (disk '
+                          'full?); the previous document is kept')
         os.replace(partial, out)
     except BaseException:
         if os.path.isfile(partial):
             os.remove(partial)
         raise
+
+
+def _complete_document(path: str) -> bool:
+    """Whether ``path`` is a whole FCStd archive (a zip whose members all read back)."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            return 'Document.xml' in archive.namelist() and archive.testzip() is None
+    except (OSError, zipfile.BadZipFile):
+        return False
 
 
 def run_headless() -> None:
