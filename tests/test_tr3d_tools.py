@@ -19,9 +19,9 @@ import pytest
 import torch
 from mmengine.config import Config
 from mmengine.registry import init_default_scope
-from mmengine.runner import load_checkpoint
 
 from configurator.scan_io import read_scan, write_scan
+from projects.synthdet.checkpoint import load_model_weights
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
 
@@ -154,7 +154,7 @@ def test_full_scale_experiments_share_one_architecture() -> None:
     assert len(set(counts.values())) == 1, counts
 
 
-def test_checkpoints_save_resume_and_load(tiny: dict, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_checkpoints_save_resume_and_load(tiny: dict) -> None:
     # Saved by tools/train.py: the newest epoch and the best validation mAP@0.25.
     first = tiny['work'] / 'epoch_1.pth'
     assert first.is_file() and (tiny['work'] / 'best_mAP_0.25_epoch_1.pth').is_file()
@@ -185,13 +185,12 @@ def test_checkpoints_save_resume_and_load(tiny: dict, monkeypatch: pytest.Monkey
     changes = [float((after[k] - before[k]).abs().max()) for k in parameters]
     assert 0 < max(changes) < 0.01
 
-    # Load: a freshly built model gets exactly the saved weights.
+    # Load (weights-only, as the tools do): a freshly built model gets exactly the saved weights.
     from mmdet3d.registry import MODELS
-    monkeypatch.setenv('TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD', '1')  # as the tools do
     cfg = Config.fromfile(str(TINY))
     init_default_scope(cfg.default_scope)
     model = MODELS.build(cfg.model)
-    load_checkpoint(model, str(resumed_dir / 'epoch_2.pth'), map_location='cpu')
+    load_model_weights(model, resumed_dir / 'epoch_2.pth')
     for key, value in model.state_dict().items():
         assert torch.equal(value, after[key]), key
 
@@ -229,10 +228,8 @@ def test_table3_layout_from_indoor_metric_results() -> None:
         test_tool.table3({'mAP_0.25': 0.5}, ['table'])
 
 
-def test_test_tool_prints_and_writes_table3(tiny: dict, monkeypatch: pytest.MonkeyPatch,
-                                            capsys: pytest.CaptureFixture) -> None:
+def test_test_tool_prints_and_writes_table3(tiny: dict, capsys: pytest.CaptureFixture) -> None:
     # In this process (the tool's own code, without a second start-up of the stack).
-    monkeypatch.setenv('TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD', '1')  # as the tool sets it
     out_dir = tiny['root'] / 'test_out'
     checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
     document = load_tool('test').main([
@@ -260,9 +257,7 @@ def test_test_tool_prints_and_writes_table3(tiny: dict, monkeypatch: pytest.Monk
     assert lines[header + 2].split()[0] == 'mAP@0.5'
 
 
-def test_predict_writes_detections_in_each_scan_frame(tiny: dict,
-                                                      monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setenv('TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD', '1')  # as the tool sets it
+def test_predict_writes_detections_in_each_scan_frame(tiny: dict) -> None:
     room_txt = tiny['raw'] / 'office_1' / 'office_1.txt'
     converted_bin = tiny['data'] / 'points' / 'Area_1_office_1.bin'
     scans = tiny['root'] / 'scans'
