@@ -32,7 +32,8 @@ def _positive_metres(text: str) -> float:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Detect the corners of ``args.scan``; returns 0, or 2 with a message on bad input."""
+    """Detect the corners of ``args.scan``; returns 0, 2 with a message on bad input, or 1 if
+    the output cannot be written."""
     try:
         points = read_scan(args.scan)
         outline = detect_corners(points, CornerParams(min_edge=args.min_edge))
@@ -41,7 +42,11 @@ def run(args: argparse.Namespace) -> int:
         print(f'corners: {kind}: {error}', file=sys.stderr)
         return 2
     result = outline_to_dict(outline, args.scan)
-    write_corners(args.out, result)
+    try:
+        write_corners(args.out, result)
+    except OSError as error:
+        print(f'corners: cannot write {args.out}: {error.strerror or error}', file=sys.stderr)
+        return 1
     print(f'corners: {len(outline.corners)} corners, floor z={outline.floor_z:.3f} m, '
           f'ceiling z={outline.ceiling_z:.3f} m, '
           f'{outline.quality["wall_points_on_polygon"]:.0%} of wall points on the outline '

@@ -438,6 +438,15 @@ def test_far_outliers_cost_no_memory(l_room, tmp_path):
     assert result['quality']['far_points'] == 2
 
 
+def test_corners_output_that_cannot_be_written_is_a_run_time_failure(l_room, tmp_path):
+    scan = tmp_path / 'room.txt'
+    write_scan(scan, l_room.points)
+    blocked = tmp_path / 'file'
+    blocked.write_text('')
+    proc = _corners(scan, blocked / 'room.json')
+    assert_clean_error(proc, 1, 'cannot write', str(blocked / 'room.json'))
+
+
 def test_scan_without_floor_is_an_error(l_room, tmp_path):
     points = l_room.points[l_room.points[:, 2] > l_room.floor_z + 0.05]
     scan = tmp_path / 'no_floor.txt'
