@@ -4,11 +4,10 @@
 # sofa, yumi, 3dprinter (the real areas' bookcases and boards are not trained on), TR3D's
 # published model and data settings, 5 epochs keeping the best validation mAP@0.25.
 _base_ = ['./exp2.py']
-from projects.synthdet.config_helpers import area_datasets  # noqa: E402
+from projects.synthdet.config_helpers import area_loaders  # noqa: E402
 
 train_area = [1, 2, 3, 7, 8]
 
-train_dataloader = dict(
-    dataset=dict(
-        dataset=dict(
-            datasets=area_datasets(_base_.train_area_dataset, train_area, _base_.metainfo))))
+train_dataloader, val_dataloader = area_loaders(_base_.train_area_dataset, train_area,
+                                                _base_.test_area, _base_.metainfo)
+test_dataloader = val_dataloader

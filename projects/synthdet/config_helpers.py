@@ -5,7 +5,7 @@ from it, so a derived config cannot ask its base to build one dataset per area o
 The configs import these helpers instead (below their ``_base_`` line: an import above it makes
 mmengine treat the file as a new-style config)::
 
-    from projects.synthdet.config_helpers import area_datasets, with_num_points
+    from projects.synthdet.config_helpers import area_loaders, with_num_points
 """
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -20,6 +20,17 @@ def area_datasets(area_dataset: Mapping[str, Any], areas: Iterable[int],
     """One copy of ``area_dataset`` per area, reading that area's info pickle with ``metainfo``
     (the classes), for the ``datasets`` of a ``ConcatDataset``."""
     return [dict(area_dataset, ann_file=area_info_file(area), metainfo=metainfo) for area in areas]
+
+
+def area_loaders(area_dataset: Mapping[str, Any], train_area: Iterable[int], test_area: int,
+                 metainfo: Mapping[str, Any]) -> tuple[dict, dict]:
+    """Overrides of the ``train_dataloader`` and ``val_dataloader`` (also the test loader) of
+    ``_base_/s3dis-synthdet.py``: train on ``train_area`` (the datasets of its ConcatDataset),
+    validate and test on ``test_area``, all with ``metainfo``."""
+    train = dict(
+        dataset=dict(dataset=dict(datasets=area_datasets(area_dataset, train_area, metainfo))))
+    test = dict(dataset=dict(ann_file=area_info_file(test_area), metainfo=metainfo))
+    return train, test
 
 
 def with_num_points(pipeline: Sequence[Mapping[str, Any]], num_points: int) -> list[dict]:
