@@ -23,6 +23,8 @@ from mmengine.runner import load_checkpoint
 
 from configurator.scan_io import read_scan, write_scan
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
+from projects.synthdet.evaluation.table3 import format_table3, table3, table3_rows
+from projects.synthdet.evaluation.table4 import truth_from_infos
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
 
 REPO = Path(__file__).resolve().parents[1]
