@@ -12,8 +12,10 @@ from projects.synthdet.config_helpers import area_datasets, with_num_points
 
 CONFIGS = Path(__file__).resolve().parents[1] / 'configs' / 'tr3d'
 AUGMENTATION = ['RandomFlip3D', 'GlobalRotScaleTrans']
-TRAIN_STEPS = ['LoadPointsFromFile', 'LoadAnnotations3D', 'PointSample', *AUGMENTATION,
-               'NormalizePointsColor', 'Pack3DDetInputs']
+TRAIN_STEPS = [
+    'LoadPointsFromFile', 'LoadAnnotations3D', 'PointSample', *AUGMENTATION,
+    'NormalizePointsColor', 'Pack3DDetInputs'
+]
 TEST_STEPS = ['LoadPointsFromFile', 'PointSample', 'NormalizePointsColor', 'Pack3DDetInputs']
 
 # config: train areas, test area, data_root, sampled points, train steps (tests/test_tr3d_tools.py
@@ -62,13 +64,11 @@ def test_cpu_configs_change_only_the_point_count_of_exp2_pipelines(name):
     for key in ('train_pipeline', 'test_pipeline'):
         derived = [step for step in cfg[key] if step.type != 'PointSample']
         original = [
-            step for step in exp2[key] if step.type != 'PointSample' and step.type in
-            [s.type for s in cfg[key]]
+            step for step in exp2[key]
+            if step.type != 'PointSample' and step.type in [s.type for s in cfg[key]]
         ]
         assert derived == original
-    assert cfg.model.voxel_size == 0.02 and exp2.model.voxel_size == 0.01
-    assert {k: v for k, v in cfg.model.items() if k != 'voxel_size'} == {
-        k: v for k, v in exp2.model.items() if k != 'voxel_size'}
+    assert exp2.model.voxel_size == 0.01 and cfg.model == dict(exp2.model, voxel_size=0.02)
 
 
 def test_helpers_copy_and_refuse_a_pipeline_without_point_sample():

@@ -40,8 +40,9 @@ def heavy_modules(code: str, *args: str | Path, cwd: Path) -> list[str]:
 
 def test_create_data_and_dataset_stats_run_without_torch_or_mmcv(tmp_path):
     write_synthetic_area(tmp_path, 7, 1, seed=3, points_per_object=40)
-    convert = [REPO / 'tools' / 'create_data.py', 's3dis', '--root-path', tmp_path, '--out-dir',
-               tmp_path]
+    convert = [
+        REPO / 'tools' / 'create_data.py', 's3dis', '--root-path', tmp_path, '--out-dir', tmp_path
+    ]
     assert heavy_modules(RUN_TOOL, *convert, cwd=tmp_path) == []
     assert (tmp_path / 's3dis_infos_Area_7.pkl').is_file()
     stats = [REPO / 'tools' / 'dataset_stats.py', tmp_path, '--out', tmp_path / 'table1.json']

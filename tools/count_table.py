@@ -27,8 +27,8 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
 
 from projects.synthdet.datasets.s3dis_classes import DETECTION_CLASSES  # noqa: E402
-from projects.synthdet.evaluation.table4 import (TrueBox, format_table4, table4,  # noqa: E402
-                                                 truth_from_infos)
+from projects.synthdet.evaluation.table4 import (  # noqa: E402
+    TrueBox, format_table4, table4, truth_from_infos)
 from projects.synthdet.evaluation.table_files import write_table  # noqa: E402
 
 PREDICTIONS_FORMAT = 'synthdet.predictions/1'

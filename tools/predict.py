@@ -91,8 +91,8 @@ def main(argv: list[str] | None = None) -> list[Path]:
                              'predict them into different --out directories')
         targets[target] = scan
 
-    model = init_model(load_config(args.config, args.cfg_options), args.checkpoint,
-                       device=args.device)
+    model = init_model(
+        load_config(args.config, args.cfg_options), args.checkpoint, device=args.device)
     model_name = Path(args.config).stem
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []

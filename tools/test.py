@@ -19,8 +19,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's 
 from mmengine.dist import is_main_process  # noqa: E402
 from mmengine.runner import Runner  # noqa: E402
 
-from projects.synthdet.bootstrap import (add_runner_arguments, parse_runner_args,  # noqa: E402
-                                         runner_config)
+from projects.synthdet.bootstrap import (  # noqa: E402
+    add_runner_arguments, parse_runner_args, runner_config)
 from projects.synthdet.evaluation.table3 import format_table3, table3  # noqa: E402
 from projects.synthdet.evaluation.table_files import write_table  # noqa: E402
 

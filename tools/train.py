@@ -12,8 +12,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's 
 from mmengine.config import Config  # noqa: E402
 from mmengine.runner import Runner  # noqa: E402
 
-from projects.synthdet.bootstrap import (add_runner_arguments, parse_runner_args,  # noqa: E402
-                                         runner_config)
+from projects.synthdet.bootstrap import (  # noqa: E402
+    add_runner_arguments, parse_runner_args, runner_config)
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:

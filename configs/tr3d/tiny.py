@@ -9,8 +9,8 @@
 # - a constant learning rate (TR3D's 1e-3 without its decay after epochs 8 and 11), 24 epochs,
 #   validation and a checkpoint after the last one only, log every 5 iterations.
 _base_ = ['./exp2.py']
-from projects.synthdet.config_helpers import (area_datasets, area_info_file,  # noqa: E402
-                                              with_num_points)
+from projects.synthdet.config_helpers import area_datasets, area_info_file  # noqa: E402
+from projects.synthdet.config_helpers import with_num_points  # noqa: E402
 
 data_root = 'data/s3dis_tiny/'
 train_area = [1]

@@ -65,14 +65,15 @@ def table1_rows(counts: dict[int, Counter],
 def table1(counts: dict[int, Counter], classes: Sequence[str] = TABLE1_CLASSES) -> dict:
     """Table 1 as a JSON-able document: its areas, classes and the rows of ``table1_rows``
     (the synthetic share is ``None`` where a class has no instance)."""
+    rows = [{
+        'label': label,
+        'values': [None if value != value else value for value in values]
+    } for label, values in table1_rows(counts, classes)]
     return {
         'format': TABLE1_FORMAT,
         'areas': sorted(counts),
         'classes': list(classes),
-        'rows': [{
-            'label': label,
-            'values': [None if value != value else value for value in values]
-        } for label, values in table1_rows(counts, classes)],
+        'rows': rows
     }
 
 

@@ -39,7 +39,10 @@ def table3(metrics: dict, classes: Sequence[str], config: str, checkpoint: str,
         'test_set': test_set,
         'classes': list(classes),
         'rows': table3_rows(metrics, classes),
-        'metrics': {k: float(v) for k, v in metrics.items()},
+        'metrics': {
+            k: float(v)
+            for k, v in metrics.items()
+        },
     }
 
 
