@@ -18,7 +18,7 @@ centred on its bounding box, z = 0 at its lowest point, and its front towards lo
 """
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -320,6 +320,19 @@ class _Placer:
         self.objects.append(obj)
         return obj
 
+    def place_first_free(self,
+                         spec: AssetSpec,
+                         propose: Callable[[int], tuple[np.ndarray, float]],
+                         tries: int,
+                         on: str | None = None) -> PlacedObject | None:
+        """Place ``spec`` at the first free pose ``propose(attempt) -> (center, yaw)`` of
+        ``tries`` attempts (an object standing ``on`` another may touch it); None if none is."""
+        for attempt in range(tries):
+            center, yaw = propose(attempt)
+            if self.is_free(PlacedObject('', spec, center, yaw), ignore=on):
+                return self.add(spec, center, yaw, on)
+        return None
+
 
 def _wrap_angle(yaw: float) -> float:
     return float((yaw + np.pi) % (2 * np.pi) - np.pi)
@@ -372,14 +385,14 @@ def _place_wall_item(rng,
     if width > length - 0.2:
         return None
     yaw = _wrap_angle(float(np.arctan2(normal[0], -normal[1])))
-    for _ in range(tries):
+
+    def propose(_attempt: int) -> tuple[np.ndarray, float]:
         u = rng.uniform(0.1 + width / 2, length - 0.1 - width / 2)
         gap = rng.uniform(*gap_range)
         xy = p0 + direction * u + normal * (gap + depth / 2)
-        candidate = PlacedObject('', spec, np.array([xy[0], xy[1], spec.size[2] / 2]), yaw)
-        if placer.is_free(candidate):
-            return placer.add(spec, candidate.center, yaw)
-    return None
+        return np.array([xy[0], xy[1], spec.size[2] / 2]), yaw
+
+    return placer.place_first_free(spec, propose, tries)
 
 
 def _place_on_table(rng, placer: _Placer, table: PlacedObject, side: int, item: AssetSpec) -> bool:
@@ -398,12 +411,10 @@ def _place_on_table(rng, placer: _Placer, table: PlacedObject, side: int, item: 
     ])
     xy = table.center[:2] + rotation2d(table.yaw) @ local
     z0 = table.base[2] + table.spec.top_z
+    center = np.array([xy[0], xy[1], z0 + item.size[2] / 2])
     yaw = _wrap_angle(table.yaw + k * np.pi / 2)
-    candidate = PlacedObject('', item, np.array([xy[0], xy[1], z0 + item.size[2] / 2]), yaw)
-    if not placer.is_free(candidate, ignore=table.instance):
-        return False
-    placer.add(item, candidate.center, yaw, on=table.instance)
-    return True
+    placed = placer.place_first_free(item, lambda _attempt: (center, yaw), 1, on=table.instance)
+    return placed is not None
 
 
 def _place_openings(rng, placer: _Placer, room_cfg, layout: RoomLayout) -> None:
@@ -458,13 +469,12 @@ def _place_clutter(rng, placer: _Placer, layout_cfg) -> None:
             'kind': kind,
             'color': colour
         }, (sx, sy, sz))
-        for _ in range(20):
+
+        def propose(_attempt: int) -> tuple[np.ndarray, float]:
             xy = rng.uniform(lo_xy, hi_xy)
-            yaw = float(rng.uniform(-np.pi, np.pi))
-            candidate = PlacedObject('', spec, np.array([xy[0], xy[1], sz / 2]), yaw)
-            if placer.is_free(candidate):
-                placer.add(spec, candidate.center, yaw)
-                break
+            return np.array([xy[0], xy[1], sz / 2]), float(rng.uniform(-np.pi, np.pi))
+
+        placer.place_first_free(spec, propose, 20)
 
 
 def generate_layout(rng: np.random.Generator, catalog: Catalog,
@@ -529,17 +539,17 @@ def generate_layout(rng: np.random.Generator, catalog: Catalog,
             if rng.random() >= probs['chair']:
                 continue
             spec = catalog['chair'][int(rng.integers(len(catalog['chair'])))]
-            for attempt in range(8):
+
+            def propose(attempt: int) -> tuple[np.ndarray, float]:
                 shift = 0.0 if attempt == 0 else rng.uniform(-0.15, 0.15)
                 s = ((phase + k / n_pos + shift) % 1.0) * perimeter
                 i = min(int(np.searchsorted(cumulative, s, side='right')) - 1, len(inner) - 1)
                 t = (s - cumulative[i]) / max(cumulative[i + 1] - cumulative[i], EPS)
                 xy = inner[i] + t * edges[i]
                 yaw = float(rng.uniform(-np.pi, np.pi))
-                candidate = PlacedObject('', spec, np.array([xy[0], xy[1], spec.size[2] / 2]), yaw)
-                if placer.is_free(candidate):
-                    placer.add(spec, candidate.center, yaw)
-                    break
+                return np.array([xy[0], xy[1], spec.size[2] / 2]), yaw
+
+            placer.place_first_free(spec, propose, 8)
 
     _place_clutter(rng, placer, layout_cfg)
     layout.objects = placer.objects

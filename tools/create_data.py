@@ -6,9 +6,13 @@ Example::
 """
 import argparse
 import sys
+from pathlib import Path
 
-from projects.synthdet.datasets.point_text import PointFileError
-from projects.synthdet.datasets.s3dis_converter import S3DISLayoutError, convert_s3dis
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
+
+from projects.synthdet.datasets.point_text import PointFileError  # noqa: E402
+from projects.synthdet.datasets.s3dis_converter import (  # noqa: E402
+    S3DISLayoutError, convert_s3dis)
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:

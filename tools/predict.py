@@ -11,26 +11,20 @@ input scan's own frame (``"format": "synthdet.predictions/1"``, see docs/trainin
 """
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT))  # the configs' custom_imports load `projects.synthdet`
-# mmengine 0.10's checkpoints hold numpy arrays and its HistoryBuffer, which torch >= 2.6 refuses
-# to unpickle by default (open-mmlab/mmengine#1655): load them fully, as torch < 2.6 did. A
-# checkpoint is a pickle, so only resume from, test or predict with checkpoints you trust.
-os.environ.setdefault('TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD', '1')
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
 
 import torch  # noqa: E402
 from mmdet3d.apis import inference_detector, init_model  # noqa: E402
-from mmengine.config import Config, DictAction  # noqa: E402
 from mmengine.runner import set_random_seed  # noqa: E402
 
 from configurator.scan_io import read_scan  # noqa: E402
+from projects.synthdet.bootstrap import add_cfg_options, load_config  # noqa: E402
 
 PREDICTIONS_FORMAT = 'synthdet.predictions/1'
 
@@ -49,7 +43,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help='keep detections with at least this score (default 0.3)')
     parser.add_argument('--device', default='cuda:0' if torch.cuda.is_available() else 'cpu')
     parser.add_argument('--seed', type=int, default=0, help='seed of the point sampling')
-    parser.add_argument('--cfg-options', nargs='+', action=DictAction, help='override config keys')
+    add_cfg_options(parser)
     return parser.parse_args(argv)
 
 
@@ -97,10 +91,8 @@ def main(argv: list[str] | None = None) -> list[Path]:
                              'predict them into different --out directories')
         targets[target] = scan
 
-    cfg = Config.fromfile(args.config)
-    if args.cfg_options:
-        cfg.merge_from_dict(args.cfg_options)
-    model = init_model(cfg, args.checkpoint, device=args.device)
+    model = init_model(
+        load_config(args.config, args.cfg_options), args.checkpoint, device=args.device)
     model_name = Path(args.config).stem
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
