@@ -37,7 +37,7 @@ from configurator.corners import (
     detect_corners,  # noqa
     find_levels,
     simplify_outline)
-from configurator.scan_io import read_scan  # noqa: E402
+from synthdet.scan_io import read_scan  # noqa: E402
 from tests.room_scans import SHAPES, NoiseModel, make_room  # noqa: E402
 
 

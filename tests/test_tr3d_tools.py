@@ -21,7 +21,7 @@ from mmengine.config import Config
 from mmengine.registry import init_default_scope
 from mmengine.runner import load_checkpoint
 
-from configurator.scan_io import read_scan, write_scan
+from synthdet.scan_io import read_scan, write_scan
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
 

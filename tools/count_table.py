@@ -32,7 +32,7 @@ sys.path.insert(0, str(REPO_ROOT))
 import torch  # noqa: E402
 from mmdet3d.structures import DepthInstance3DBoxes  # noqa: E402
 
-from projects.synthdet.datasets.s3dis_classes import DETECTION_CLASSES  # noqa: E402
+from synthdet.classes import DETECTION_CLASSES  # noqa: E402
 
 PREDICTIONS_FORMAT = 'synthdet.predictions/1'
 ROOM_FORMAT = 'synthdet.room/1'

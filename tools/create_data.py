@@ -7,7 +7,7 @@ Example::
 import argparse
 import sys
 
-from projects.synthdet.datasets.point_text import PointFileError
+from synthdet.point_text import PointFileError
 from projects.synthdet.datasets.s3dis_converter import S3DISLayoutError, convert_s3dis
 
 

@@ -4,7 +4,7 @@
 and numba; ``synthdet_s3dis`` registers ``SynthdetS3DISDataset`` with mmdet3d.
 """
 from .instance_counts import count_instances, format_table1, table1_rows
-from .s3dis_classes import DETECTION_CLASSES, SEMANTIC_CLASSES
+from synthdet.classes import DETECTION_CLASSES, SEMANTIC_CLASSES
 from .s3dis_converter import ConversionSummary, convert_s3dis
 from .synthdet_s3dis import SynthdetS3DISDataset
 
