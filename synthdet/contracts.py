@@ -150,6 +150,13 @@ def expect_format(data: dict, expected: str, source: str) -> None:
              f'"{expected}"')
 
 
+def _document(data: object, expected: str, source: str, required: tuple[str, ...]) -> dict:
+    """A JSON object of format ``expected`` (checked first: other versions may have other
+    keys) holding every key of ``required``."""
+    expect_format(expect_object(data, source, '', ()), expected, source)
+    return expect_object(data, source, '', required)
+
+
 def _polygon(value: object, source: str, where: str) -> list[list[float]]:
     """A simple clockwise polygon of 3 to ``MAX_CORNERS`` distinct ``[x, y]`` corners."""
     if not isinstance(value, list) or not 3 <= len(value) <= MAX_CORNERS:
@@ -189,8 +196,7 @@ def validate_predictions(data: object, source: str = '<predictions>') -> dict:
 
     Detection classes may be any name (a model may know classes this project does not).
     """
-    data = expect_object(data, source, '', ('format', 'detections'))
-    expect_format(data, PREDICTIONS_FORMAT, source)
+    data = _document(data, PREDICTIONS_FORMAT, source, ('detections', ))
     classes = data.get('classes', [])
     if not isinstance(classes, list):
         fail(source, 'classes', f'expected a list of names, got {_describe(classes)}')
@@ -223,9 +229,8 @@ def validate_predictions(data: object, source: str = '<predictions>') -> dict:
 def validate_corners(data: object, source: str = '<corners>') -> dict:
     """Check a ``synthdet.corners/1`` document (a simple clockwise polygon, the floor below the
     ceiling, quality figures); returns a normalised copy."""
-    data = expect_object(data, source, '',
-                         ('format', 'scan', 'corners', 'floor_z', 'ceiling_z', 'quality'))
-    expect_format(data, CORNERS_FORMAT, source)
+    data = _document(data, CORNERS_FORMAT, source,
+                     ('scan', 'corners', 'floor_z', 'ceiling_z', 'quality'))
     points = _polygon(data['corners'], source, 'corners')
     floor_z = expect_number(data['floor_z'], source, 'floor_z')
     ceiling_z = expect_number(data['ceiling_z'], source, 'ceiling_z')
@@ -250,8 +255,7 @@ def validate_room(data: object, source: str = '<room>') -> dict:
     height, objects of known classes with unique instance names and boxes, ``on`` naming
     another object. Returns the document itself (it may hold more, e.g. the generator's
     settings)."""
-    data = expect_object(data, source, '', ('format', 'room', 'objects'))
-    expect_format(data, ROOM_FORMAT, source)
+    data = _document(data, ROOM_FORMAT, source, ('room', 'objects'))
     room = expect_object(data['room'], source, 'room', ('polygon', 'height'))
     _polygon(room['polygon'], source, 'room.polygon')
     _extent(room['height'], source, 'room.height')

@@ -10,7 +10,7 @@ import pytest
 from configurator.corners import (CornerDetectionError, detect_corners, dominant_wall_angle,
                                   simplify_outline, trace_boundary)
 from synthdet.contracts import CORNERS_FORMAT, read_corners
-from synthdet.scan_io import write_scan
+from synthdet.scan_io import read_scan, write_scan
 from tests.room_scans import SHAPES, NoiseModel, inside_polygon, make_room
 
 
