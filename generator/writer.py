@@ -8,8 +8,9 @@ Layout of one room (exactly as the Stanford S3DIS release)::
 
 The room file is the concatenation of the annotation files. Coordinates carry a fixed number of
 decimals (3, like S3DIS), colours are integers. Lines are formatted by the core's vectorised
-``synthdet.point_text.format_lines`` (no per-line Python formatting). A room is built in a temporary folder next to its final place and
-renamed at the end, so a room folder either exists complete or not at all.
+``synthdet.point_text.format_lines`` (no per-line Python formatting). A room is built in a
+temporary folder next to its final place and renamed at the end, so a room folder either exists
+complete or not at all.
 """
 import json
 import os

@@ -58,8 +58,8 @@ def load_json(path: str | os.PathLike) -> object:
 
 def write_json_atomic(path: str | os.PathLike, data: object, indent: int | None = 1) -> None:
     """Write ``data`` as UTF-8 JSON next to ``path`` and rename it into place."""
-    _write_text_atomic(path, json.dumps(data, indent=indent, ensure_ascii=False,
-                                        allow_nan=False) + '\n')
+    _write_text_atomic(path,
+                       json.dumps(data, indent=indent, ensure_ascii=False, allow_nan=False) + '\n')
 
 
 def _write_text_atomic(path: str | os.PathLike, text: str) -> None:
@@ -221,7 +221,7 @@ def validate_predictions(data: object, source: str = '<predictions>') -> dict:
         'format': PREDICTIONS_FORMAT,
         'scan': expect_text(data.get('scan', ''), source, 'scan'),
         'model': expect_text(data.get('model', ''), source, 'model'),
-        'classes': [_name(name, source, f'classes[{index}]') for index, name in enumerate(classes)],
+        'classes': [_name(name, source, f'classes[{i}]') for i, name in enumerate(classes)],
         'detections': checked
     }
 

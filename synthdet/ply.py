@@ -20,8 +20,9 @@ def write_ply(path: str | os.PathLike,
     lengths = {len(values) for values in columns.values()}
     if len(lengths) != 1:
         raise ValueError(f'{path}: vertex properties of different lengths {sorted(lengths)}')
-    table = np.empty(lengths.pop(), dtype=[(name, values.dtype.newbyteorder('<'))
-                                           for name, values in columns.items()])
+    table = np.empty(
+        lengths.pop(),
+        dtype=[(name, values.dtype.newbyteorder('<')) for name, values in columns.items()])
     for name, values in columns.items():
         table[name] = values
     path = os.fspath(path)

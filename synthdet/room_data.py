@@ -20,7 +20,7 @@ from synthdet.classes import SEMANTIC_CLASSES
 from synthdet.contracts import read_corners, read_predictions, read_room
 from synthdet.geometry import box_corners_xy
 from synthdet.ply import write_ply
-from synthdet.scan_io import read_scan
+from synthdet.scan_io import ply_vertex, read_scan
 
 
 @dataclass(frozen=True)
@@ -128,9 +128,8 @@ def load_ground_truth(path: str | os.PathLike, scan_path: str | os.PathLike) -> 
 def boxes_from_predictions(path: str | os.PathLike, min_score: float = 0.0) -> list[Box]:
     """Detections of a ``synthdet.predictions/1`` file scoring at least ``min_score``."""
     return [
-        Box(item['class'], tuple(item['center']), tuple(item['size']), item['yaw'],
-            item['score']) for item in read_predictions(path)['detections']
-        if item['score'] >= min_score
+        Box(item['class'], tuple(item['center']), tuple(item['size']), item['yaw'], item['score'])
+        for item in read_predictions(path)['detections'] if item['score'] >= min_score
     ]
 
 
@@ -143,16 +142,7 @@ def write_labelled_ply(out: str | os.PathLike, scan: Scan) -> None:
     """Write the scan as a binary PLY for CloudCompare: ``x y z`` (float32), ``red green blue``
     (the scan's colours) and, with annotations, a ``class`` index into ``SEMANTIC_CLASSES``
     (-1 for classes outside it), also listed in the header's comment."""
-    points = scan.points
-    colours = np.clip(np.rint(points[:, 3:6]), 0, 255).astype(np.uint8)
-    vertex = {
-        'x': points[:, 0].astype(np.float32),
-        'y': points[:, 1].astype(np.float32),
-        'z': points[:, 2].astype(np.float32),
-        'red': colours[:, 0],
-        'green': colours[:, 1],
-        'blue': colours[:, 2],
-    }
+    vertex = ply_vertex(scan.points)
     comments = []
     if scan.labels is not None:
         index = {name: i for i, name in enumerate(SEMANTIC_CLASSES)}

@@ -57,8 +57,11 @@ def _read_bin(path: Path) -> np.ndarray:
     return np.fromfile(path, dtype=np.float32).reshape(-1, 6).astype(np.float64)
 
 
-PLY_COLOUR_NAMES = (('red', 'green', 'blue'), ('r', 'g', 'b'), ('diffuse_red', 'diffuse_green',
-                                                                 'diffuse_blue'))
+PLY_COLOUR_NAMES = (
+    ('red', 'green', 'blue'),
+    ('r', 'g', 'b'),
+    ('diffuse_red', 'diffuse_green', 'diffuse_blue'),
+)
 
 
 def _read_ply(path: Path) -> np.ndarray:
@@ -93,15 +96,21 @@ def _write_bin(path: Path, points: np.ndarray) -> None:
 
 
 def _write_ply(path: Path, points: np.ndarray) -> None:
+    write_ply(path, ply_vertex(points))
+
+
+def ply_vertex(points: np.ndarray) -> dict[str, np.ndarray]:
+    """PLY vertex properties of an ``(N, 6)`` scan: ``x y z`` float32, ``red green blue``
+    uchar."""
     colours = _colours_0_255(points).astype(np.uint8)
-    write_ply(path, {
+    return {
         'x': points[:, 0].astype(np.float32),
         'y': points[:, 1].astype(np.float32),
         'z': points[:, 2].astype(np.float32),
         'red': colours[:, 0],
         'green': colours[:, 1],
         'blue': colours[:, 2],
-    })
+    }
 
 
 def _colours_0_255(points: np.ndarray) -> np.ndarray:

@@ -141,8 +141,8 @@ def draw_top_view(out: str | os.PathLike,
     shown |= {box.label for box in (*gt, *pred)}
     if colour_by == 'class':
         handles += [
-            Patch(color=np.array(class_colour(name)) / 255, label=name)
-            for name in CLASS_COLOURS if name in shown
+            Patch(color=np.array(class_colour(name)) / 255, label=name) for name in CLASS_COLOURS
+            if name in shown
         ]
     if gt:
         handles.append(Line2D([], [], color='grey', lw=2.2, label='ground truth'))

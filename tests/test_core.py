@@ -53,9 +53,9 @@ def test_core_and_light_stages_import_no_ml_stack_and_no_stage():
 def test_contracts_need_the_standard_library_only_and_the_package_imports_nothing():
     loaded = set(run_python('import sys, synthdet.contracts; print(*sys.modules)'))
     assert 'numpy' not in loaded  # FreeCAD's own Python loads contracts.py
-    assert {name for name in loaded if name.startswith('synthdet')} == {
-        'synthdet', 'synthdet.contracts', 'synthdet.classes', 'synthdet.geometry'
-    }
+    assert {name
+            for name in loaded if name.startswith('synthdet')
+            } == {'synthdet', 'synthdet.contracts', 'synthdet.classes', 'synthdet.geometry'}
     loaded = set(run_python('import sys, synthdet; print(*sys.modules)'))
     assert {name for name in loaded if name.startswith('synthdet')} == {'synthdet'}
 
@@ -79,9 +79,12 @@ def test_class_lists_have_one_meaning_each():
 
 def predictions() -> dict:
     return {
-        'format': 'synthdet.predictions/1',
-        'scan': 'Area_9/lab_3/lab_3.txt',
-        'model': 'exp2',
+        'format':
+        'synthdet.predictions/1',
+        'scan':
+        'Area_9/lab_3/lab_3.txt',
+        'model':
+        'exp2',
         'classes': ['table', 'chair'],
         'detections': [{
             'class': 'table',
@@ -106,40 +109,27 @@ def corners() -> dict:
     }
 
 
+def room_object(instance: str, cls: str, center: list, size: list, on: str | None) -> dict:
+    return {'instance': instance, 'class': cls, 'box': {'center': center, 'size': size}, 'on': on}
+
+
 def room() -> dict:
     return {
         'format': 'synthdet.room/1',
         'seed': 1,
-        'room': {
-            'polygon': copy.deepcopy(L_ROOM),
-            'height': 3.0,
-            'shape': 'L'
-        },
-        'objects': [{
-            'instance': 'table_1',
-            'class': 'table',
-            'box': {
-                'center': [1.0, 4.0, 0.375],
-                'size': [1.6, 0.8, 0.75],
-                'yaw': 0.0
-            },
-            'on': None
-        }, {
-            'instance': 'yumi_1',
-            'class': 'yumi',
-            'box': {
-                'center': [1.0, 4.0, 1.0],
-                'size': [0.5, 0.5, 0.5],
-                'yaw': 0.0
-            },
-            'on': 'table_1'
-        }]
-    }
+        'room': {'polygon': copy.deepcopy(L_ROOM), 'height': 3.0, 'shape': 'L'},
+        'objects': [
+            room_object('table_1', 'table', [1.0, 4.0, 0.375], [1.6, 0.8, 0.75], None),
+            room_object('yumi_1', 'yumi', [1.0, 4.0, 1.0], [0.5, 0.5, 0.5], 'table_1'),
+        ]
+    }  # yapf: disable
 
 
 def _set(path: str, value):
     """A mutation setting the value at a dotted/indexed JSON path (``a.b[1]``)."""
-    keys = [int(k) if k.isdigit() else k for k in path.replace('[', '.').replace(']', '').split('.')]
+    keys = [
+        int(k) if k.isdigit() else k for k in path.replace('[', '.').replace(']', '').split('.')
+    ]
 
     def mutate(data):
         for key in keys[:-1]:
@@ -172,7 +162,8 @@ RULES = [
     (predictions, _set('detections[0].score', True), 'detections[0].score: expected a number'),
     (predictions, _set('detections[0].center[1]', INF), 'detections[0].center[1]: expected a '
      'finite number, got Infinity'),
-    (predictions, _set('detections[0].center', [1, 2]), 'detections[0].center: expected a list of'),
+    (predictions, _set('detections[0].center',
+                       [1, 2]), 'detections[0].center: expected a list of'),
     (predictions, _set('detections[0].size[1]', 0.0), 'detections[0].size[1]: expected positive'),
     (predictions, _set('detections[0].size[2]', 1e4), 'detections[0].size[2]: expected positive '
      'sizes up to 1000 m'),
@@ -256,7 +247,8 @@ def test_writers_validate_and_round_trip_atomically(tmp_path):
     bad = dict(corners(), corners=L_ROOM[::-1])
     with pytest.raises(SchemaError, match='bad.json: corners: the corners run counter-clockwise'):
         contracts.write_corners(tmp_path / 'bad.json', bad)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ['meta.json', 'p.json', 'room.corners.json']
+    assert sorted(p.name
+                  for p in tmp_path.iterdir()) == ['meta.json', 'p.json', 'room.corners.json']
 
 
 def test_optional_fields_get_their_defaults():
@@ -288,12 +280,18 @@ def test_scan_round_trip(tmp_path, suffix, tolerance):
 
 
 def test_read_ply_without_colours_and_with_float_colours(tmp_path):
-    write_ply(tmp_path / 'bare.ply', {'x': np.array([0.0, 3.0]), 'y': np.array([1.0, 4.0]),
-                                      'z': np.array([2.0, 5.0])})
-    np.testing.assert_array_equal(read_scan(tmp_path / 'bare.ply'),
-                                  [[0, 1, 2, 0, 0, 0], [3, 4, 5, 0, 0, 0]])
-    columns = {name: np.array([value], np.float32) for name, value in
-               zip(('x', 'y', 'z', 'red', 'green', 'blue'), (0.0, 1.0, 2.0, 1.0, 0.5, 0.0))}
+    write_ply(tmp_path / 'bare.ply', {
+        'x': np.array([0.0, 3.0]),
+        'y': np.array([1.0, 4.0]),
+        'z': np.array([2.0, 5.0])
+    })
+    np.testing.assert_array_equal(
+        read_scan(tmp_path / 'bare.ply'), [[0, 1, 2, 0, 0, 0], [3, 4, 5, 0, 0, 0]])
+    columns = {
+        name: np.array([value], np.float32)
+        for name, value in zip(('x', 'y', 'z', 'red', 'green', 'blue'), (0.0, 1.0, 2.0, 1.0, 0.5,
+                                                                         0.0))
+    }
     write_ply(tmp_path / 'float.ply', columns)
     np.testing.assert_allclose(read_scan(tmp_path / 'float.ply'), [[0, 1, 2, 255, 127.5, 0]])
 
@@ -414,8 +412,8 @@ def test_segment_touching_and_self_crossing():
 
 def test_points_in_polygon_and_distance_to_it():
     points = np.array([[1, 1], [4, 3], [4, 1], [-1, 1], [2.5, 4.99], [3, 1]])  # (3, 1): on a wall
-    np.testing.assert_array_equal(points_in_polygon(points[:5], np.array(L_ROOM)),
-                                  [True, True, False, False, True])
+    np.testing.assert_array_equal(
+        points_in_polygon(points[:5], np.array(L_ROOM)), [True, True, False, False, True])
     np.testing.assert_allclose(distance_to_polygon(points, L_ROOM), [1, 1, 1, 1, 0.01, 0])
 
 
@@ -430,11 +428,13 @@ def test_oriented_box_footprint_and_crossing_edges():
     assert not edges_cross(square, box_corners_xy((2, 0), (2, 2), 0.0))  # sharing an edge
 
 
-@pytest.mark.parametrize('polygon, count', [
-    ([[0, 0], [0, 5], [6, 5], [6, 0]], 1),
-    (L_ROOM, 3),
-    ([[0, 0], [0, 5], [2, 5], [2, 3], [4, 3], [4, 5], [6, 5], [6, 0]], 5),  # U
-])
+@pytest.mark.parametrize(
+    'polygon, count',
+    [
+        ([[0, 0], [0, 5], [6, 5], [6, 0]], 1),
+        (L_ROOM, 3),
+        ([[0, 0], [0, 5], [2, 5], [2, 3], [4, 3], [4, 5], [6, 5], [6, 0]], 5),  # U
+    ])
 def test_grid_cells_tile_the_room(polygon, count):
     cells = grid_cells(np.array(polygon, float))
     assert len(cells) == count
