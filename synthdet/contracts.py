@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from typing import NoReturn
 
 from synthdet.classes import SEMANTIC_CLASSES
 from synthdet.geometry import first_self_crossing, signed_area
@@ -73,7 +74,7 @@ def _write_text_atomic(path: str | os.PathLike, text: str) -> None:
 # --------------------------------------------------------------------------- value checks
 
 
-def fail(source: str, where: str, message: str) -> None:
+def fail(source: str, where: str, message: str) -> NoReturn:
     """Raise the one-line ``SchemaError`` of a bad value at JSON path ``where``."""
     raise SchemaError(f'{source}: {where}: {message}' if where else f'{source}: {message}')
 
