@@ -21,7 +21,7 @@ from mmengine.config import Config
 from mmengine.registry import init_default_scope
 from mmengine.runner import load_checkpoint
 
-from configurator.scan_io import read_scan, write_scan
+from synthdet.scan_io import read_scan, write_scan
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.evaluation.table3 import format_table3, table3, table3_rows
 from projects.synthdet.evaluation.table4 import truth_from_infos

@@ -17,7 +17,6 @@ The counting rule is in ``projects/synthdet/evaluation/table4.py``. Cells read
 table as JSON (``synthdet.table4/1``) and as text next to it (``table4.txt``).
 """
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -26,13 +25,12 @@ import numpy as np
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
 
-from projects.synthdet.datasets.s3dis_classes import DETECTION_CLASSES  # noqa: E402
 from projects.synthdet.evaluation.table4 import (  # noqa: E402
     TrueBox, format_table4, table4, truth_from_infos)
 from projects.synthdet.evaluation.table_files import write_table  # noqa: E402
+from synthdet.classes import DETECTION_CLASSES  # noqa: E402
+from synthdet.contracts import SchemaError, read_predictions, read_room  # noqa: E402
 
-PREDICTIONS_FORMAT = 'synthdet.predictions/1'
-ROOM_FORMAT = 'synthdet.room/1'
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -58,19 +56,19 @@ def load_predictions(paths: list[str]) -> list[tuple[Path, dict]]:
         files += found
     documents = []
     for file in files:
-        document = json.loads(file.read_text())
-        if document.get('format') != PREDICTIONS_FORMAT:
-            raise SystemExit(f'{file}: format {document.get("format")!r} is not '
-                             f'{PREDICTIONS_FORMAT!r}')
-        documents.append((file, document))
+        try:
+            documents.append((file, read_predictions(file)))
+        except SchemaError as error:
+            raise SystemExit(str(error)) from None
     return documents
 
 
 def truth_from_meta(meta_path: Path) -> list[TrueBox]:
     """Axis-aligned enclosing boxes ``(class, [cx, cy, cz, dx, dy, dz])`` of a ``meta.json``."""
-    meta = json.loads(meta_path.read_text())
-    if meta.get('format') != ROOM_FORMAT:
-        raise SystemExit(f'{meta_path}: format {meta.get("format")!r} is not {ROOM_FORMAT!r}')
+    try:
+        meta = read_room(meta_path)
+    except SchemaError as error:
+        raise SystemExit(str(error)) from None
     boxes = []
     for obj in meta['objects']:
         if obj['class'] not in DETECTION_CLASSES:

@@ -10,9 +10,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
 
-from projects.synthdet.datasets.point_text import PointFileError  # noqa: E402
 from projects.synthdet.datasets.s3dis_converter import (  # noqa: E402
     S3DISLayoutError, convert_s3dis)
+from synthdet.point_text import PointFileError  # noqa: E402
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:

@@ -37,6 +37,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
 
 from projects.synthdet.config_helpers import with_num_points  # noqa: E402
+from synthdet.contracts import read_corners, read_predictions, read_room  # noqa: E402
 
 BASE_CONFIG = REPO_ROOT / 'configs/tr3d/exp2_cpu.py'
 AREAS = (7, 8, 9)
@@ -340,9 +341,9 @@ class Demo:
             '',
         ]
         for room in self.held_out_rooms():
-            corners = json.loads((self.rooms_dir / f'{room}.corners.json').read_text())
-            meta = json.loads((self.scan(room).parent / 'meta.json').read_text())
-            detections = json.loads((self.predictions / f'{room}.pred.json').read_text())
+            corners = read_corners(self.rooms_dir / f'{room}.corners.json')
+            meta = read_room(self.scan(room).parent / 'meta.json')
+            detections = read_predictions(self.predictions / f'{room}.pred.json')
             fcstd = self.rooms_dir / f'{room}.FCStd'
             lines += [
                 f'### {room}',

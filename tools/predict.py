@@ -4,13 +4,12 @@ Usage: python tools/predict.py CONFIG CHECKPOINT POINTS... --out DIR [--score-th
                                [--device cpu|cuda:0] [--seed 0] [--cfg-options k=v ...]
 
 POINTS are ``.bin`` (float32 N x 6), S3DIS ``.txt`` or ``.ply`` scans (x y z r g b, colours
-0-255), read with ``configurator.scan_io.read_scan``. The scan is shifted so that its minimum
+0-255), read with ``synthdet.scan_io.read_scan``. The scan is shifted so that its minimum
 is at the origin, like the converted training data, and passed through the config's test
 pipeline with mmdet3d's inference API; the detections are shifted back, so they are in the
 input scan's own frame (``"format": "synthdet.predictions/1"``, see docs/training.md).
 """
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -23,10 +22,9 @@ import torch  # noqa: E402
 from mmdet3d.apis import inference_detector, init_model  # noqa: E402
 from mmengine.runner import set_random_seed  # noqa: E402
 
-from configurator.scan_io import read_scan  # noqa: E402
 from projects.synthdet.bootstrap import add_cfg_options, load_config  # noqa: E402
-
-PREDICTIONS_FORMAT = 'synthdet.predictions/1'
+from synthdet.contracts import PREDICTIONS_FORMAT, write_predictions  # noqa: E402
+from synthdet.scan_io import read_scan  # noqa: E402
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -105,9 +103,7 @@ def main(argv: list[str] | None = None) -> list[Path]:
             'classes': list(model.dataset_meta['classes']),
             'detections': detections,
         }
-        tmp = target.with_name(target.name + '.tmp')
-        tmp.write_text(json.dumps(document, indent=2) + '\n')
-        tmp.replace(target)
+        write_predictions(target, document)
         written.append(target)
     return written
 

@@ -1,5 +1,5 @@
 """synthdet datasets; the package itself imports nothing.
 
-``s3dis_converter``, ``point_text``, ``s3dis_classes`` need only numpy, numba and tqdm;
+``s3dis_converter`` needs only numpy, numba, tqdm and the light core (``synthdet``);
 ``synthdet_s3dis`` registers ``SynthdetS3DISDataset`` with mmdet3d (and so imports it).
 """

@@ -26,8 +26,9 @@ from typing import Iterable, Iterator, Sequence
 import numpy as np
 from tqdm import tqdm
 
-from .point_text import PointFileError, compile_parser, max_rows, read_point_file
-from .s3dis_classes import DETECTION_CLASSES, FALLBACK_CLASS, SEMANTIC_CLASSES
+from synthdet.classes import DETECTION_CLASSES, FALLBACK_CLASS, SEMANTIC_CLASSES
+from synthdet.point_text import PointFileError, compile_parser, max_rows, read_point_file
+from synthdet.room_data import annotation_class, natural_key
 
 S3DIS_DIR = 'Stanford3dDataset_v1.2_Aligned_Version'
 OUTPUT_DIRS = ('points', 'instance_mask', 'semantic_mask')
@@ -92,10 +93,6 @@ class RoomResult:
     unknown: dict[str, list[str]]
 
 
-def _natural_key(name: str) -> list:
-    return [int(part) if part.isdigit() else part for part in re.split(r'(\d+)', name)]
-
-
 def find_areas(root_path: str | Path) -> list[int]:
     """Area numbers N with a folder ``Area_N`` under the S3DIS data folder, sorted."""
     data_dir = Path(root_path) / S3DIS_DIR
@@ -110,12 +107,7 @@ def list_rooms(area_dir: Path) -> list[str]:
     """Room folder names of an area in natural order (``office_2`` before ``office_10``)."""
     return sorted(
         (p.name for p in area_dir.iterdir() if p.is_dir() and not p.name.startswith('.')),
-        key=_natural_key)
-
-
-def annotation_class(path: Path) -> str:
-    """Class name of an annotation file: the file name before the first ``_``."""
-    return path.stem.split('_')[0]
+        key=natural_key)
 
 
 def _partial_paths(out_dir: Path, name: str) -> list[Path]:
@@ -149,7 +141,7 @@ class _RoomPoints:
 
 def _read_room(room_dir: Path, skip: bool) -> _RoomPoints:
     ann_dir = room_dir / 'Annotations'
-    files = sorted(ann_dir.glob('*.txt'), key=lambda p: _natural_key(p.name)) \
+    files = sorted(ann_dir.glob('*.txt'), key=lambda p: natural_key(p.name)) \
         if ann_dir.is_dir() else []
     if not files:
         raise S3DISLayoutError(f'{ann_dir}: no Annotations/<class>_<k>.txt files')

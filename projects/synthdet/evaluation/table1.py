@@ -4,7 +4,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Sequence
 
-from ..datasets.s3dis_classes import REAL_AREAS
+from synthdet.classes import REAL_AREAS
 
 TABLE1_FORMAT = 'synthdet.table1/1'
 TABLE1_CLASSES = ('chair', 'table', 'sofa', 'bookcase', 'board', 'yumi', '3dprinter')

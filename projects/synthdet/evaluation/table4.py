@@ -13,7 +13,7 @@ import numpy as np
 import torch
 from mmdet3d.structures import DepthInstance3DBoxes
 
-from ..datasets.s3dis_classes import DETECTION_CLASSES
+from synthdet.classes import DETECTION_CLASSES
 
 TABLE4_FORMAT = 'synthdet.table4/1'
 
