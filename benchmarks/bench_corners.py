@@ -37,7 +37,8 @@ from configurator.corners import (
     detect_corners,  # noqa
     find_levels,
     simplify_outline)
-from configurator.scan_io import read_scan  # noqa: E402
+from synthdet.contracts import read_room  # noqa: E402
+from synthdet.scan_io import read_scan  # noqa: E402
 from tests.room_scans import SHAPES, NoiseModel, make_room  # noqa: E402
 
 
@@ -74,9 +75,7 @@ METHODS = {
 def generated_rooms(folder: Path):
     """(label, points, true polygon) of every generator room under ``folder``."""
     for meta_path in sorted(folder.rglob('meta.json')):
-        meta = json.loads(meta_path.read_text())
-        if meta.get('format') != 'synthdet.room/1':
-            raise ValueError(f'{meta_path}: unknown format {meta.get("format")!r}')
+        meta = read_room(meta_path)
         scan = meta_path.parent / f'{meta_path.parent.name}.txt'
         noise = meta['generator'].get('config', {}).get('scanner', {}).get('range_noise', 0)
         label = f'generator {meta["room"].get("shape", "?")}' + (' noisy' if noise else '')

@@ -72,7 +72,7 @@ def run_worker(room_file: Path, voxel_size: float, iters: int, threads: int) -> 
     from mmdet3d.utils import register_all_modules
     from mmengine.structures import InstanceData
 
-    import projects.synthdet  # noqa: F401  (registers TR3D)
+    import projects.synthdet.models  # noqa: F401  (registers TR3D)
     torch.set_num_threads(threads)
     torch.manual_seed(0)
     register_all_modules(init_default_scope=True)

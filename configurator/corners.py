@@ -17,16 +17,16 @@ Method (``docs/corners.md`` explains it in full):
    ``snap_angle``, and consecutive lines are intersected into the corners.
 """
 from __future__ import annotations
-import json
 import math
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
 
-CORNERS_FORMAT = 'synthdet.corners/1'
+from synthdet.contracts import CORNERS_FORMAT
+from synthdet.geometry import (distance_to_polygon, first_self_crossing, points_in_polygon,
+                               rotation2d, signed_area)
 
 
 class CornerDetectionError(ValueError):
@@ -111,7 +111,7 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
                                    f'the floor (z={floor_z:.2f}) and ceiling (z={ceiling_z:.2f})')
 
     angle = dominant_wall_angle(wall_xy, params.angle_cell)
-    to_frame = _rotation(-angle)  # wall-aligned frame: dominant walls along the axes
+    to_frame = rotation2d(-angle)  # wall-aligned frame: dominant walls along the axes
     frame_xy = xyz[:, :2] @ to_frame.T
     frame_walls = wall_xy @ to_frame.T
 
@@ -137,7 +137,7 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
         raise CornerDetectionError(f'the fitted outline crosses itself (walls {crossing[0]} and '
                                    f'{crossing[1]}); the scan is too sparse or not one room')
 
-    corners = corners @ _rotation(angle).T
+    corners = corners @ rotation2d(angle).T
     corners = _canonical_order(corners)
     quality = _quality(corners, xyz, floor_z, ceiling_z, lines, params)
     quality['far_points'] = far_points
@@ -158,7 +158,7 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
 
 def corners_for_scan(scan_path: str | os.PathLike, params: CornerParams | None = None) -> dict:
     """Read a scan file and return its ``synthdet.corners/1`` dictionary."""
-    from configurator.scan_io import read_scan
+    from synthdet.scan_io import read_scan
     outline = detect_corners(read_scan(scan_path), params)
     return outline_to_dict(outline, str(scan_path))
 
@@ -183,27 +183,6 @@ def outline_to_dict(outline: RoomOutline, scan: str) -> dict:
             for key, value in outline.quality.items()
         },
     }
-
-
-def write_corners(path: str | os.PathLike, corners: dict) -> None:
-    """Validate a ``synthdet.corners/1`` dictionary and write it as JSON atomically."""
-    path = Path(path)
-    _validate_corners(corners, str(path))
-    tmp = path.with_name(path.name + '.tmp')
-    lines = [f'  {json.dumps(key)}: {json.dumps(value)}' for key, value in corners.items()]
-    tmp.write_text('{\n' + ',\n'.join(lines) + '\n}\n')  # one line per key
-    os.replace(tmp, path)
-
-
-def load_corners(path: str | os.PathLike) -> dict:
-    """Read and validate a ``synthdet.corners/1`` JSON file; raises ``ValueError`` if bad."""
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as error:
-        raise ValueError(f'{path}:{error.lineno}: not valid JSON ({error.msg})') from None
-    _validate_corners(data, str(path))
-    return data
 
 
 # --------------------------------------------------------------------------- levels and angle
@@ -306,11 +285,6 @@ def dominant_wall_angle(wall_xy: np.ndarray, cell: float = 0.02) -> float:
     fine = best + np.radians(np.arange(-1.0, 1.0001, 0.05))
     best = fine[int(np.argmax([sharpness(t) for t in fine]))]
     return float(best % (math.pi / 2))
-
-
-def _rotation(theta: float) -> np.ndarray:
-    c, s = math.cos(theta), math.sin(theta)
-    return np.array([[c, -s], [s, c]])
 
 
 # --------------------------------------------------------------------------- footprint tracing
@@ -422,7 +396,7 @@ def trace_boundary(mask: np.ndarray) -> np.ndarray:
             # prefer the right turn, then straight on, then left (keeps diagonal contacts apart)
             edge = min(options, key=lambda e: _turn_rank(heading, ends[e] - starts[e]))
         polygon = np.array(loop, dtype=np.float64)
-        area = -_signed_area(polygon)  # clockwise loops have negative signed area
+        area = -signed_area(polygon)  # clockwise loops have negative signed area
         if area > best_area:
             best_loop, best_area = polygon, area
     if best_loop is None:
@@ -442,11 +416,6 @@ def _drop_collinear(polygon: np.ndarray) -> np.ndarray:
     b = following - polygon
     cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
     return polygon[np.abs(cross) > 1e-9]
-
-
-def _signed_area(polygon: np.ndarray) -> float:
-    x, y = polygon[:, 0], polygon[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
 
 # --------------------------------------------------------------------------- simplification
@@ -714,38 +683,9 @@ def _intersect_lines(lines: list[_WallLine], min_edge: float, min_turn: float) -
 # --------------------------------------------------------------------------- output helpers
 
 
-def first_self_crossing(polygon: np.ndarray) -> tuple[int, int] | None:
-    """The first pair of non-adjacent edges of a closed polygon that touch or cross."""
-    count = len(polygon)
-    for i in range(count):
-        for j in range(i + 2, count):
-            if i == 0 and j == count - 1:
-                continue  # adjacent through the closing edge
-            if _segments_touch(polygon[i], polygon[(i + 1) % count], polygon[j],
-                               polygon[(j + 1) % count]):
-                return i, j
-    return None
-
-
-def _segments_touch(a, b, c, d) -> bool:
-
-    def side(p, q, r) -> float:
-        return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
-
-    def within(p, q, r) -> bool:  # r on the segment p-q, given collinear
-        return min(p[0], q[0]) <= r[0] <= max(p[0], q[0]) and \
-            min(p[1], q[1]) <= r[1] <= max(p[1], q[1])
-
-    s1, s2, s3, s4 = side(a, b, c), side(a, b, d), side(c, d, a), side(c, d, b)
-    if ((s1 > 0) != (s2 > 0)) and ((s3 > 0) != (s4 > 0)) and 0 not in (s1, s2, s3, s4):
-        return True
-    return any(s == 0 and within(p, q, r)
-               for s, p, q, r in ((s1, a, b, c), (s2, a, b, d), (s3, c, d, a), (s4, c, d, b)))
-
-
 def _canonical_order(corners: np.ndarray) -> np.ndarray:
     """Clockwise order starting at the corner nearest the bounding box's (min x, min y)."""
-    if _signed_area(corners) > 0:
+    if signed_area(corners) > 0:
         corners = corners[::-1]
     start = int(np.argmin(np.linalg.norm(corners - corners.min(axis=0), axis=1)))
     return np.roll(corners, -start, axis=0)
@@ -754,28 +694,6 @@ def _canonical_order(corners: np.ndarray) -> np.ndarray:
 def _subsample(points: np.ndarray, limit: int) -> np.ndarray:
     """At most about ``limit`` of the points: every k-th one (deterministic, no copy)."""
     return points[::max(1, math.ceil(len(points) / limit))]
-
-
-def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
-    """Even-odd test: which 2D points lie inside the closed polygon."""
-    inside = np.zeros(len(points), dtype=bool)
-    for a, b in zip(polygon, np.roll(polygon, -1, axis=0)):
-        crosses = (a[1] > points[:, 1]) != (b[1] > points[:, 1])
-        if not crosses.any():
-            continue
-        t = (points[crosses, 1] - a[1]) / (b[1] - a[1])
-        inside[crosses] ^= points[crosses, 0] < a[0] + t * (b[0] - a[0])
-    return inside
-
-
-def distance_to_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
-    """Distance from each 2D point to the closed polygon's boundary."""
-    best = np.full(len(points), np.inf)
-    for a, b in zip(polygon, np.roll(polygon, -1, axis=0)):
-        d = b - a
-        t = np.clip(((points - a) @ d) / max(float(d @ d), 1e-12), 0.0, 1.0)
-        best = np.minimum(best, np.linalg.norm(points - (a + t[:, None] * d), axis=1))
-    return best
 
 
 def _quality(corners: np.ndarray, xyz: np.ndarray, floor_z: float, ceiling_z: float,
@@ -799,36 +717,3 @@ def _quality(corners: np.ndarray, xyz: np.ndarray, floor_z: float, ceiling_z: fl
         'min_wall_support':
         float(min(supports)) if supports else 0.0,
     }
-
-
-def _validate_corners(data: object, where: str) -> None:
-    if not isinstance(data, dict):
-        raise ValueError(f'{where}: expected a JSON object, got {type(data).__name__}')
-    if data.get('format') != CORNERS_FORMAT:
-        raise ValueError(f'{where}: unknown format {data.get("format")!r}, expected '
-                         f'{CORNERS_FORMAT!r}')
-    corners = data.get('corners')
-    if not isinstance(corners, list) or len(corners) < 3 or not all(
-            isinstance(c, list) and len(c) == 2 and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                for v in c) for c in corners):
-        raise ValueError(f'{where}: "corners" must be a list of at least 3 [x, y] finite numbers')
-    polygon = np.array(corners, dtype=np.float64)
-    crossing = first_self_crossing(polygon)
-    if crossing is not None:
-        raise ValueError(f'{where}: "corners" cross themselves (edges {crossing[0]} and '
-                         f'{crossing[1]})')
-    if _signed_area(polygon) >= 0:
-        raise ValueError(f'{where}: "corners" must be clockwise seen from above')
-    for key in ('floor_z', 'ceiling_z'):
-        value = data.get(key)
-        if not isinstance(value, (int, float)) or isinstance(value, bool) or \
-                not math.isfinite(value):
-            raise ValueError(f'{where}: "{key}" must be a finite number')
-    if data['ceiling_z'] <= data['floor_z']:
-        raise ValueError(f'{where}: "ceiling_z" must be above "floor_z"')
-    if not isinstance(data.get('scan'), str):
-        raise ValueError(f'{where}: "scan" must be a string')
-    quality = data.get('quality')
-    if not isinstance(quality, dict) or 'wall_points_on_polygon' not in quality:
-        raise ValueError(f'{where}: "quality" must hold "wall_points_on_polygon"')

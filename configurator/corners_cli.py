@@ -7,8 +7,9 @@ import argparse
 import sys
 
 from configurator.corners import (CornerDetectionError, CornerParams, detect_corners,
-                                  outline_to_dict, write_corners)
-from configurator.scan_io import read_scan
+                                  outline_to_dict)
+from synthdet.contracts import write_corners
+from synthdet.scan_io import read_scan
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -52,11 +53,12 @@ def run(args: argparse.Namespace) -> int:
           f'{outline.quality["wall_points_on_polygon"]:.0%} of wall points on the outline '
           f'-> {args.out}')
     if args.preview:
-        from configurator.preview import save_preview
-        save_preview(
+        from synthdet.room_data import Scan
+        from synthdet.topview import draw_top_view
+        draw_top_view(
             args.preview,
-            points,
-            outline.corners,
-            title=f'{args.scan}: {len(outline.corners)} corners')
+            Scan(points, None, args.scan),
+            corners=outline.corners,
+            title=f'{args.scan}: {len(outline.corners)} corners, clockwise from 0')
         print(f'corners: preview -> {args.preview}')
     return 0

@@ -16,8 +16,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from configurator.predictions import (JOB_FORMAT, RESULT_FORMAT, load_json, read_corners,
-                                      read_predictions, validate_corners)
+from configurator.freecad.synthdet_freecad.schema import JOB_FORMAT, RESULT_FORMAT
+from synthdet.contracts import load_json, read_corners, read_predictions, validate_corners
 
 MACRO = Path(__file__).resolve().parent / 'freecad' / 'ImportSynthdet.FCMacro'
 

@@ -20,8 +20,8 @@ import json
 from pathlib import Path
 from typing import Any
 
-DETECTION_CLASSES = ('table', 'chair', 'sofa', 'yumi', '3dprinter')
-STRUCTURE_CLASSES = ('ceiling', 'floor', 'wall', 'door', 'window', 'clutter')
+from synthdet.classes import GENERATED_CLASSES
+
 
 DEFAULTS: dict[str, Any] = {
     'room': {
@@ -105,7 +105,7 @@ def _merge(target: dict, user: dict, reference: dict, source: str, prefix: str) 
         where = f'{prefix}{key}'
         if key not in reference and prefix == 'probabilities.':
             raise ConfigError(f'{source}: unknown class "{key}" in "probabilities" '
-                              f'(classes: {", ".join(DETECTION_CLASSES)})')
+                              f'(classes: {", ".join(GENERATED_CLASSES)})')
         if key not in reference:
             known = ', '.join(sorted(reference))
             raise ConfigError(f'{source}: unknown key "{where}" (known here: {known})')
@@ -151,9 +151,9 @@ def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
     """Raise :class:`ConfigError` when any value of ``config`` is out of its domain."""
     probs = config['probabilities']
     for cls in probs:
-        if cls not in DETECTION_CLASSES:
+        if cls not in GENERATED_CLASSES:
             raise ConfigError(f'{source}: unknown class "{cls}" in "probabilities" '
-                              f'(classes: {", ".join(DETECTION_CLASSES)})')
+                              f'(classes: {", ".join(GENERATED_CLASSES)})')
         p = _number(config, 'probabilities', cls, source)
         if not 0.0 <= p <= 1.0:
             raise ConfigError(

@@ -18,11 +18,13 @@ centred on its bounding box, z = 0 at its lowest point, and its front towards lo
 """
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from generator.config import DETECTION_CLASSES
+from synthdet.classes import GENERATED_CLASSES
+from synthdet.geometry import (box_corners_xy, edges_cross, points_in_polygon, rotation2d,
+                               signed_area)
 
 EPS = 1e-9
 
@@ -47,7 +49,7 @@ def catalog_from_library(library: Any) -> dict[str, list[AssetSpec]]:
     """Build a layout catalog from an asset library; a class the library lacks never appears."""
     catalog = {}
     present = set(library.classes())
-    for cls in DETECTION_CLASSES:
+    for cls in GENERATED_CLASSES:
         specs = []
         for inst in (library.instances(cls) if cls in present else []):
             top_size = None if inst.top_size is None else tuple(float(v) for v in inst.top_size)
@@ -118,7 +120,7 @@ class RoomLayout:
     openings: list[Opening] = field(default_factory=list)
 
     def counts(self) -> dict[str, int]:
-        result = {cls: 0 for cls in DETECTION_CLASSES}
+        result = {cls: 0 for cls in GENERATED_CLASSES}
         for obj in self.objects:
             if obj.cls in result:
                 result[obj.cls] += 1
@@ -126,23 +128,6 @@ class RoomLayout:
 
 
 # ----------------------------------------------------------------------------- geometry helpers
-
-
-def _next(points: np.ndarray) -> np.ndarray:
-    """The cyclic successor of every row (a cheaper ``np.roll(points, -1, axis=0)``)."""
-    return np.concatenate([points[1:], points[:1]])
-
-
-def rotation2d(yaw: float) -> np.ndarray:
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.array([[c, -s], [s, c]])
-
-
-def box_corners_xy(center: Sequence[float], size: Sequence[float], yaw: float) -> np.ndarray:
-    """Corners (4, 2) of an oriented rectangle, counter-clockwise."""
-    hx, hy = size[0] / 2, size[1] / 2
-    local = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
-    return local @ rotation2d(yaw).T + np.asarray(center[:2], dtype=float)
 
 
 def rectangles_overlap(a: np.ndarray, b: np.ndarray, clearance: float = 0.0) -> bool:
@@ -172,44 +157,13 @@ def boxes_intersect(a: PlacedObject, b: PlacedObject, clearance: float = 0.0) ->
         box_corners_xy(a.center, sa, a.yaw), box_corners_xy(b.center, sb, b.yaw), clearance)
 
 
-def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
-    """Even-odd test of points (M, 2) in a simple polygon (N, 2); boundary counts as either."""
-    x, y = points[:, 0:1], points[:, 1:2]
-    x0, y0 = polygon[:, 0], polygon[:, 1]
-    x1, y1 = _next(x0), _next(y0)
-    crosses = (y0 > y) != (y1 > y)
-    with np.errstate(divide='ignore', invalid='ignore'):
-        x_at = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
-    return (crosses & (x < x_at)).sum(axis=1) % 2 == 1
-
-
-def _edges_cross(a: np.ndarray, b: np.ndarray) -> bool:
-    """True if any edge of closed polyline ``a`` properly crosses any edge of ``b``."""
-    p0, p1 = a[:, None, :], _next(a)[:, None, :]
-    q0, q1 = b[None, :, :], _next(b)[None, :, :]
-
-    def orient(u, v, w):
-        return (v[..., 0] - u[..., 0]) * (w[..., 1] - u[..., 1]) - (v[..., 1] - u[..., 1]) * (
-            w[..., 0] - u[..., 0])
-
-    d1, d2 = orient(q0, q1, p0), orient(q0, q1, p1)
-    d3, d4 = orient(p0, p1, q0), orient(p0, p1, q1)
-    return bool(np.any((d1 * d2 < -EPS) & (d3 * d4 < -EPS)))
-
-
 def quad_inside_polygon(quad: np.ndarray, polygon: np.ndarray) -> bool:
     """True if the convex quad lies inside the simple polygon (touching allowed)."""
     if not points_in_polygon(quad, polygon).all():
         return False
-    if points_in_polygon(polygon, quad[::-1] if _area(quad) < 0 else quad).any():
+    if points_in_polygon(polygon, quad[::-1] if signed_area(quad) < 0 else quad).any():
         return False
-    return not _edges_cross(quad, polygon)
-
-
-def _area(polygon: np.ndarray) -> float:
-    """Signed area (positive = counter-clockwise)."""
-    x, y = polygon[:, 0], polygon[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+    return not edges_cross(quad, polygon, EPS)
 
 
 def inward_normals(polygon: np.ndarray) -> np.ndarray:
@@ -320,6 +274,19 @@ class _Placer:
         self.objects.append(obj)
         return obj
 
+    def place_first_free(self,
+                         spec: AssetSpec,
+                         propose: Callable[[int], tuple[np.ndarray, float]],
+                         tries: int,
+                         on: str | None = None) -> PlacedObject | None:
+        """Place ``spec`` at the first free pose ``propose(attempt) -> (center, yaw)`` of
+        ``tries`` attempts (an object standing ``on`` another may touch it); None if none is."""
+        for attempt in range(tries):
+            center, yaw = propose(attempt)
+            if self.is_free(PlacedObject('', spec, center, yaw), ignore=on):
+                return self.add(spec, center, yaw, on)
+        return None
+
 
 def _wrap_angle(yaw: float) -> float:
     return float((yaw + np.pi) % (2 * np.pi) - np.pi)
@@ -372,14 +339,14 @@ def _place_wall_item(rng,
     if width > length - 0.2:
         return None
     yaw = _wrap_angle(float(np.arctan2(normal[0], -normal[1])))
-    for _ in range(tries):
+
+    def propose(_attempt: int) -> tuple[np.ndarray, float]:
         u = rng.uniform(0.1 + width / 2, length - 0.1 - width / 2)
         gap = rng.uniform(*gap_range)
         xy = p0 + direction * u + normal * (gap + depth / 2)
-        candidate = PlacedObject('', spec, np.array([xy[0], xy[1], spec.size[2] / 2]), yaw)
-        if placer.is_free(candidate):
-            return placer.add(spec, candidate.center, yaw)
-    return None
+        return np.array([xy[0], xy[1], spec.size[2] / 2]), yaw
+
+    return placer.place_first_free(spec, propose, tries)
 
 
 def _place_on_table(rng, placer: _Placer, table: PlacedObject, side: int, item: AssetSpec) -> bool:
@@ -398,12 +365,10 @@ def _place_on_table(rng, placer: _Placer, table: PlacedObject, side: int, item: 
     ])
     xy = table.center[:2] + rotation2d(table.yaw) @ local
     z0 = table.base[2] + table.spec.top_z
+    center = np.array([xy[0], xy[1], z0 + item.size[2] / 2])
     yaw = _wrap_angle(table.yaw + k * np.pi / 2)
-    candidate = PlacedObject('', item, np.array([xy[0], xy[1], z0 + item.size[2] / 2]), yaw)
-    if not placer.is_free(candidate, ignore=table.instance):
-        return False
-    placer.add(item, candidate.center, yaw, on=table.instance)
-    return True
+    placed = placer.place_first_free(item, lambda _attempt: (center, yaw), 1, on=table.instance)
+    return placed is not None
 
 
 def _place_openings(rng, placer: _Placer, room_cfg, layout: RoomLayout) -> None:
@@ -458,13 +423,12 @@ def _place_clutter(rng, placer: _Placer, layout_cfg) -> None:
             'kind': kind,
             'color': colour
         }, (sx, sy, sz))
-        for _ in range(20):
+
+        def propose(_attempt: int) -> tuple[np.ndarray, float]:
             xy = rng.uniform(lo_xy, hi_xy)
-            yaw = float(rng.uniform(-np.pi, np.pi))
-            candidate = PlacedObject('', spec, np.array([xy[0], xy[1], sz / 2]), yaw)
-            if placer.is_free(candidate):
-                placer.add(spec, candidate.center, yaw)
-                break
+            return np.array([xy[0], xy[1], sz / 2]), float(rng.uniform(-np.pi, np.pi))
+
+        placer.place_first_free(spec, propose, 20)
 
 
 def generate_layout(rng: np.random.Generator, catalog: Catalog,
@@ -529,17 +493,17 @@ def generate_layout(rng: np.random.Generator, catalog: Catalog,
             if rng.random() >= probs['chair']:
                 continue
             spec = catalog['chair'][int(rng.integers(len(catalog['chair'])))]
-            for attempt in range(8):
+
+            def propose(attempt: int) -> tuple[np.ndarray, float]:
                 shift = 0.0 if attempt == 0 else rng.uniform(-0.15, 0.15)
                 s = ((phase + k / n_pos + shift) % 1.0) * perimeter
                 i = min(int(np.searchsorted(cumulative, s, side='right')) - 1, len(inner) - 1)
                 t = (s - cumulative[i]) / max(cumulative[i + 1] - cumulative[i], EPS)
                 xy = inner[i] + t * edges[i]
                 yaw = float(rng.uniform(-np.pi, np.pi))
-                candidate = PlacedObject('', spec, np.array([xy[0], xy[1], spec.size[2] / 2]), yaw)
-                if placer.is_free(candidate):
-                    placer.add(spec, candidate.center, yaw)
-                    break
+                return np.array([xy[0], xy[1], spec.size[2] / 2]), yaw
+
+            placer.place_first_free(spec, propose, 8)
 
     _place_clutter(rng, placer, layout_cfg)
     layout.objects = placer.objects

@@ -105,7 +105,8 @@ class RoomGenerator:
         from generator.layout import generate_layout, layout_meta
         from generator.scanner import Scanner, sensor_path
         from generator.scene import export_triangles
-        from generator.writer import ROOM_FORMAT, TMP_PREFIX, clean_stale, write_room
+        from generator.writer import TMP_PREFIX, clean_stale, write_room
+        from synthdet.contracts import ROOM_FORMAT
         start = time.perf_counter()
         options = self.options
         area_dir = Path(options.out) / f'Area_{task.area}'

@@ -22,7 +22,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from generator.layout import points_in_polygon
+from synthdet.geometry import grid_cells
 
 
 @dataclass
@@ -45,20 +45,6 @@ class ScanResult:
     part: np.ndarray  # (N,) int32
     rays_cast: int
     object_points: int
-
-
-def grid_cells(polygon: np.ndarray) -> list[np.ndarray]:
-    """Rectangles (4, 2) of the grid through the corner coordinates whose centres lie in the room.
-
-    A rectangle has one cell, an L-shaped room three, a U- or T-shaped room five.
-    """
-    xs, ys = np.unique(polygon[:, 0]), np.unique(polygon[:, 1])
-    cells = []
-    for x0, x1 in zip(xs[:-1], xs[1:]):
-        for y0, y1 in zip(ys[:-1], ys[1:]):
-            if points_in_polygon(np.array([[(x0 + x1) / 2, (y0 + y1) / 2]]), polygon)[0]:
-                cells.append(np.array([[x0, y0], [x0, y1], [x1, y1], [x1, y0]]))
-    return cells
 
 
 def _chord(polygon: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> tuple[float, float]:

@@ -9,7 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from generator.layout import AssetSpec, RoomLayout, points_in_polygon
+from generator.layout import AssetSpec, RoomLayout
+from synthdet.geometry import grid_cells
 
 
 @dataclass
@@ -33,22 +34,10 @@ def _quads_to_mesh(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return vertices, triangles
 
 
-def _floor_cells(polygon: np.ndarray) -> list[tuple[float, float, float, float]]:
-    """Split an axis-aligned polygon into grid cells (x0, y0, x1, y1) that lie inside it."""
-    xs, ys = np.unique(polygon[:, 0]), np.unique(polygon[:, 1])
-    cells = []
-    for x0, x1 in zip(xs[:-1], xs[1:]):
-        for y0, y1 in zip(ys[:-1], ys[1:]):
-            centre = np.array([[(x0 + x1) / 2, (y0 + y1) / 2]])
-            if points_in_polygon(centre, polygon)[0]:
-                cells.append((x0, y0, x1, y1))
-    return cells
-
-
 def _horizontal(polygon: np.ndarray, z: float) -> tuple[np.ndarray, np.ndarray]:
-    cells = _floor_cells(polygon)
+    bounds = [(*cell.min(axis=0), *cell.max(axis=0)) for cell in grid_cells(polygon)]
     corners = np.array([[[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]]
-                        for x0, y0, x1, y1 in cells],
+                        for x0, y0, x1, y1 in bounds],
                        dtype=float)
     return _quads_to_mesh(corners)
 

@@ -27,7 +27,8 @@ OBJECT_PARTS = {
 }
 GENERIC_PARTS = [(0.7, 0.7, 0.4, 0.0)]  # any other class name, e.g. 'stairs'
 
-CLASS_COLOURS = {
+# the RGB of each class's points in the synthetic test rooms (not the drawing palette)
+SURFACE_COLOURS = {
     'ceiling': (225, 225, 215),
     'floor': (95, 90, 85),
     'wall': (180, 175, 160),
@@ -43,8 +44,8 @@ CLASS_COLOURS = {
 
 
 def _colour(class_name: str) -> np.ndarray:
-    if class_name in CLASS_COLOURS:
-        return np.array(CLASS_COLOURS[class_name], dtype=np.float64)
+    if class_name in SURFACE_COLOURS:
+        return np.array(SURFACE_COLOURS[class_name], dtype=np.float64)
     name_bytes = np.frombuffer(class_name.encode().ljust(3, b'_')[:3], dtype=np.uint8)
     return (name_bytes.astype(np.float64) * 37) % 256
 

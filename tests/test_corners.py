@@ -1,4 +1,4 @@
-"""Room corners (configurator/corners.py, the corners CLI) and the shared scan reader."""
+"""Room corners (configurator/corners.py, the corners CLI)."""
 import json
 import math
 import subprocess
@@ -7,10 +7,10 @@ import sys
 import numpy as np
 import pytest
 
-from configurator.corners import (CORNERS_FORMAT, CornerDetectionError, detect_corners,
-                                  dominant_wall_angle, load_corners, simplify_outline,
-                                  trace_boundary, write_corners)
-from configurator.scan_io import ScanFormatError, read_scan, write_scan
+from configurator.corners import (CornerDetectionError, detect_corners, dominant_wall_angle,
+                                  simplify_outline, trace_boundary)
+from synthdet.contracts import CORNERS_FORMAT, read_corners
+from synthdet.scan_io import read_scan, write_scan
 from tests.room_scans import SHAPES, NoiseModel, inside_polygon, make_room
 
 
@@ -227,35 +227,6 @@ def test_floor_and_ceiling_without_walls_has_no_walls(scattered, message):
 # --------------------------------------------------------------------------- JSON and CLI
 
 
-def test_corners_json_round_trip_and_format_check(tmp_path):
-    data = {
-        'format': CORNERS_FORMAT,
-        'scan': 'room.txt',
-        'corners': [[0, 0], [0, 5], [6, 5]],
-        'floor_z': 0.0,
-        'ceiling_z': 3.0,
-        'quality': {
-            'wall_points_on_polygon': 0.9
-        }
-    }
-    path = tmp_path / 'room.corners.json'
-    write_corners(path, data)
-    assert load_corners(path) == data
-    future = dict(data, format='synthdet.corners/2')
-    path.write_text(json.dumps(future))
-    with pytest.raises(ValueError, match='unknown format'):
-        load_corners(path)
-    path.write_text(json.dumps(dict(data, corners=[[0, 0], [6, 5], [0, 5]])))
-    with pytest.raises(ValueError, match='clockwise'):
-        load_corners(path)
-    path.write_text(json.dumps(dict(data, corners=[[0, 0], [0, 5], [6, 0], [6, 5]])))
-    with pytest.raises(ValueError, match='cross themselves'):
-        load_corners(path)
-    path.write_text('{"format": ')
-    with pytest.raises(ValueError, match=r'room.corners.json:1: not valid JSON'):
-        load_corners(path)
-
-
 def test_cli_writes_json_and_preview(tmp_path):
     room = make_room('T', n_points=100_000, seed=8, noise=NoiseModel())
     scan = tmp_path / 'room.ply'
@@ -271,7 +242,7 @@ def test_cli_writes_json_and_preview(tmp_path):
                             text=True,
                             timeout=120)
     assert result.returncode == 0, result.stderr
-    data = load_corners(out)
+    data = read_corners(out)
     assert data['format'] == CORNERS_FORMAT and data['scan'] == str(scan)
     assert matched_error(np.array(data['corners']), room.polygon) < 0.05
     assert data['ceiling_z'] - data['floor_z'] == pytest.approx(
@@ -297,73 +268,3 @@ def test_cli_reports_bad_scans(tmp_path):
     assert result.returncode == 2
     assert 'empty.txt' in result.stderr and 'no points' in result.stderr
     assert not (tmp_path / 'x.json').exists()
-
-
-# --------------------------------------------------------------------------- scan_io
-
-
-@pytest.mark.parametrize('suffix,tolerance', [('.txt', 1e-6), ('.bin', 1e-5), ('.ply', 1e-5)])
-def test_scan_round_trip(tmp_path, suffix, tolerance):
-    rng = np.random.default_rng(0)
-    points = np.column_stack([rng.uniform(-10, 10, (500, 3)),
-                              rng.integers(0, 256, (500, 3))]).astype(np.float64)
-    path = tmp_path / f'scan{suffix}'
-    write_scan(path, points)
-    loaded = read_scan(path)
-    assert loaded.shape == (500, 6) and loaded.dtype == np.float64
-    np.testing.assert_allclose(loaded[:, :3], points[:, :3], atol=tolerance)
-    np.testing.assert_array_equal(loaded[:, 3:], points[:, 3:])
-
-
-def test_read_ply_without_colours(tmp_path):
-    from plyfile import PlyData, PlyElement
-    vertex = np.array([(0.0, 1.0, 2.0), (3.0, 4.0, 5.0)],
-                      dtype=[('x', 'f8'), ('y', 'f8'), ('z', 'f8')])
-    path = tmp_path / 'bare.ply'
-    PlyData([PlyElement.describe(vertex, 'vertex')], text=True).write(str(path))
-    np.testing.assert_array_equal(read_scan(path), [[0, 1, 2, 0, 0, 0], [3, 4, 5, 0, 0, 0]])
-
-
-def test_read_text_with_xyz_only_and_ply_with_float_colours(tmp_path):
-    path = tmp_path / 'xyz.txt'
-    path.write_text('1.5 2 3\n\n4 5 6.25\n')  # blank lines are skipped
-    np.testing.assert_array_equal(read_scan(path), [[1.5, 2, 3, 0, 0, 0], [4, 5, 6.25, 0, 0, 0]])
-    from plyfile import PlyData, PlyElement
-    vertex = np.array([(0.0, 1.0, 2.0, 1.0, 0.5, 0.0)],
-                      dtype=[('x', 'f4'), ('y', 'f4'), ('z', 'f4'), ('red', 'f4'), ('green', 'f4'),
-                             ('blue', 'f4')])
-    path = tmp_path / 'float.ply'
-    PlyData([PlyElement.describe(vertex, 'vertex')]).write(str(path))
-    np.testing.assert_allclose(read_scan(path), [[0, 1, 2, 255, 127.5, 0]])
-
-
-@pytest.mark.parametrize('text,message', [
-    ('', 'no points'),
-    ('1 2 3 4 5 6\n1 2 3 4 5 6 7\n', r'bad.txt:2: expected 6 numbers, got 7'),
-    ('1 2 3 4 5 6\n1 2 3 4 5\n', r'bad.txt:2: expected 6 numbers, got 5'),
-    ('1 2 3 4 5 6\n1 2 x 4 5 6\n', r"bad.txt:2: not a number: 'x'"),
-    ('1 2 3 4\n', r'bad.txt:1: expected 6 numbers per line'),
-    ('1 2 3 4 5 6\n1 2 3 4 5 6\nnan 2 3 4 5 6\n', r'bad.txt:3: non-finite'),
-])
-def test_bad_text_scans_name_file_and_line(tmp_path, text, message):
-    path = tmp_path / 'bad.txt'
-    path.write_text(text)
-    with pytest.raises(ScanFormatError, match=message):
-        read_scan(path)
-
-
-def test_bad_binary_and_other_files(tmp_path):
-    path = tmp_path / 'bad.bin'
-    np.zeros(7, dtype=np.float32).tofile(path)
-    with pytest.raises(ScanFormatError, match='bad.bin: 28 bytes'):
-        read_scan(path)
-    path = tmp_path / 'bad.ply'
-    path.write_bytes(b'not a ply file')
-    with pytest.raises(ScanFormatError, match='bad.ply: not a readable PLY'):
-        read_scan(path)
-    path = tmp_path / 'scan.las'
-    path.write_bytes(b'\0')
-    with pytest.raises(ScanFormatError, match="unknown scan type '.las'"):
-        read_scan(path)
-    with pytest.raises(FileNotFoundError, match='missing.txt'):
-        read_scan(tmp_path / 'missing.txt')

@@ -8,11 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from projects.synthdet.datasets.point_text import (_POW10, PointFileError, _parse_fast, max_rows,
-                                                   read_point_file)
-from projects.synthdet.datasets.s3dis_classes import DETECTION_CLASSES, SEMANTIC_CLASSES
 from projects.synthdet.datasets.s3dis_converter import (S3DIS_DIR, S3DISLayoutError,
                                                         UnknownClassWarning, convert_s3dis)
+from synthdet.classes import DETECTION_CLASSES, SEMANTIC_CLASSES
+from synthdet.point_text import _POW10, PointFileError, _parse_fast, max_rows, read_point_file
 from tests.s3dis_fixtures import write_synthetic_area
 
 REPO_ROOT = Path(__file__).resolve().parents[1]

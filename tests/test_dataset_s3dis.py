@@ -5,8 +5,8 @@ import torch
 from mmdet3d.registry import DATASETS
 from mmengine.registry import init_default_scope
 
-import projects.synthdet  # noqa: F401  (registers SynthdetS3DISDataset)
-from projects.synthdet.datasets.s3dis_classes import DETECTION_CLASSES, SEMANTIC_CLASSES
+import projects.synthdet.datasets.synthdet_s3dis  # noqa: F401  (registers SynthdetS3DISDataset)
+from synthdet.classes import DETECTION_CLASSES, SEMANTIC_CLASSES
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from tests.s3dis_fixtures import write_synthetic_area
 

@@ -1,4 +1,5 @@
 """Table 1 statistics counted from converted info pickles."""
+import json
 import math
 import pickle
 import subprocess
@@ -8,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from projects.synthdet.datasets.instance_counts import (TABLE1_CLASSES, count_instances,
-                                                        format_table1, table1_rows)
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis, info_metainfo
+from projects.synthdet.evaluation.table1 import (TABLE1_CLASSES, count_instances, format_table1,
+                                                 table1, table1_rows)
 from tests.s3dis_fixtures import write_synthetic_area
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -68,19 +69,30 @@ def test_table1_rows_and_cli_on_known_counts(tmp_path):
     share = rows['Synthetic share %']
     assert share[:2] == [20.0, 75.0] and math.isnan(
         share[2]) and share[3:] == [0.0, 0.0, 100.0, 100.0]
-    text = format_table1(count_instances(tmp_path))
+    document = table1(count_instances(tmp_path))
+    assert document['format'] == 'synthdet.table1/1' and document['areas'] == [2, 5, 9]
+    assert document['rows'][-1] == {
+        'label': 'Synthetic share %',
+        'values': [20.0, 75.0, None, 0.0, 0.0, 100.0, 100.0]
+    }
+    text = format_table1(json.loads(json.dumps(document)))
     assert text.splitlines()[-1].split() == [
         'Synthetic', 'share', '%', '20.0', '75.0', '-', '0.0', '0.0', '100.0', '100.0'
     ]
+    out = tmp_path / 'tables' / 'table1.json'
     done = subprocess.run([
         sys.executable,
         str(REPO_ROOT / 'tools' / 'dataset_stats.py'),
-        str(tmp_path), '--areas', '2', '9'
+        str(tmp_path), '--areas', '2', '9', '--out',
+        str(out)
     ],
                           capture_output=True,
                           text=True)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.splitlines()[-2].split() == ['Total', '4', '4', '-', '1', '1', '2', '1']
+    written = (tmp_path / 'tables' / 'table1.txt').read_text()
+    assert written.startswith('Table 1') and written in done.stdout
+    assert written.splitlines()[-2].split() == ['Total', '4', '4', '-', '1', '1', '2', '1']
+    assert json.loads(out.read_text())['areas'] == [2, 9]
     missing = subprocess.run([
         sys.executable,
         str(REPO_ROOT / 'tools' / 'dataset_stats.py'),

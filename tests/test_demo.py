@@ -16,9 +16,10 @@ import pytest
 from PIL import Image
 from plyfile import PlyData
 
-from tools.visualization import (Box, Scan, boxes_from_info, boxes_from_meta,
-                                 boxes_from_predictions, class_colours, draw_top_view, load_scan,
-                                 write_ply)
+from synthdet.room_data import (Box, Scan, boxes_from_info, boxes_from_meta,
+                                boxes_from_predictions, load_scan)
+from synthdet.room_data import write_labelled_ply as write_ply
+from synthdet.topview import class_colours, draw_top_view
 
 REPO = Path(__file__).resolve().parents[1]
 CLASSES = ['table', 'chair', 'sofa', 'yumi', '3dprinter']
@@ -274,7 +275,7 @@ def test_boxes_from_meta_info_and_predictions(tmp_path):
         }))
     assert len(boxes_from_predictions(predictions, 0.3)) == 1
     predictions.write_text('{"format": "synthdet.predictions/2"}')
-    with pytest.raises(ValueError, match='p.json: expected "format"'):
+    with pytest.raises(ValueError, match='p.json: format: unsupported format'):
         boxes_from_predictions(predictions)
 
 
@@ -327,4 +328,4 @@ def test_visualize_cli_writes_png_and_ply_and_names_bad_files(tmp_path):
                           capture_output=True,
                           text=True,
                           timeout=120)
-    assert proc.returncode == 1 and 'bad.pred.json: detections[0] is not valid' in proc.stderr
+    assert proc.returncode == 1 and 'bad.pred.json: detections[0]: missing key' in proc.stderr

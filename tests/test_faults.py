@@ -32,9 +32,9 @@ import pytest
 import torch
 
 from configurator.freecad_cli import FreecadFailed, build_document
-from configurator.scan_io import write_scan
-from projects.synthdet.datasets.s3dis_classes import SEMANTIC_CLASSES
-from projects.synthdet.datasets.s3dis_converter import (UnknownClassWarning, convert_s3dis)
+from projects.synthdet.datasets.s3dis_converter import UnknownClassWarning, convert_s3dis
+from synthdet.classes import SEMANTIC_CLASSES
+from synthdet.scan_io import write_scan
 from tests.room_scans import NoiseModel, make_room
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
 
@@ -416,7 +416,7 @@ def _corners(scan: Path, out: Path) -> subprocess.CompletedProcess:
 
 
 def _corner_error(corners: list, polygon: np.ndarray) -> float:
-    from configurator.corners import distance_to_polygon
+    from synthdet.geometry import distance_to_polygon
     return float(distance_to_polygon(np.array(corners), polygon).max())
 
 

@@ -19,9 +19,8 @@ import pytest
 
 from configurator import freecad_cli
 from configurator.freecad_cli import MACRO, FreecadFailed, build_document
-from configurator.predictions import (SchemaError, load_json, validate_corners,
-                                      validate_predictions)
-from configurator.scan_io import write_scan
+from synthdet.contracts import SchemaError, load_json, validate_corners, validate_predictions
+from synthdet.scan_io import write_scan
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from room_scans import make_room  # noqa: E402

@@ -11,10 +11,11 @@ import sys
 import numpy as np
 import pytest
 
-from generator.config import DEFAULTS, DETECTION_CLASSES, ConfigError, load_config
+from generator.config import DEFAULTS, ConfigError, load_config
 from generator.layout import box_corners_xy, generate_layout, points_in_polygon
 from generator.pipeline import plan_tasks
 from generator.writer import format_lines
+from synthdet.classes import GENERATED_CLASSES
 
 TABLE1 = {'chair': 364, 'table': 252, 'sofa': 86, 'yumi': 200, '3dprinter': 192}
 
@@ -24,7 +25,7 @@ def catalog(tmp_path_factory):
     import bpy  # noqa: F401  (before open3d, see docs/stack)
     from generator.assets import ASSET_CLASSES, default_library
     from generator.layout import catalog_from_library
-    assert tuple(ASSET_CLASSES) == DETECTION_CLASSES
+    assert tuple(ASSET_CLASSES) == GENERATED_CLASSES
     return catalog_from_library(default_library(tmp_path_factory.mktemp('assets')))
 
 
@@ -66,7 +67,7 @@ def _check_rules(layout) -> None:
     x, y = polygon[:, 0], polygon[:, 1]
     assert np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y) < 0, 'polygon not clockwise'
     objects = meta['objects']
-    counts = {cls: sum(o['class'] == cls for o in objects) for cls in DETECTION_CLASSES}
+    counts = {cls: sum(o['class'] == cls for o in objects) for cls in GENERATED_CLASSES}
     assert counts['chair'] <= 4
     assert counts['table'] + counts['sofa'] <= 4
     by_name = {o['instance']: o for o in objects}
@@ -147,7 +148,7 @@ def test_rules_hold_on_many_seeded_rooms(catalog):
 
 def test_default_run_reproduces_table1_counts(catalog):
     config = load_config()
-    totals = dict.fromkeys(DETECTION_CLASSES, 0)
+    totals = dict.fromkeys(GENERATED_CLASSES, 0)
     for task in plan_tasks([7, 8, 9], 50, seed=0):  # exactly the rooms of the default run
         layout = generate_layout(np.random.default_rng([task.seed, 0]), catalog, config)
         for cls, n in layout.counts().items():
@@ -159,7 +160,7 @@ def test_default_run_reproduces_table1_counts(catalog):
 def test_expected_counts_are_calibrated(catalog):
     """The mean over many rooms, not just one lucky run, matches Table 1 (per 150 rooms)."""
     config = load_config()
-    totals = dict.fromkeys(DETECTION_CLASSES, 0)
+    totals = dict.fromkeys(GENERATED_CLASSES, 0)
     tasks = plan_tasks([101, 102, 103, 104, 105, 106], 150, seed=7)
     for task in tasks:
         layout = generate_layout(np.random.default_rng([task.seed, 0]), catalog, config)

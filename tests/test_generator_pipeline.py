@@ -19,13 +19,22 @@ import numpy as np
 import pytest
 
 from generator.__main__ import main
-from generator.config import DEFAULTS, DETECTION_CLASSES, STRUCTURE_CLASSES
-from generator.layout import offset_polygon, points_in_polygon
+from generator.config import DEFAULTS
+from generator.layout import offset_polygon
 from generator.scanner import Scanner, TriangleScene, sensor_path
-from generator.writer import TMP_PREFIX, parse_lines
+from generator.writer import TMP_PREFIX
+from synthdet.classes import GENERATED_CLASSES, GENERATED_STRUCTURE_CLASSES
+from synthdet.geometry import points_in_polygon
+from synthdet.point_text import read_point_file
 
 POINTS = 20000
 TOL = 2e-3  # text rounding (0.5 mm) + float32 ray casting
+
+
+def parse_lines(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """xyz (N, 3) float64 and rgb (N, 3) int64 of an S3DIS text file."""
+    points, _ = read_point_file(path)
+    return points[:, :3], points[:, 3:].astype(np.int64)
 
 
 @pytest.fixture(scope='module')
@@ -88,9 +97,9 @@ def _check_room(room: Path, points: int) -> None:
     object_points = 0
     for path in annotations:
         cls, index = path.stem.split('_')
-        assert index.isdigit() and cls in DETECTION_CLASSES + STRUCTURE_CLASSES
+        assert index.isdigit() and cls in GENERATED_CLASSES + GENERATED_STRUCTURE_CLASSES
         pts, _ = parse_lines(path)
-        if cls in DETECTION_CLASSES or cls == 'clutter':
+        if cls in GENERATED_CLASSES or cls == 'clutter':
             box = objects[path.stem]['box']
             yaw = box['yaw']
             rel = pts[:, :2] - np.asarray(box['center'][:2])
@@ -111,7 +120,7 @@ def _check_room(room: Path, points: int) -> None:
             d = (p1 - p0) / np.linalg.norm(p1 - p0)
             dist = (pts[:, 0] - p0[0]) * d[1] - (pts[:, 1] - p0[1]) * d[0]
             assert np.abs(dist).max() <= TOL, path
-    movable = [o for o in meta['objects'] if o['class'] in DETECTION_CLASSES]
+    movable = [o for o in meta['objects'] if o['class'] in GENERATED_CLASSES]
     if movable:  # object share of the points, exactly as requested
         assert object_points == round(0.5 * points) == meta['generator']['object_points']
 
@@ -260,7 +269,7 @@ def _points_on_edge(xyz: np.ndarray, a: np.ndarray, b: np.ndarray, height: float
         [(0, 0), (0, 4), (6, 4), (6, 0)],  # box: the paper's single cross
     ])
 def test_sensor_path_crosses_every_cell_of_the_room(polygon):
-    from generator.scanner import grid_cells
+    from synthdet.geometry import grid_cells
     polygon = np.array(polygon, float)
     path, segments = sensor_path(polygon, 3.0, np.random.default_rng(3), steps=500)
     cells = grid_cells(polygon)

@@ -12,7 +12,6 @@ from mmdet3d.structures import Det3DDataSample, DepthInstance3DBoxes
 from mmdet3d.utils import register_all_modules
 from mmengine.structures import InstanceData
 
-import projects.synthdet  # noqa: F401  (registers the TR3D modules)
 from projects.synthdet.models import TR3DDetector, tr3d_assign
 from tests.s3dis_fixtures import write_synthetic_area
 
@@ -109,7 +108,7 @@ def test_head_config_errors():
 
 def test_count_params_tool(tmp_path, monkeypatch, capsys):
     config = tmp_path / 'tr3d_s3dis.py'
-    config.write_text("custom_imports = dict(imports=['projects.synthdet'])\n"
+    config.write_text("custom_imports = dict(imports=['projects.synthdet.models'])\n"
                       f'model = {tr3d_config()!r}\n')
     monkeypatch.setattr(sys, 'argv', ['count_params.py', str(config)])
     runpy.run_path(str(REPO / 'tools' / 'count_params.py'), run_name='__main__')

@@ -20,9 +20,11 @@ import torch
 from mmengine.config import Config
 from mmengine.registry import init_default_scope
 
-from configurator.scan_io import read_scan, write_scan
 from projects.synthdet.checkpoint import load_model_weights
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
+from projects.synthdet.evaluation.table3 import format_table3, table3, table3_rows
+from projects.synthdet.evaluation.table4 import truth_from_infos
+from synthdet.scan_io import read_scan, write_scan
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
 
 REPO = Path(__file__).resolve().parents[1]
@@ -196,7 +198,6 @@ def test_checkpoints_save_resume_and_load(tiny: dict) -> None:
 
 
 def test_table3_layout_from_indoor_metric_results() -> None:
-    test_tool = load_tool('test')
     metrics = {
         'table_AP_0.25': 0.96,
         'chair_AP_0.25': 0.72,
@@ -205,8 +206,8 @@ def test_table3_layout_from_indoor_metric_results() -> None:
         'chair_AP_0.50': 0.45,
         'mAP_0.50': 0.66
     }
-    rows = test_tool.table3(metrics, ['table', 'chair', 'yumi'])
-    assert rows == {
+    document = table3(metrics, ['table', 'chair', 'yumi'], 'c.py', 'c.pth', 'a.pkl')
+    assert document['rows'] == {
         'mAP@0.25': {
             'table': 0.96,
             'chair': 0.72,
@@ -220,12 +221,12 @@ def test_table3_layout_from_indoor_metric_results() -> None:
             'mean': 0.66
         }
     }
-    text = test_tool.format_table3(rows).splitlines()
+    text = format_table3(json.loads(json.dumps(document))).splitlines()
     assert text[0].split() == ['metric', 'table', 'chair', 'yumi', 'mean']
     assert text[1].split() == ['mAP@0.25', '0.960', '0.720', '-', '0.840']
     assert text[2].split() == ['mAP@0.5', '0.870', '0.450', '-', '0.660']
     with pytest.raises(KeyError, match='mAP_0.50'):
-        test_tool.table3({'mAP_0.25': 0.5}, ['table'])
+        table3_rows({'mAP_0.25': 0.5}, ['table'])
 
 
 def test_test_tool_prints_and_writes_table3(tiny: dict, capsys: pytest.CaptureFixture) -> None:
@@ -413,7 +414,7 @@ def test_count_table_counts_correct_and_incorrect_detections(tmp_path: Path) -> 
 def test_count_table_reads_ground_truth_from_info_pickles(tiny: dict, tmp_path: Path) -> None:
     count_table = load_tool('count_table')
     info_file = tiny['data'] / 's3dis_infos_Area_1.pkl'
-    truth = count_table.truth_from_infos([str(info_file)])
+    truth = truth_from_infos([str(info_file)])
     assert set(truth) == {'Area_1_office_1.bin', 'Area_1_lab_1.bin'}
     # The converted boxes are the fixture's true boxes, shifted by the room minimum.
     boxes = truth['Area_1_office_1.bin']

@@ -1,33 +1,40 @@
 """Print the paper's Table 1: detection instances per class and area, S3DIS vs synthetic.
 
 Counts come from the info pickles ``<data_root>/s3dis_infos_Area_N.pkl`` written by
-``tools/create_data.py``. Example::
+``tools/create_data.py``; ``--out table1.json`` also writes the table as JSON
+(``synthdet.table1/1``) and as text (``table1.txt``). Example::
 
-    python tools/dataset_stats.py data/s3dis --areas 1 2 3 4 5 6 7 8 9
+    python tools/dataset_stats.py data/s3dis --areas 1 2 3 4 5 6 7 8 9 --out work_dirs/table1.json
 """
 import argparse
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
 
-from projects.synthdet.datasets.instance_counts import (  # noqa: E402
-    InfoFileError, count_instances, format_table1)
+from projects.synthdet.evaluation.table1 import (  # noqa: E402
+    InfoFileError, count_instances, format_table1, table1)
+from projects.synthdet.evaluation.table_files import write_table  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Count, print Table 1 and optionally write it; returns the exit code."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('data_root', help='folder holding s3dis_infos_Area_N.pkl')
     parser.add_argument('--areas', type=int, nargs='+', help='areas (default: every pickle found)')
+    parser.add_argument('--out', help='write the table to this JSON file and a .txt next to it')
     args = parser.parse_args(argv)
     try:
         counts = count_instances(args.data_root, args.areas)
     except (FileNotFoundError, InfoFileError) as error:
         print(f'dataset_stats: error: {error}', file=sys.stderr)
         return 2
-    print(f'Table 1: detection instances per class, counted from the info pickles in '
-          f'{args.data_root}')
-    print(format_table1(counts))
+    document = table1(counts)
+    text = (f'Table 1: detection instances per class, counted from the info pickles in '
+            f'{args.data_root}\n{format_table1(document)}')
+    print(text)
+    if args.out:
+        print(f'written to {args.out} and {write_table(args.out, document, text)}')
     return 0
 
 

@@ -11,7 +11,7 @@ goes to ``data/``: the generated areas and converted files live in ``WORK/data``
 Steps and outputs (``WORK`` = the work directory):
  1. generate areas 7-9          WORK/data/Stanford3dDataset_v1.2_Aligned_Version/Area_{7,8,9}
  2. convert                     WORK/data/s3dis_infos_Area_{7,8,9}.pkl, points/, masks
- 3. Table 1                     WORK/table1.txt
+ 3. Table 1                     WORK/table1.json, WORK/table1.txt
  4. train (exp2_cpu, resized)   WORK/exp2_cpu_<size>.py, WORK/train/epoch_N.pth (the last one is tested)
  5. test, Table 3               WORK/table3.json, WORK/table3.txt
  6. predict held-out rooms of 9 WORK/predictions/<room>.pred.json
@@ -35,6 +35,9 @@ from typing import Callable
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
+
+from projects.synthdet.config_helpers import with_num_points  # noqa: E402
+from synthdet.contracts import read_corners, read_predictions, read_room  # noqa: E402
 
 BASE_CONFIG = REPO_ROOT / 'configs/tr3d/exp2_cpu.py'
 AREAS = (7, 8, 9)
@@ -122,29 +125,26 @@ class Demo:
             json.loads(self.durations_file.read_text()) if self.durations_file.is_file() else {})
 
     # ------------------------------------------------------------------ running commands
-    def run(self, name: str, *args: str | os.PathLike) -> str:
+    def run(self, name: str, *args: str | os.PathLike) -> None:
         """Run ``python ARGS`` from the repository root, echo its output live (progress bars
-        included) and keep it in ``logs/<name>.log``; returns the output, raises on failure."""
+        included) and keep it in ``logs/<name>.log``; raises on failure."""
         self.logs.mkdir(parents=True, exist_ok=True)
         log_path = self.logs / f'{name}.log'
         command = [self.python, *map(str, args)]
         env = dict(os.environ, PYTHONUNBUFFERED='1', PYTHONWARNINGS='ignore')
         if self.threads:
             env['OMP_NUM_THREADS'] = str(self.threads)
-        chunks = []
         with open(log_path, 'wb') as log, subprocess.Popen(
                 command, cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                 env=env) as process:
             log.write(('$ ' + ' '.join(command) + '\n').encode())
             for chunk in iter(lambda: process.stdout.read1(4096), b''):
                 log.write(chunk)
-                chunks.append(chunk)
                 sys.stdout.buffer.write(chunk)
                 sys.stdout.flush()
         if process.returncode != 0:
             raise StepError(f'{name}: `{" ".join(command)}` exited with {process.returncode}; '
                             f'see {log_path}')
-        return b''.join(chunks).decode(errors='replace')
 
     # ------------------------------------------------------------------ the steps
     def steps(self) -> list[tuple[str, Callable[[], bool], Callable[[], None]]]:
@@ -152,11 +152,11 @@ class Demo:
         return [
             ('generate', self.generated, self.generate),
             ('convert', self.converted, self.convert),
-            ('table1', lambda: (self.work / 'table1.txt').is_file(), self.table1),
+            ('table1', lambda: (self.work / 'table1.json').is_file(), self.table1),
             ('train', self.trained, self.train),
-            ('test', lambda: (self.work / 'table3.txt').is_file(), self.test),
+            ('test', lambda: (self.work / 'table3.json').is_file(), self.test),
             ('predict', self.predicted, self.predict),
-            ('table4', lambda: (self.work / 'table4.txt').is_file(), self.table4),
+            ('table4', lambda: (self.work / 'table4.json').is_file(), self.table4),
             ('corners', lambda: self.all_exist('.corners.json'), self.corners),
             ('freecad', lambda: self.all_exist('.FCStd'), self.freecad),
             ('pictures', lambda: self.all_exist('.png'), self.pictures),
@@ -198,9 +198,9 @@ class Demo:
                  self.data, '--areas', *map(str, AREAS), '--workers', str(self.size.workers))
 
     def table1(self) -> None:
-        output = self.run('table1', 'tools/dataset_stats.py', self.data, '--areas',
-                          *map(str, AREAS))
-        (self.work / 'table1.txt').write_text(_table_lines(output, 'Table 1'))
+        """``table1.json`` and ``table1.txt``, written by the tool."""
+        self.run('table1', 'tools/dataset_stats.py', self.data, '--areas', *map(str, AREAS),
+                 '--out', self.work / 'table1.json')
 
     def write_config(self) -> None:
         """The demo's config: ``configs/tr3d/exp2_cpu.py`` with this size's data, points and
@@ -213,14 +213,15 @@ class Demo:
         loader = dict(num_workers=size.loader_workers, persistent_workers=size.loader_workers > 0)
         for dataset in cfg.train_dataloader.dataset.dataset.datasets:
             dataset.data_root = data_root
-            _set_num_points(dataset.pipeline, size.num_points)
+            dataset.pipeline = with_num_points(dataset.pipeline, size.num_points)
         cfg.train_dataloader.dataset.times = size.repeats
         cfg.train_dataloader.batch_size = size.batch_size
         cfg.train_dataloader.update(loader)
         for name in ('val_dataloader', 'test_dataloader'):
             cfg[name].update(loader)
             cfg[name].dataset.data_root = data_root
-            _set_num_points(cfg[name].dataset.pipeline, size.num_points)
+            cfg[name].dataset.pipeline = with_num_points(cfg[name].dataset.pipeline,
+                                                         size.num_points)
         cfg.train_cfg.max_epochs = size.epochs
         cfg.train_cfg.val_interval = 1
         cfg.default_hooks.logger.interval = size.log_interval
@@ -249,9 +250,9 @@ class Demo:
         return final
 
     def test(self) -> None:
-        output = self.run('test', 'tools/test.py', self.config, self.final_checkpoint(),
-                          '--work-dir', self.work / 'test', '--out', self.work / 'table3.json')
-        (self.work / 'table3.txt').write_text(_table_lines(output, 'Table 3'))
+        """``table3.json`` and ``table3.txt``, written by the tool."""
+        self.run('test', 'tools/test.py', self.config, self.final_checkpoint(), '--work-dir',
+                 self.work / 'test', '--out', self.work / 'table3.json')
 
     def predicted(self) -> bool:
         rooms = self.held_out_rooms()
@@ -264,9 +265,9 @@ class Demo:
                  '--seed', str(self.seed), '--score-thr', str(self.size.score_thr))
 
     def table4(self) -> None:
-        output = self.run('table4', 'tools/count_table.py', self.predictions, '--out',
-                          self.work / 'table4.json', '--score-thr', str(self.size.score_thr))
-        (self.work / 'table4.txt').write_text(_table_lines(output, 'Table 4'))
+        """``table4.json`` and ``table4.txt``, written by the tool."""
+        self.run('table4', 'tools/count_table.py', self.predictions, '--out',
+                 self.work / 'table4.json', '--score-thr', str(self.size.score_thr))
 
     def configurator(self, log: str, command: str, *args: str | os.PathLike) -> None:
         """Run ``python -m configurator COMMAND ARGS``."""
@@ -340,9 +341,9 @@ class Demo:
             '',
         ]
         for room in self.held_out_rooms():
-            corners = json.loads((self.rooms_dir / f'{room}.corners.json').read_text())
-            meta = json.loads((self.scan(room).parent / 'meta.json').read_text())
-            detections = json.loads((self.predictions / f'{room}.pred.json').read_text())
+            corners = read_corners(self.rooms_dir / f'{room}.corners.json')
+            meta = read_room(self.scan(room).parent / 'meta.json')
+            detections = read_predictions(self.predictions / f'{room}.pred.json')
             fcstd = self.rooms_dir / f'{room}.FCStd'
             lines += [
                 f'### {room}',
@@ -406,29 +407,6 @@ class Demo:
         print(
             f'[demo] finished in {time.monotonic() - start:.0f} s: {self.work / "REPORT.md"}',
             flush=True)
-
-
-def _set_num_points(pipeline: list, num_points: int) -> None:
-    """Set the ``PointSample`` transform's point count in a pipeline."""
-    samplers = [step for step in pipeline if step['type'] == 'PointSample']
-    if not samplers:
-        raise StepError(f'{BASE_CONFIG}: a pipeline has no PointSample transform')
-    for step in samplers:
-        step['num_points'] = num_points
-
-
-def _table_lines(output: str, name: str) -> str:
-    """The table a tool printed: from its last line starting with NAME (e.g. ``Table 3``) to the
-    end, without log, warning and progress lines (mmengine's config dump comes before it)."""
-    lines = output.replace('\r', '\n').splitlines()
-    starts = [i for i, line in enumerate(lines) if line.startswith(name)]
-    keep = [line.rstrip() for line in lines[starts[-1]:]
-            if line.strip() and ' - mmengine - ' not in line and 'Warning' not in line
-            and not line.startswith(('  warnings.warn', '  sp = ', '$ ')) and '%|' not in line
-            ] if starts else []
-    if not any(any(ch.isdigit() for ch in line) for line in keep[1:]):
-        raise StepError(f'{name}: the tool printed no table:\n{output[-2000:]}')
-    return '\n'.join(keep) + '\n'
 
 
 def _table3_markdown(table3: dict) -> str:

@@ -4,7 +4,7 @@ Usage: python tools/predict.py CONFIG CHECKPOINT POINTS... --out DIR [--score-th
                                [--device cpu|cuda:0] [--seed 0] [--cfg-options k=v ...]
 
 POINTS are ``.bin`` (float32 N x 6), S3DIS ``.txt`` or ``.ply`` scans (x y z r g b, colours
-0-255), read with ``configurator.scan_io.read_scan``. The scan is shifted so that its minimum
+0-255), read with ``synthdet.scan_io.read_scan``. The scan is shifted so that its minimum
 is at the origin, like the converted training data, and passed through the config's test
 pipeline with mmdet3d's inference API; the detections are shifted back, so they are in the
 input scan's own frame (``"format": "synthdet.predictions/1"``, see docs/training.md).
@@ -14,25 +14,22 @@ Every scan is read and checked before the model is loaded; the checkpoint is loa
 with one line naming the file and exit code 2.
 """
 import argparse
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT))  # the configs' custom_imports load `projects.synthdet`
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
 
 import torch  # noqa: E402
 from mmdet3d.apis import inference_detector, init_model  # noqa: E402
-from mmengine.config import Config, DictAction  # noqa: E402
 from mmengine.runner import set_random_seed  # noqa: E402
 
-from configurator.scan_io import ScanFormatError, read_scan  # noqa: E402
+from projects.synthdet.bootstrap import add_cfg_options, load_config  # noqa: E402
 from projects.synthdet.checkpoint import CheckpointError, load_model_weights  # noqa: E402
-
-PREDICTIONS_FORMAT = 'synthdet.predictions/1'
+from synthdet.contracts import PREDICTIONS_FORMAT, write_predictions  # noqa: E402
+from synthdet.scan_io import ScanFormatError, read_scan  # noqa: E402
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -49,7 +46,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help='keep detections with at least this score (default 0.3)')
     parser.add_argument('--device', default='cuda:0' if torch.cuda.is_available() else 'cpu')
     parser.add_argument('--seed', type=int, default=0, help='seed of the point sampling')
-    parser.add_argument('--cfg-options', nargs='+', action=DictAction, help='override config keys')
+    add_cfg_options(parser)
     return parser.parse_args(argv)
 
 
@@ -106,7 +103,7 @@ def check_scans(scans: list[Path], out_dir: Path) -> dict[Path, Path]:
     return targets
 
 
-def load_model(cfg: Config, checkpoint: str, device: str) -> torch.nn.Module:
+def load_model(cfg, checkpoint: str, device: str) -> torch.nn.Module:
     """Build the config's model and load the checkpoint's weights weights-only."""
     model = init_model(cfg, None, device=device)
     try:
@@ -124,10 +121,7 @@ def main(argv: list[str] | None = None) -> list[Path]:
     args = parse_args(argv)
     out_dir = Path(args.out)
     targets = check_scans([Path(p) for p in args.points], out_dir)
-    cfg = Config.fromfile(args.config)
-    if args.cfg_options:
-        cfg.merge_from_dict(args.cfg_options)
-    model = load_model(cfg, args.checkpoint, args.device)
+    model = load_model(load_config(args.config, args.cfg_options), args.checkpoint, args.device)
     model_name = Path(args.config).stem
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
@@ -143,9 +137,7 @@ def main(argv: list[str] | None = None) -> list[Path]:
             'classes': list(model.dataset_meta['classes']),
             'detections': detections,
         }
-        tmp = target.with_name(target.name + '.tmp')
-        tmp.write_text(json.dumps(document, indent=2) + '\n')
-        tmp.replace(target)
+        write_predictions(target, document)
         written.append(target)
     return written
 

@@ -18,17 +18,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from anywhere
 
-from tools.visualization import (
-    boxes_from_predictions,
-    draw_top_view,  # noqa: E402
-    load_corners,
-    load_ground_truth,
-    load_scan,
-    write_ply)
+from synthdet.room_data import (boxes_from_predictions, corner_polygon,  # noqa: E402
+                                 load_ground_truth, load_scan, write_labelled_ply)
+from synthdet.topview import draw_top_view  # noqa: E402
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser = argparse.ArgumentParser(description=' '.join(__doc__.split('\n\n')[0].split()))
     parser.add_argument('scan', help='S3DIS room .txt, .bin or .ply')
     parser.add_argument('--gt', help='ground truth: generator meta.json or info .pkl')
     parser.add_argument('--pred', help='predictions JSON (synthdet.predictions/1)')
@@ -49,15 +45,16 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Draw (and export) one scan; returns the exit code (1 with a message for bad inputs)."""
     args = parse_args(argv)
     try:
         scan = load_scan(args.scan)
         gt = load_ground_truth(args.gt, args.scan) if args.gt else []
         pred = boxes_from_predictions(args.pred, args.min_score) if args.pred else []
-        corners = load_corners(args.corners) if args.corners else None
+        corners = corner_polygon(args.corners) if args.corners else None
         draw_top_view(args.out, scan, gt, pred, corners, args.colour_by, args.title)
         if args.ply:
-            write_ply(args.ply, scan)
+            write_labelled_ply(args.ply, scan)
     except (OSError, ValueError, KeyError) as error:
         print(f'visualize: error: {error}', file=sys.stderr)
         return 1

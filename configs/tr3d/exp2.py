@@ -7,6 +7,7 @@
 # YuMi (about 0.4 x 0.5 x 0.6 m) and desktop 3D printers (about 0.5 m) are chair-sized objects
 # and go to the fine level, like TR3D's chair.
 _base_ = ['./tr3d.py', './_base_/s3dis-synthdet.py']
+from projects.synthdet.config_helpers import area_loaders  # noqa: E402
 
 metainfo = dict(classes=('table', 'chair', 'sofa', 'yumi', '3dprinter'))
 train_area = [7, 8]
@@ -14,14 +15,6 @@ test_area = 9
 
 model = dict(bbox_head=dict(num_classes=5, label2level=(1, 0, 1, 0, 0)))
 
-train_dataloader = dict(
-    dataset=dict(
-        dataset=dict(datasets=[
-            dict(
-                _base_.train_area_dataset,
-                ann_file=f's3dis_infos_Area_{area}.pkl',
-                metainfo=metainfo) for area in train_area
-        ])))
-val_dataloader = dict(
-    dataset=dict(ann_file=f's3dis_infos_Area_{test_area}.pkl', metainfo=metainfo))
+train_dataloader, val_dataloader = area_loaders(_base_.train_area_dataset, train_area, test_area,
+                                                metainfo)
 test_dataloader = val_dataloader

@@ -20,67 +20,24 @@
 # Cost measured on generated 1M-point rooms (one OpenMP thread, a busy 2-core machine): about
 # 10 CPU-s per training iteration of 4 rooms and 1 CPU-s per test room, 1.7 GB peak memory.
 _base_ = ['./exp2.py']
+from projects.synthdet.config_helpers import area_datasets, with_num_points  # noqa: E402
 
-metainfo = dict(classes=('table', 'chair', 'sofa', 'yumi', '3dprinter'))
-train_area = [7, 8]
-test_area = 9
 num_points = 40000
-
 voxel_size = 0.02
 model = dict(voxel_size=voxel_size)
 
-train_pipeline = [
-    dict(
-        type='LoadPointsFromFile',
-        coord_type='DEPTH',
-        shift_height=False,
-        use_color=True,
-        load_dim=6,
-        use_dim=[0, 1, 2, 3, 4, 5]),
-    dict(type='LoadAnnotations3D', with_bbox_3d=True, with_label_3d=True),
-    dict(type='PointSample', num_points=num_points),
-    dict(
-        type='RandomFlip3D',
-        sync_2d=False,
-        flip_ratio_bev_horizontal=0.5,
-        flip_ratio_bev_vertical=0.5),
-    dict(
-        type='GlobalRotScaleTrans',
-        rot_range=[0, 0],
-        scale_ratio_range=[0.95, 1.05],
-        translation_std=[0.1, 0.1, 0.1],
-        shift_height=False),
-    dict(type='NormalizePointsColor', color_mean=None),
-    dict(type='Pack3DDetInputs', keys=['points', 'gt_bboxes_3d', 'gt_labels_3d'])
-]
-test_pipeline = [
-    dict(
-        type='LoadPointsFromFile',
-        coord_type='DEPTH',
-        shift_height=False,
-        use_color=True,
-        load_dim=6,
-        use_dim=[0, 1, 2, 3, 4, 5]),
-    dict(type='PointSample', num_points=num_points),
-    dict(type='NormalizePointsColor', color_mean=None),
-    dict(type='Pack3DDetInputs', keys=['points'])
-]
-
+train_pipeline = with_num_points(_base_.train_pipeline, num_points)
+test_pipeline = with_num_points(_base_.test_pipeline, num_points)
 train_dataloader = dict(
     batch_size=4,
     num_workers=1,
     dataset=dict(
         times=5,
-        dataset=dict(datasets=[
-            dict(
-                _base_.train_area_dataset,
-                pipeline=train_pipeline,
-                ann_file=f's3dis_infos_Area_{area}.pkl',
-                metainfo=metainfo) for area in train_area
-        ])))
-val_dataloader = dict(
-    dataset=dict(
-        ann_file=f's3dis_infos_Area_{test_area}.pkl', metainfo=metainfo, pipeline=test_pipeline))
+        dataset=dict(
+            datasets=area_datasets(
+                dict(_base_.train_area_dataset, pipeline=train_pipeline), _base_.train_area,
+                _base_.metainfo))))
+val_dataloader = dict(dataset=dict(pipeline=test_pipeline))
 test_dataloader = val_dataloader
 
 param_scheduler = dict(

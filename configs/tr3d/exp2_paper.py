@@ -4,15 +4,10 @@
 # sofa, yumi, 3dprinter (the real areas' bookcases and boards are not trained on), TR3D's
 # published model and data settings, 5 epochs keeping the best validation mAP@0.25.
 _base_ = ['./exp2.py']
+from projects.synthdet.config_helpers import area_loaders  # noqa: E402
 
-metainfo = dict(classes=('table', 'chair', 'sofa', 'yumi', '3dprinter'))
 train_area = [1, 2, 3, 7, 8]
 
-train_dataloader = dict(
-    dataset=dict(
-        dataset=dict(datasets=[
-            dict(
-                _base_.train_area_dataset,
-                ann_file=f's3dis_infos_Area_{area}.pkl',
-                metainfo=metainfo) for area in train_area
-        ])))
+train_dataloader, val_dataloader = area_loaders(_base_.train_area_dataset, train_area,
+                                                _base_.test_area, _base_.metainfo)
+test_dataloader = val_dataloader

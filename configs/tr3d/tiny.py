@@ -9,63 +9,34 @@
 # - a constant learning rate (TR3D's 1e-3 without its decay after epochs 8 and 11), 24 epochs,
 #   validation and a checkpoint after the last one only, log every 5 iterations.
 _base_ = ['./exp2.py']
+from projects.synthdet.config_helpers import area_datasets, area_info_file  # noqa: E402
+from projects.synthdet.config_helpers import with_num_points  # noqa: E402
 
 data_root = 'data/s3dis_tiny/'
-metainfo = dict(classes=('table', 'chair', 'sofa', 'yumi', '3dprinter'))
 train_area = [1]
 test_area = 1
 num_points = 10000
-
 voxel_size = 0.02
 model = dict(voxel_size=voxel_size)
 
 train_pipeline = [
-    dict(
-        type='LoadPointsFromFile',
-        coord_type='DEPTH',
-        shift_height=False,
-        use_color=True,
-        load_dim=6,
-        use_dim=[0, 1, 2, 3, 4, 5]),
-    dict(type='LoadAnnotations3D', with_bbox_3d=True, with_label_3d=True),
-    dict(type='PointSample', num_points=num_points),
-    dict(type='NormalizePointsColor', color_mean=None),
-    dict(type='Pack3DDetInputs', keys=['points', 'gt_bboxes_3d', 'gt_labels_3d'])
+    step for step in with_num_points(_base_.train_pipeline, num_points)
+    if step['type'] not in ('RandomFlip3D', 'GlobalRotScaleTrans')
 ]
-test_pipeline = [
-    dict(
-        type='LoadPointsFromFile',
-        coord_type='DEPTH',
-        shift_height=False,
-        use_color=True,
-        load_dim=6,
-        use_dim=[0, 1, 2, 3, 4, 5]),
-    dict(type='PointSample', num_points=num_points),
-    dict(type='NormalizePointsColor', color_mean=None),
-    dict(type='Pack3DDetInputs', keys=['points'])
-]
-
+test_pipeline = with_num_points(_base_.test_pipeline, num_points)
 train_dataloader = dict(
     batch_size=1,
     num_workers=0,
     persistent_workers=False,
     dataset=dict(
         times=1,
-        dataset=dict(datasets=[
-            dict(
-                _base_.train_area_dataset,
-                data_root=data_root,
-                pipeline=train_pipeline,
-                ann_file=f's3dis_infos_Area_{area}.pkl',
-                metainfo=metainfo) for area in train_area
-        ])))
+        dataset=dict(
+            datasets=area_datasets(
+                dict(_base_.train_area_dataset, data_root=data_root, pipeline=train_pipeline),
+                train_area, _base_.metainfo))))
 val_dataloader = dict(
     num_workers=0,
-    dataset=dict(
-        data_root=data_root,
-        ann_file=f's3dis_infos_Area_{test_area}.pkl',
-        metainfo=metainfo,
-        pipeline=test_pipeline))
+    dataset=dict(data_root=data_root, ann_file=area_info_file(test_area), pipeline=test_pipeline))
 test_dataloader = val_dataloader
 
 train_cfg = dict(max_epochs=24, val_interval=24)

@@ -12,7 +12,9 @@
 # The head's voxel size is set from the detector's `voxel_size`.
 # Experiments (data, classes, label2level) are in exp1.py, exp2.py, exp3.py.
 _base_ = ['mmdet3d::_base_/default_runtime.py']
-custom_imports = dict(imports=['projects.synthdet'], allow_failed_imports=False)
+custom_imports = dict(
+    imports=['projects.synthdet.datasets.synthdet_s3dis', 'projects.synthdet.models'],
+    allow_failed_imports=False)
 
 voxel_size = 0.01
 

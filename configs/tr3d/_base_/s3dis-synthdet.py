@@ -4,22 +4,26 @@
 # translation jitter, no rotation (the boxes are axis-aligned). The test pipeline is the flat
 # equivalent of mmdet3d's single-scale, no-flip MultiScaleFlipAug3D.
 # Experiments pick the areas and classes: they fill `train_dataloader.dataset.dataset.datasets`
-# with one `dict(train_area_dataset, ann_file=..., metainfo=...)` per training area and set the
-# test area's ann_file and metainfo in val/test_dataloader.
+# with `area_datasets(_base_.train_area_dataset, train_area, metainfo)` (one dataset per training
+# area, projects/synthdet/config_helpers.py) and set the test area's ann_file and metainfo in
+# val/test_dataloader. Configs that sample another number of points derive the pipelines with
+# `with_num_points(_base_.train_pipeline, n)`.
 _base_ = ['mmdet3d::_base_/datasets/s3dis-3d.py']
 
 dataset_type = 'SynthdetS3DISDataset'
 data_root = 'data/s3dis/'
 num_points = 100000
 
+load_points = dict(
+    type='LoadPointsFromFile',
+    coord_type='DEPTH',
+    shift_height=False,
+    use_color=True,
+    load_dim=6,
+    use_dim=[0, 1, 2, 3, 4, 5])
+
 train_pipeline = [
-    dict(
-        type='LoadPointsFromFile',
-        coord_type='DEPTH',
-        shift_height=False,
-        use_color=True,
-        load_dim=6,
-        use_dim=[0, 1, 2, 3, 4, 5]),
+    load_points,
     dict(type='LoadAnnotations3D', with_bbox_3d=True, with_label_3d=True),
     dict(type='PointSample', num_points=num_points),
     dict(
@@ -37,13 +41,7 @@ train_pipeline = [
     dict(type='Pack3DDetInputs', keys=['points', 'gt_bboxes_3d', 'gt_labels_3d'])
 ]
 test_pipeline = [
-    dict(
-        type='LoadPointsFromFile',
-        coord_type='DEPTH',
-        shift_height=False,
-        use_color=True,
-        load_dim=6,
-        use_dim=[0, 1, 2, 3, 4, 5]),
+    load_points,
     dict(type='PointSample', num_points=num_points),
     dict(type='NormalizePointsColor', color_mean=None),
     dict(type='Pack3DDetInputs', keys=['points'])

@@ -1,4 +1,6 @@
 """synthdet's FreeCAD side: schema checks, the CAD library and the document builder.
 
-Everything but ``schema`` runs inside FreeCAD's own Python and imports nothing from synthdet.
+Everything runs inside FreeCAD's own Python. ``schema`` also runs in synthdet's Python and takes
+the predictions and corners rules from the standard-library-only ``synthdet.contracts``; the
+other modules import nothing from synthdet.
 """

@@ -29,9 +29,10 @@ from typing import Iterable, Iterator, Sequence
 import numpy as np
 from tqdm import tqdm
 
+from synthdet.classes import DETECTION_CLASSES, FALLBACK_CLASS, SEMANTIC_CLASSES
+from synthdet.point_text import PointFileError, compile_parser, max_rows, read_point_file
 from synthdet.processes import die_with_parent
-from .point_text import PointFileError, compile_parser, max_rows, read_point_file
-from .s3dis_classes import DETECTION_CLASSES, FALLBACK_CLASS, SEMANTIC_CLASSES
+from synthdet.room_data import annotation_class, annotation_files, natural_key
 
 S3DIS_DIR = 'Stanford3dDataset_v1.2_Aligned_Version'
 OUTPUT_DIRS = ('points', 'instance_mask', 'semantic_mask')
@@ -39,7 +40,6 @@ PARTIAL_SUFFIX = '.partial'
 ON_ERROR_CHOICES = ('raise', 'skip')
 _SEMANTIC_ID = {name: i for i, name in enumerate(SEMANTIC_CLASSES)}
 _DETECTION_LABEL = {name: i for i, name in enumerate(DETECTION_CLASSES)}
-_ANNOTATION_NAME = re.compile(r'(?P<cls>.+)_\d+\.txt', re.IGNORECASE)
 
 
 class S3DISLayoutError(ValueError):
@@ -101,10 +101,6 @@ class RoomResult:
     unknown: dict[str, list[str]]
 
 
-def _natural_key(name: str) -> list:
-    return [int(part) if part.isdigit() else part for part in re.split(r'(\d+)', name)]
-
-
 def find_areas(root_path: str | Path) -> list[int]:
     """Area numbers N with a folder ``Area_N`` under the S3DIS data folder, sorted."""
     data_dir = Path(root_path) / S3DIS_DIR
@@ -119,21 +115,7 @@ def list_rooms(area_dir: Path) -> list[str]:
     """Room folder names of an area in natural order (``office_2`` before ``office_10``)."""
     return sorted(
         (p.name for p in area_dir.iterdir() if p.is_dir() and not p.name.startswith('.')),
-        key=_natural_key)
-
-
-def annotation_class(path: Path) -> str | None:
-    """Class name of an annotation file ``<class>_<index>.txt``; None for other names."""
-    match = _ANNOTATION_NAME.fullmatch(path.name)
-    return match['cls'] if match else None
-
-
-def _annotation_files(ann_dir: Path) -> list[Path]:
-    """The ``.txt`` files (any case of the suffix) of an Annotations folder, natural order."""
-    if not ann_dir.is_dir():
-        return []
-    return sorted((p for p in ann_dir.iterdir() if p.suffix.lower() == '.txt' and p.is_file()),
-                  key=lambda p: _natural_key(p.name))
+        key=natural_key)
 
 
 def _partial_paths(out_dir: Path, name: str) -> list[Path]:
@@ -168,7 +150,7 @@ class _RoomPoints:
 
 def _read_room(room_dir: Path, skip: bool) -> _RoomPoints:
     ann_dir = room_dir / 'Annotations'
-    files = _annotation_files(ann_dir)
+    files = annotation_files(ann_dir)
     if not files:
         raise S3DISLayoutError(f'{ann_dir}: no Annotations/<class>_<k>.txt files')
     sizes = [path.stat().st_size for path in files]

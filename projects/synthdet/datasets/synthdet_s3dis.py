@@ -6,7 +6,8 @@ import torch
 from mmdet3d.datasets import S3DISDataset
 from mmdet3d.registry import DATASETS
 
-from .s3dis_classes import DETECTION_CLASSES, DETECTION_SEMANTIC_IDS, SEMANTIC_CLASSES
+from synthdet.classes import (CLASS_COLOURS, DETECTION_CLASSES, DETECTION_SEMANTIC_IDS,
+                              SEMANTIC_CLASSES)
 
 
 @DATASETS.register_module()
@@ -26,8 +27,7 @@ class SynthdetS3DISDataset(S3DISDataset):
         DETECTION_SEMANTIC_IDS,
         'seg_all_class_ids':
         tuple(range(len(SEMANTIC_CLASSES))),
-        'palette': [(170, 120, 200), (255, 0, 0), (200, 100, 100), (10, 200, 100), (200, 200, 200),
-                    (255, 200, 0), (0, 120, 255)],
+        'palette': [CLASS_COLOURS[name] for name in DETECTION_CLASSES],
     }
 
     def __init__(self,

@@ -1,9 +1,11 @@
-"""Reader for S3DIS point text files (one ``x y z r g b`` line per point) with exact diagnostics.
+"""Point text files (one ``x y z r g b`` line per point, as S3DIS): the project's one parser and
+its fast writer.
 
 A compiled fast path parses well-formed files. Whenever it meets anything it does not
 handle (a bad line, an exotic number, a colour out of range), the file is read again by a
 line-by-line reference parser that decides what is valid and names the offending line.
 Both parsers round decimal text to the nearest float64, so their results are identical.
+Files of ``x y z`` lines (no colours) are read with ``columns=3``.
 """
 import re
 from dataclasses import dataclass
@@ -13,10 +15,12 @@ import numba
 import numpy as np
 
 NUM_COLUMNS = 6
+COLUMN_CHOICES = (3, 6)  # x y z, or x y z r g b
 _NUMBER = re.compile(rb'[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?')
 _POW10 = np.array([10.0**k for k in range(23)])  # exactly representable powers of ten
 _MAX_DIGITS = 18  # a mantissa of up to 18 digits fits in int64 ...
 _MAX_EXACT_MANTISSA = 2**53  # ... and is exact in float64 up to 2**53
+_COLUMN_NAMES = {3: 'x y z', 6: 'x y z r g b'}
 
 
 class PointFileError(ValueError):
@@ -40,11 +44,13 @@ class BadLine:
 
 @numba.njit(cache=True, nogil=True)
 def _parse_fast(buf: np.ndarray, out: np.ndarray, pow10: np.ndarray) -> tuple[int, int]:
-    """Parse rows of 6 decimal numbers (colours within 0-255) into ``out``.
+    """Parse rows of ``out.shape[1]`` decimal numbers (columns 3-5, the colours, within 0-255)
+    into ``out``.
 
     Returns (rows, 0) on success or (-1, line) at the first line it cannot handle.
     """
     n = buf.shape[0]
+    columns = out.shape[1]
     i = 0
     row = 0
     line = 1
@@ -95,7 +101,7 @@ def _parse_fast(buf: np.ndarray, out: np.ndarray, pow10: np.ndarray) -> tuple[in
                 if exp_digits == 0:
                     return -1, line
                 exponent += -exp_value if exp_negative else exp_value
-            if exponent > 22 or exponent < -22 or col >= 6 or row >= out.shape[0]:
+            if exponent > 22 or exponent < -22 or col >= columns or row >= out.shape[0]:
                 return -1, line
             # one correctly rounded operation on exact operands: nearest float64 of the text
             value = float(mantissa) * pow10[exponent] if exponent >= 0 else \
@@ -112,7 +118,7 @@ def _parse_fast(buf: np.ndarray, out: np.ndarray, pow10: np.ndarray) -> tuple[in
                 i += 1
             if i >= n or buf[i] == 10:
                 break
-        if col != 6:
+        if col != columns:
             return -1, line
         row += 1
         i += 1
@@ -140,8 +146,8 @@ def _check_row(values: list[float], tokens: list[bytes]) -> str | None:
     return None
 
 
-def _parse_reference(path: Path, data: bytes,
-                     skip_bad_lines: bool) -> tuple[np.ndarray, list[BadLine]]:
+def _parse_reference(path: Path, data: bytes, skip_bad_lines: bool,
+                     columns: int) -> tuple[np.ndarray, list[BadLine]]:
     """Line-by-line parser that defines what is valid; raises or records each bad line."""
     rows: list[list[float]] = []
     bad_lines: list[BadLine] = []
@@ -152,8 +158,8 @@ def _parse_reference(path: Path, data: bytes,
         bad = [t for t in tokens if not _NUMBER.fullmatch(t)]
         if bad:
             reason = _describe_bad_token(bad[0])
-        elif len(tokens) != NUM_COLUMNS:
-            reason = f'expected {NUM_COLUMNS} columns (x y z r g b), found {len(tokens)}'
+        elif len(tokens) != columns:
+            reason = f'expected {columns} columns ({_COLUMN_NAMES[columns]}), found {len(tokens)}'
         else:
             values = [float(t) for t in tokens]
             reason = _check_row(values, tokens)
@@ -163,7 +169,7 @@ def _parse_reference(path: Path, data: bytes,
             bad_lines.append(BadLine(path, line_no, reason))
         else:
             raise PointFileError(path, line_no, reason)
-    return np.array(rows, dtype=np.float64).reshape(-1, NUM_COLUMNS), bad_lines
+    return np.array(rows, dtype=np.float64).reshape(-1, columns), bad_lines
 
 
 def compile_parser() -> None:
@@ -171,37 +177,114 @@ def compile_parser() -> None:
     _parse_fast(np.frombuffer(b'', dtype=np.uint8), np.empty((1, NUM_COLUMNS)), _POW10)
 
 
-def max_rows(num_bytes: int) -> int:
-    """Upper bound of the rows in a file of num_bytes: a row takes at least "0 0 0 0 0 0\\n"."""
-    return num_bytes // 12 + 1
+def max_rows(num_bytes: int, columns: int = NUM_COLUMNS) -> int:
+    """Upper bound of the rows in a file of num_bytes: a row takes at least "0 0 0 0 0 0\\n"
+    (two bytes a column)."""
+    return num_bytes // (2 * columns) + 1
 
 
 def read_point_file(path: str | Path,
                     skip_bad_lines: bool = False,
-                    out: np.ndarray | None = None) -> tuple[np.ndarray, list[BadLine]]:
-    """Read an ``x y z r g b`` text file into a float64 (N, 6) array.
+                    out: np.ndarray | None = None,
+                    columns: int = NUM_COLUMNS) -> tuple[np.ndarray, list[BadLine]]:
+    """Read an ``x y z r g b`` text file into a float64 (N, 6) array (``columns=3``: ``x y z``
+    lines into (N, 3)).
 
     Bad lines (wrong column count, unparsable or non-finite numbers, colours outside 0-255)
     raise :class:`PointFileError` naming file and line, or are skipped and returned as
     :class:`BadLine` records when ``skip_bad_lines`` is set. Blank lines are ignored. A file
     without any point is an error in both modes, reported as line 1.
 
-    With ``out`` (C-contiguous float64, at least ``max_rows(file size)`` x 6), the points are
-    written to its first rows and the returned array is a view of them.
+    With ``out`` (C-contiguous float64, at least ``max_rows(file size)`` x ``columns``), the
+    points are written to its first rows and the returned array is a view of them.
     """
+    if columns not in COLUMN_CHOICES:
+        raise ValueError(f'columns must be one of {COLUMN_CHOICES}, got {columns}')
     path = Path(path)
     data = path.read_bytes()
     if out is None:
-        out = np.empty((max_rows(len(data)), NUM_COLUMNS))  # untouched pages cost nothing
-    elif len(out) < max_rows(len(data)):
-        raise ValueError(f'{path}: output array of {len(out)} rows is too small')
+        out = np.empty((max_rows(len(data), columns), columns))  # untouched pages cost nothing
+    elif len(out) < max_rows(len(data), columns) or out.shape[1] != columns:
+        raise ValueError(f'{path}: output array of shape {out.shape} is too small')
     rows, _ = _parse_fast(np.frombuffer(data, dtype=np.uint8), out, _POW10)
     bad_lines: list[BadLine] = []
     if rows < 0:
-        points, bad_lines = _parse_reference(path, data, skip_bad_lines)
+        points, bad_lines = _parse_reference(path, data, skip_bad_lines, columns)
         rows = len(points)
         out[:rows] = points
     if rows == 0:
         reason = 'file is empty (no points)' if not bad_lines else 'no valid point line'
         raise PointFileError(path, 1, reason)
     return out[:rows], bad_lines
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def _digit_table(count: int, width: int) -> np.ndarray:
+    """ASCII digits of 0..count-1, right-aligned in ``width`` columns, 0 bytes as left padding."""
+    values = np.arange(count)
+    table = np.zeros((count, width), dtype=np.uint8)
+    n_digits = 1 + sum((values >= 10**k).astype(np.int64) for k in range(1, width + 1))
+    for col in range(width):
+        power = width - 1 - col
+        table[:, col] = np.where(n_digits > power, 48 + (values // 10**power) % 10, 0)
+    return table
+
+
+_COLOUR_DIGITS = _digit_table(256, 3)
+
+
+def format_lines(xyz: np.ndarray, rgb: np.ndarray, decimals: int = 3) -> tuple[bytes, np.ndarray]:
+    """Format points as 'x y z r g b' lines; return the bytes and the (N+1,) line start offsets.
+
+    ``x`` is printed as ``round(x * 10**decimals)`` scaled back, so parsing the text gives
+    ``np.rint(x * 10**decimals) / 10**decimals`` exactly. Digits come from lookup tables.
+    """
+    n = len(xyz)
+    scale = 10**decimals
+    fraction_digits = _digit_table(scale, decimals)
+    fraction_digits[fraction_digits == 0] = 48  # fractions keep their leading zeros
+    quantised = np.rint(np.asarray(xyz, dtype=np.float64) * scale).astype(np.int64)
+    whole_max = int(np.abs(quantised).max()) // scale if n else 0
+    if whole_max >= 10**7:
+        raise ValueError(f'coordinates up to {whole_max} m are out of range for the text writer')
+    whole_digits = _digit_table(whole_max + 1, len(str(whole_max)))
+    colours = np.asarray(rgb, dtype=np.int64)
+    if n and (colours.min() < 0 or colours.max() > 255):
+        raise ValueError('colours must be integers in 0..255')
+    w = whole_digits.shape[1]
+    field_width = 1 + w + 1 + decimals + 1
+    whole_rows = np.ascontiguousarray(whole_digits.T)
+    fraction_rows = np.ascontiguousarray(fraction_digits.T)
+    colour_rows = np.ascontiguousarray(_COLOUR_DIGITS.T)
+    whole_len = (whole_digits != 0).sum(axis=1)
+    colour_len = (_COLOUR_DIGITS != 0).sum(axis=1)
+    lengths = np.full(n, 3 * (2 + decimals) + 3 * 1, dtype=np.int64)  # '.', fraction, separators
+    # built with one contiguous row per character position, transposed once at the end
+    table = np.zeros((3 * field_width + 12, n), dtype=np.uint8)
+    for axis in range(3):
+        q = np.ascontiguousarray(quantised[:, axis])
+        negative = q < 0
+        m = np.abs(q)
+        whole, fraction = np.divmod(m, scale)
+        col = axis * field_width
+        table[col] = negative * np.uint8(ord('-'))
+        for r in range(w):
+            table[col + 1 + r] = whole_rows[r][whole]
+        table[col + 1 + w] = ord('.')
+        for r in range(decimals):
+            table[col + 2 + w + r] = fraction_rows[r][fraction]
+        table[col + 2 + w + decimals] = 32
+        lengths += negative + whole_len[whole]
+    for channel in range(3):
+        c = np.ascontiguousarray(colours[:, channel])
+        col = 3 * field_width + 4 * channel
+        for r in range(3):
+            table[col + r] = colour_rows[r][c]
+        table[col + 3] = 32 if channel < 2 else 10
+        lengths += colour_len[c]
+    table = np.ascontiguousarray(table.T)
+    offsets = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(lengths, out=offsets[1:])
+    return table[table != 0].tobytes(), offsets

@@ -1,11 +1,12 @@
-"""Detection instances per class and area, counted from the info pickles (the paper's Table 1)."""
+"""The paper's Table 1: detection instances per class and area, counted from the info pickles."""
 import pickle
 from collections import Counter
 from pathlib import Path
 from typing import Sequence
 
-from .s3dis_classes import REAL_AREAS
+from synthdet.classes import REAL_AREAS
 
+TABLE1_FORMAT = 'synthdet.table1/1'
 TABLE1_CLASSES = ('chair', 'table', 'sofa', 'bookcase', 'board', 'yumi', '3dprinter')
 
 
@@ -85,21 +86,35 @@ def table1_rows(counts: dict[int, Counter],
                    ('Total', grand_total), ('Synthetic share %', share)]
 
 
-def format_table1(counts: dict[int, Counter], classes: Sequence[str] = TABLE1_CLASSES) -> str:
+def table1(counts: dict[int, Counter], classes: Sequence[str] = TABLE1_CLASSES) -> dict:
+    """Table 1 as a JSON-able document: its areas, classes and the rows of ``table1_rows``
+    (the synthetic share is ``None`` where a class has no instance)."""
+    rows = [{
+        'label': label,
+        'values': [None if value != value else value for value in values]
+    } for label, values in table1_rows(counts, classes)]
+    return {
+        'format': TABLE1_FORMAT,
+        'areas': sorted(counts),
+        'classes': list(classes),
+        'rows': rows
+    }
+
+
+def format_table1(table: dict) -> str:
     """Table 1 as aligned plain text; zero counts print as '-' like the paper."""
 
-    def cell(value: float, is_share: bool) -> str:
+    def cell(value: float | None, is_share: bool) -> str:
         if is_share:
-            return '-' if value != value else f'{value:.1f}'
+            return '-' if value is None else f'{value:.1f}'
         return str(int(value)) if value else '-'
 
-    rows = table1_rows(counts, classes)
-    width = max(len(label) for label, _ in rows)
+    classes, rows = table['classes'], table['rows']
+    width = max(len(row['label']) for row in rows)
     widths = [max(len(c), 6) for c in classes]
     lines = [' ' * width + ' ' + ' '.join(c.rjust(w) for c, w in zip(classes, widths))]
-    for label, values in rows:
-        is_share = label.startswith('Synthetic share')
-        lines.append(
-            label.ljust(width) + ' ' +
-            ' '.join(cell(v, is_share).rjust(w) for v, w in zip(values, widths)))
+    for row in rows:
+        is_share = row['label'].startswith('Synthetic share')
+        lines.append(row['label'].ljust(width) + ' ' +
+                     ' '.join(cell(v, is_share).rjust(w) for v, w in zip(row['values'], widths)))
     return '\n'.join(lines)

@@ -1,0 +1,62 @@
+"""The shared start of ``tools/train.py``, ``test.py`` and ``predict.py``.
+
+Command-line options common to the tools, config loading with ``--cfg-options`` (loading a
+config imports its ``custom_imports``, which registers the plugin's modules with mmdet3d), the
+work directory and the launcher. Checkpoints are loaded weights-only
+(``projects/synthdet/checkpoint.py``); nothing here changes how ``torch.load`` unpickles.
+"""
+import argparse
+import os
+from pathlib import Path
+
+from mmengine.config import Config, DictAction
+
+
+def add_cfg_options(parser: argparse.ArgumentParser) -> None:
+    """Add ``--cfg-options key=value ...``."""
+    parser.add_argument(
+        '--cfg-options',
+        nargs='+',
+        action=DictAction,
+        help='override config keys, e.g. train_cfg.max_epochs=2 '
+        'test_dataloader.dataset.ann_file=s3dis_infos_Area_9.pkl')
+
+
+def add_runner_arguments(parser: argparse.ArgumentParser, work_dir_help: str) -> None:
+    """Add ``--work-dir``, ``--cfg-options``, ``--launcher`` and ``--local-rank``."""
+    parser.add_argument('--work-dir', help=work_dir_help)
+    add_cfg_options(parser)
+    parser.add_argument(
+        '--launcher',
+        choices=['none', 'pytorch', 'slurm', 'mpi'],
+        default='none',
+        help='job launcher for distributed runs (tools/dist_train.sh uses pytorch)')
+    parser.add_argument('--local-rank', '--local_rank', type=int, default=0)
+
+
+def parse_runner_args(parser: argparse.ArgumentParser,
+                      argv: list[str] | None = None) -> argparse.Namespace:
+    """Parse the command line of a tool with ``add_runner_arguments``; sets ``LOCAL_RANK``."""
+    args = parser.parse_args(argv)
+    os.environ.setdefault('LOCAL_RANK', str(args.local_rank))
+    return args
+
+
+def load_config(path: str | Path, cfg_options: dict | None = None) -> Config:
+    """Load a config (registering its ``custom_imports``) and apply ``--cfg-options``."""
+    cfg = Config.fromfile(path)
+    if cfg_options:
+        cfg.merge_from_dict(cfg_options)
+    return cfg
+
+
+def runner_config(args: argparse.Namespace) -> Config:
+    """The config for mmengine's Runner: ``load_config`` plus the launcher and the work dir
+    (``--work-dir``, else the config's ``work_dir``, else ``work_dirs/<config name>``)."""
+    cfg = load_config(args.config, args.cfg_options)
+    cfg.launcher = args.launcher
+    if args.work_dir:
+        cfg.work_dir = args.work_dir
+    elif cfg.get('work_dir') is None:
+        cfg.work_dir = str(Path('work_dirs') / Path(args.config).stem)
+    return cfg

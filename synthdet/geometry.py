@@ -1,0 +1,144 @@
+"""2D geometry of floor polygons and boxes: metres, x/y seen from above, yaw counter-clockwise.
+
+The exact predicates (``signed_area``, ``segments_touch``, ``first_self_crossing``) are plain
+Python on any sequence of ``(x, y)`` pairs, because ``synthdet.contracts`` uses them inside
+FreeCAD's own Python with the standard library alone; numpy is therefore imported by the
+vectorised helpers that need it, not by this module.
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Sequence
+
+if TYPE_CHECKING:
+    import numpy as np
+
+EPS = 1e-12
+
+
+def _pairs(polygon) -> list:
+    """``polygon`` as a list of ``[x, y]`` (numpy arrays are converted in one call)."""
+    return polygon.tolist() if hasattr(polygon, 'tolist') else list(polygon)
+
+
+def signed_area(polygon) -> float:
+    """Shoelace area of a closed polygon: positive counter-clockwise, negative clockwise."""
+    points = _pairs(polygon)
+    total = 0.0
+    for (x0, y0), (x1, y1) in zip(points, points[1:] + points[:1]):
+        total += x0 * y1 - x1 * y0
+    return total / 2.0
+
+
+def segments_touch(p, q, r, s, eps: float = EPS) -> bool:
+    """Whether the closed segments ``pq`` and ``rs`` cross or touch."""
+
+    def orientation(a, b, c) -> int:
+        value = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+        return (value > eps) - (value < -eps)
+
+    def on_segment(a, b, c) -> bool:  # c on the segment ab, given collinear
+        return (min(a[0], b[0]) - eps <= c[0] <= max(a[0], b[0]) + eps
+                and min(a[1], b[1]) - eps <= c[1] <= max(a[1], b[1]) + eps)
+
+    o1, o2, o3, o4 = orientation(p, q, r), orientation(p, q, s), orientation(r, s, p), \
+        orientation(r, s, q)
+    if o1 != o2 and o3 != o4:
+        return True
+    return ((o1 == 0 and on_segment(p, q, r)) or (o2 == 0 and on_segment(p, q, s))
+            or (o3 == 0 and on_segment(r, s, p)) or (o4 == 0 and on_segment(r, s, q)))
+
+
+def first_self_crossing(polygon) -> tuple[int, int] | None:
+    """The first pair ``(i, j)`` of non-adjacent edges (edge i runs from corner i to i+1) of a
+    closed polygon that cross or touch, or None for a simple polygon."""
+    points = _pairs(polygon)
+    count = len(points)
+    for i in range(count):
+        for j in range(i + 2, count):
+            if i == 0 and j == count - 1:
+                continue  # adjacent through the closing edge
+            if segments_touch(points[i], points[(i + 1) % count], points[j],
+                              points[(j + 1) % count]):
+                return i, j
+    return None
+
+
+def clockwise(polygon) -> np.ndarray:
+    """The polygon as a float ``(N, 2)`` array, reversed if it runs counter-clockwise."""
+    import numpy as np
+    polygon = np.asarray(polygon, dtype=np.float64)
+    return polygon[::-1].copy() if signed_area(polygon) > 0 else polygon
+
+
+def rotation2d(yaw: float) -> np.ndarray:
+    """The 2x2 matrix turning vectors counter-clockwise by ``yaw`` radians."""
+    import numpy as np
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s], [s, c]])
+
+
+def box_corners_xy(center: Sequence[float], size: Sequence[float], yaw: float) -> np.ndarray:
+    """Floor footprint (4, 2) of an oriented box, counter-clockwise; ``size`` is along the box's
+    own axes and ``yaw`` turns it counter-clockwise about ``center``."""
+    import numpy as np
+    hx, hy = size[0] / 2, size[1] / 2
+    local = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
+    return local @ rotation2d(yaw).T + np.asarray(center[:2], dtype=float)
+
+
+def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """Even-odd test of 2D points (M, 2) in a simple polygon (N, 2); the boundary counts as
+    either side. Memory grows with M, not M x N."""
+    import numpy as np
+    points, polygon = np.asarray(points, dtype=float), np.asarray(polygon, dtype=float)
+    x, y = points[:, 0], points[:, 1]
+    inside = np.zeros(len(points), dtype=bool)
+    for (x0, y0), (x1, y1) in zip(polygon, np.roll(polygon, -1, axis=0)):
+        crosses = (y0 > y) != (y1 > y)
+        if crosses.any():
+            x_at = x0 + (y[crosses] - y0) * (x1 - x0) / (y1 - y0)
+            inside[crosses] ^= x[crosses] < x_at
+    return inside
+
+
+def distance_to_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """Distance from each 2D point (M, 2) to the boundary of the closed polygon (N, 2)."""
+    import numpy as np
+    points, polygon = np.asarray(points, dtype=float), np.asarray(polygon, dtype=float)
+    best = np.full(len(points), np.inf)
+    for a, b in zip(polygon, np.roll(polygon, -1, axis=0)):
+        d = b - a
+        t = np.clip(((points - a) @ d) / max(float(d @ d), 1e-12), 0.0, 1.0)
+        best = np.minimum(best, np.linalg.norm(points - (a + t[:, None] * d), axis=1))
+    return best
+
+
+def edges_cross(a: np.ndarray, b: np.ndarray, eps: float = 1e-9) -> bool:
+    """True if an edge of closed polygon ``a`` properly crosses an edge of ``b`` (touching and
+    collinear overlaps do not count)."""
+    import numpy as np
+    p0, p1 = a[:, None, :], np.roll(a, -1, axis=0)[:, None, :]
+    q0, q1 = b[None, :, :], np.roll(b, -1, axis=0)[None, :, :]
+
+    def orient(u, v, w):
+        return (v[..., 0] - u[..., 0]) * (w[..., 1] - u[..., 1]) - (v[..., 1] - u[..., 1]) * (
+            w[..., 0] - u[..., 0])
+
+    d1, d2 = orient(q0, q1, p0), orient(q0, q1, p1)
+    d3, d4 = orient(p0, p1, q0), orient(p0, p1, q1)
+    return bool(np.any((d1 * d2 < -eps) & (d3 * d4 < -eps)))
+
+
+def grid_cells(polygon: np.ndarray) -> list[np.ndarray]:
+    """Rectangles (4, 2), clockwise from (x0, y0), of the grid through an axis-aligned polygon's
+    corner coordinates whose centres lie inside it: a box room has one, an L room three, a U or
+    T room five."""
+    import numpy as np
+    polygon = np.asarray(polygon, dtype=float)
+    xs, ys = np.unique(polygon[:, 0]), np.unique(polygon[:, 1])
+    cells = []
+    for x0, x1 in zip(xs[:-1], xs[1:]):
+        for y0, y1 in zip(ys[:-1], ys[1:]):
+            if points_in_polygon(np.array([[(x0 + x1) / 2, (y0 + y1) / 2]]), polygon)[0]:
+                cells.append(np.array([[x0, y0], [x0, y1], [x1, y1], [x1, y0]]))
+    return cells

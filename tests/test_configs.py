@@ -1,0 +1,84 @@
+"""The experiment configs as mmengine resolves them: areas, data roots and pipelines.
+
+The configs derive from ``_base_`` (``projects/synthdet/config_helpers.py``); these are the
+values they were written out with before, so a change of the derivation cannot change them.
+"""
+from pathlib import Path
+
+import pytest
+from mmengine.config import Config
+
+from projects.synthdet.config_helpers import area_datasets, with_num_points
+
+CONFIGS = Path(__file__).resolve().parents[1] / 'configs' / 'tr3d'
+AUGMENTATION = ['RandomFlip3D', 'GlobalRotScaleTrans']
+TRAIN_STEPS = [
+    'LoadPointsFromFile', 'LoadAnnotations3D', 'PointSample', *AUGMENTATION,
+    'NormalizePointsColor', 'Pack3DDetInputs'
+]
+TEST_STEPS = ['LoadPointsFromFile', 'PointSample', 'NormalizePointsColor', 'Pack3DDetInputs']
+
+# config: train areas, test area, data_root, sampled points, train steps (tests/test_tr3d_tools.py
+# checks the classes, models and schedules)
+EXPECTED = {
+    'exp1': ([1, 2, 3, 4, 6], 5, 'data/s3dis/', 100000, TRAIN_STEPS),
+    'exp2': ([7, 8], 9, 'data/s3dis/', 100000, TRAIN_STEPS),
+    'exp2_paper': ([1, 2, 3, 7, 8], 9, 'data/s3dis/', 100000, TRAIN_STEPS),
+    'exp3': ([1, 2, 3, 4, 6, 7, 8, 9], 5, 'data/s3dis/', 100000, TRAIN_STEPS),
+    'exp2_cpu': ([7, 8], 9, 'data/s3dis/', 40000, TRAIN_STEPS),
+    'tiny': ([1], 1, 'data/s3dis_tiny/', 10000, [s for s in TRAIN_STEPS if s not in AUGMENTATION]),
+}
+
+
+def load(name: str) -> Config:
+    return Config.fromfile(CONFIGS / f'{name}.py', import_custom_modules=False)
+
+
+def _num_points(pipeline: list) -> list[int]:
+    return [step['num_points'] for step in pipeline if step['type'] == 'PointSample']
+
+
+@pytest.mark.parametrize('name', sorted(EXPECTED))
+def test_resolved_datasets_and_pipelines(name):
+    areas, test_area, data_root, num_points, train_steps = EXPECTED[name]
+    cfg = load(name)
+    datasets = cfg.train_dataloader.dataset.dataset.datasets
+    assert [d.ann_file for d in datasets] == [f's3dis_infos_Area_{a}.pkl' for a in areas]
+    for dataset in datasets:
+        assert dataset.data_root == data_root and dataset.pipeline == cfg.train_pipeline
+        assert dataset.metainfo == cfg.metainfo
+    assert [step.type for step in cfg.train_pipeline] == train_steps
+    assert _num_points(cfg.train_pipeline) == [num_points]
+    assert cfg.val_dataloader == cfg.test_dataloader
+    test_set = cfg.test_dataloader.dataset
+    assert (test_set.ann_file, test_set.data_root) == (f's3dis_infos_Area_{test_area}.pkl',
+                                                       data_root)
+    assert test_set.pipeline == cfg.test_pipeline and test_set.metainfo == cfg.metainfo
+    assert [step.type for step in cfg.test_pipeline] == TEST_STEPS
+    assert _num_points(cfg.test_pipeline) == [num_points]
+
+
+@pytest.mark.parametrize('name', ['exp2_cpu', 'tiny'])
+def test_cpu_configs_change_only_the_point_count_of_exp2_pipelines(name):
+    exp2, cfg = load('exp2'), load(name)
+    for key in ('train_pipeline', 'test_pipeline'):
+        derived = [step for step in cfg[key] if step.type != 'PointSample']
+        original = [
+            step for step in exp2[key]
+            if step.type != 'PointSample' and step.type in [s.type for s in cfg[key]]
+        ]
+        assert derived == original
+    assert exp2.model.voxel_size == 0.01 and cfg.model == dict(exp2.model, voxel_size=0.02)
+
+
+def test_helpers_copy_and_refuse_a_pipeline_without_point_sample():
+    pipeline = [dict(type='LoadPointsFromFile'), dict(type='PointSample', num_points=5)]
+    changed = with_num_points(pipeline, 7)
+    assert _num_points(changed) == [7] and _num_points(pipeline) == [5]
+    with pytest.raises(ValueError, match='no PointSample step'):
+        with_num_points(pipeline[:1], 7)
+    template = dict(type='SynthdetS3DISDataset', data_root='d/')
+    assert area_datasets(template, [2, 9], dict(classes=('sofa', ))) == [
+        dict(template, ann_file=f's3dis_infos_Area_{a}.pkl', metainfo=dict(classes=('sofa', )))
+        for a in (2, 9)
+    ]
