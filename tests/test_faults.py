@@ -562,6 +562,20 @@ def test_freecad_timeout_ends_the_whole_process_group(tmp_path):
     assert helper is None or not alive([helper]), 'FreeCAD\'s child process survived'
 
 
+def test_freecad_result_without_warnings_is_a_clear_failure(tmp_path):
+    fake = tmp_path / 'freecadcmd'  # a FreeCAD whose macro reports success but no lists
+    fake.write_text('#!/bin/sh\necho \'{"format": "synthdet.freecad-result/1", "status": "ok", '
+                    '"objects": []}\' > "$SYNTHDET_RESULT"\n')
+    fake.chmod(0o755)
+    scan = tmp_path / 'scan.txt'
+    scan.write_text('0 0 0 1 2 3\n')
+    proc = run('-m', 'configurator', 'freecad', '--scan', scan, '--predictions',
+               _pred(tmp_path / 'p.pred.json', [1.0, 1.0, 0.5]), '--corners',
+               _corners_json(tmp_path / 'c.json'), '--out', tmp_path / 'room.FCStd',
+               '--freecadcmd', fake)
+    assert_clean_error(proc, 1, 'result has no "warnings" list')
+
+
 # --------------------------------------------------------------------------------- converter
 
 
