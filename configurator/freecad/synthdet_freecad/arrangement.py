@@ -7,7 +7,8 @@ it faces, inside the walls (standard library only; metres and radians like the i
   mid-height stands on that table's top; everything else stands on the floor (``floor_z``).
 - A detection with a yaw keeps it. An axis-aligned one (yaw 0, as TR3D predicts on S3DIS) is
   turned by a multiple of 90 degrees by rules users expect: a chair faces the nearest table, a
-  table or sofa puts its back to the nearest wall, a YuMi faces the free side of its table.
+  table or sofa puts its back to the nearest wall, a YuMi on a table faces the table's free
+  side (away from the wall nearest to the table).
   Every model's front is its local -y side and its back +y.
 - A footprint crossing a wall is moved inside, with a warning.
 """
@@ -18,6 +19,7 @@ AXIS_ALIGNED = 1e-6  # radians: a smaller |yaw| counts as an axis-aligned detect
 ORIENTED_CLASSES = ('chair', 'table', 'sofa', 'yumi')
 MAX_PUSHES = 50
 PUSH_MARGIN = 1e-4  # metres beyond the wall face a pushed footprint ends
+WALL_TOLERANCE = 1e-3  # metres a footprint may reach into a wall before it is moved
 
 
 class Placed:
@@ -115,23 +117,6 @@ def _nearest_on_boundary(x: float, y: float, polygon: list[list[float]]) -> tupl
     return best
 
 
-def _ray_to_boundary(x: float, y: float, dx: float, dy: float,
-                     polygon: list[list[float]]) -> float:
-    """Distance from (x, y) along the unit direction (dx, dy) to the first polygon edge."""
-    nearest = math.inf
-    for index, (x0, y0) in enumerate(polygon):
-        x1, y1 = polygon[(index + 1) % len(polygon)]
-        ex, ey = x1 - x0, y1 - y0
-        denominator = dx * ey - dy * ex
-        if abs(denominator) < 1e-12:
-            continue
-        t = ((x0 - x) * ey - (y0 - y) * ex) / denominator
-        u = ((x0 - x) * dy - (y0 - y) * dx) / denominator
-        if t > 0.0 and 0.0 <= u <= 1.0:
-            nearest = min(nearest, t)
-    return nearest
-
-
 def _wall_push(item: Placed, polygon: list[list[float]]) -> tuple[float, float]:
     """The largest move needed to get one footprint corner (or wall corner) out of a wall."""
     best = (0.0, 0.0)
@@ -140,12 +125,12 @@ def _wall_push(item: Placed, polygon: list[list[float]]) -> tuple[float, float]:
             px, py = _nearest_on_boundary(x, y, polygon)
             dx, dy = px - x, py - y
             length = math.hypot(dx, dy)
-            if length > math.hypot(*best):
+            if length > max(WALL_TOLERANCE, math.hypot(*best)):
                 scale = (length + PUSH_MARGIN) / length
                 best = (dx * scale, dy * scale)
     c, s = math.cos(item.yaw), math.sin(item.yaw)
     for x, y in polygon:  # a room corner poking into the footprint (an L room's inner corner)
-        if not item.contains_xy(x, y, PUSH_MARGIN):
+        if not item.contains_xy(x, y, WALL_TOLERANCE):
             continue
         u = c * (x - item.x) + s * (y - item.y)
         v = -s * (x - item.x) + c * (y - item.y)
@@ -202,15 +187,10 @@ def orient(item: Placed, tables: list[Placed], polygon: list[list[float]] | None
         wall_x, wall_y = _nearest_on_boundary(item.x, item.y, polygon)
         _turn(item, _facing(item.x - wall_x, item.y - wall_y), 'back to the nearest wall')
     elif item.class_name == 'yumi' and item.support is not None and polygon:
-        table = item.support
-        low, high = world_bounds(table.detection)
-
-        def free_space(turns: int) -> float:
-            dx, dy = _front(turns)
-            half = (abs(dx) * (high[0] - low[0]) + abs(dy) * (high[1] - low[1])) / 2.0
-            return _ray_to_boundary(table.x, table.y, dx, dy, polygon) - half
-
-        _turn(item, max(range(4), key=free_space), f'faces the free side of {table.label}')
+        table = item.support  # its free side is the one away from the table's nearest wall
+        wall_x, wall_y = _nearest_on_boundary(table.x, table.y, polygon)
+        _turn(item, _facing(table.x - wall_x, table.y - wall_y),
+              f'faces the free side of {table.label}')
 
 
 def find_support(item: Placed, tables: list[Placed]) -> Placed | None:
