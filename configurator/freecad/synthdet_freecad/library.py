@@ -31,8 +31,11 @@ LABEL_COLUMN_WIDTH = 280  # pixels: the sheets' description column shows whole d
 # specification; public URDF descriptions): robot frame x forward, y left, z up, metres, angles
 # in radians; joints along an arm in ABB's order 1, 2, 7, 3, 4, 5, 6.
 YUMI_HEIGHT = 0.571
-YUMI_DEPTH = 0.497  # base plate along the robot's x
-YUMI_REACH = 0.72  # the folded rest pose's extent across the robot (its y)
+# the extent of this model in its rest pose: across (robot y) and along (robot x: from the
+# grippers in front, 0.389 m, to the base plate's back, 0.2485 m) -- the box it is fitted to
+YUMI_REST_ACROSS = 0.532
+YUMI_REST_DEPTH = 0.638
+YUMI_REST_FORWARD = 0.07025  # how far the rest pose's footprint centre lies ahead of the base
 YUMI_BASE = (0.497, 0.399, 0.08)
 YUMI_TORSO = ((0.08, -0.22, 0.20, 0.18), (0.30, -0.18, 0.10, 0.14), (0.48, -0.15, 0.045, 0.085),
               (0.571, -0.13, 0.0, 0.06))  # cross-sections: z, x back, x front, half width
@@ -223,7 +226,7 @@ def build_yumi(model: ModelBuilder) -> None:
     each arm frame (``right_frame_K``, K along the arm) is a placement cell computed from them.
     """
     model.parameter('scale', f'=min(height / {1000 * YUMI_HEIGHT} mm; width / '
-                    f'{1000 * YUMI_DEPTH} mm; length / {1000 * YUMI_REACH} mm)',
+                    f'{1000 * YUMI_REST_DEPTH} mm; length / {1000 * YUMI_REST_ACROSS} mm)',
                     'size relative to the real IRB 14000')
     for side in ('right', 'left'):
         for joint in (1, 2, 3, 4, 5, 6, 7):
@@ -231,12 +234,12 @@ def build_yumi(model: ModelBuilder) -> None:
                                             else 1)
             model.parameter(f'{side}_joint_{joint}', f'={angle:g} deg',
                             f'{side} arm joint {joint} angle')
-    # robot frame (x forward) -> part frame (the robot faces -y)
-    robot = 'create(<<placement>>; create(<<vector>>; 0 mm; 0 mm; 0 mm); ' \
-            'create(<<rotation>>; -90; 0; 0))'
+    # robot frame (x forward) -> part frame (the robot faces -y, its rest pose centred)
+    robot = (f'create(<<placement>>; create(<<vector>>; 0 mm; {_mm(YUMI_REST_FORWARD)}; 0 mm); '
+             'create(<<rotation>>; -90; 0; 0))')
     depth, across, plate = YUMI_BASE
     model.box('BasePlate', _mm(across), _mm(depth), _mm(plate), f'-{_mm(across / 2)}',
-              f'-{_mm(depth / 2)}', '0 mm')
+              f'{_mm(YUMI_REST_FORWARD - depth / 2)}', '0 mm')
     upright = f'{robot} * create(<<placement>>; create(<<vector>>; 0 mm; 0 mm; 0 mm); ' \
               'create(<<rotation>>; 0; 0; 90))'  # wedge y (its taper) along the robot's z
     for index, (low, high) in enumerate(zip(YUMI_TORSO, YUMI_TORSO[1:]), start=1):
