@@ -19,6 +19,7 @@ import pytest
 
 from configurator import freecad_cli
 from configurator.freecad_cli import MACRO, FreecadFailed, build_document
+from configurator.freecad_screenshot import USER_CONFIG as GUI_USER_CONFIG
 from configurator.predictions import (SchemaError, load_json, validate_corners,
                                       validate_predictions)
 from configurator.scan_io import write_scan
@@ -175,14 +176,6 @@ GUI_DRIVER = textwrap.dedent('''\
     os._exit(0)  # the offscreen platform has no OpenGL context to tear the 3D view down
 ''')
 
-# A user configuration that opens no Start page (its web view cannot start as root offscreen).
-GUI_USER_CONFIG = textwrap.dedent('''\
-    <?xml version="1.0" encoding="UTF-8" standalone="yes"?>
-    <FCParameters><FCParamGroup Name="Root"><FCParamGroup Name="BaseApp">
-    <FCParamGroup Name="Preferences"><FCParamGroup Name="General">
-    <FCText Name="AutoloadModule">NoneWorkbench</FCText>
-    </FCParamGroup></FCParamGroup></FCParamGroup></FCParamGroup></FCParameters>
-''')
 
 
 def run_freecad(script: Path, env: dict | None = None) -> subprocess.CompletedProcess:
