@@ -171,6 +171,12 @@ GUI_DRIVER = textwrap.dedent('''\
     seen['gui'] = App.GuiUp
     seen['classes'] = sorted(o.DetectedClass for o in doc.Objects if hasattr(o, 'DetectedClass'))
     seen['floor_area'] = doc.getObject('Floor').Shape.Area if doc.getObject('Floor') else None
+    table = [o for o in doc.Objects if getattr(o, 'DetectedClass', None) == 'table'][0]
+    seen['table_colour'] = list(doc.getObject(table.Name + '_Top').ViewObject.ShapeColor)[:3]
+    seen['hidden_solids'] = [o.Label for o in doc.Objects if o.isDerivedFrom('Part::Feature')
+                             and o.Name not in ('FloorSketch', 'WallOutline', 'WallProfile')
+                             and o.getParentGeoFeatureGroup() is not None
+                             and not o.ViewObject.Visibility]
     with open(params['report'], 'w', encoding='utf-8') as stream:
         json.dump(seen, stream)
     os._exit(0)  # the offscreen platform has no OpenGL context to tear the 3D view down
@@ -607,3 +613,5 @@ def test_macro_in_the_gui_asks_for_the_files_and_imports(workspace, tmp_path):
     expected = [d['class'] for d in MAIN_DETECTIONS if d['score'] >= 0.3] + workspace['hostile']
     assert seen['classes'] == sorted(expected)
     assert seen['floor_area'] == pytest.approx(24e6)
+    assert seen['table_colour'] == pytest.approx([31 / 255, 119 / 255, 180 / 255], abs=0.01)
+    assert seen['hidden_solids'] == []

@@ -236,3 +236,36 @@ def test_the_gui_opens_the_document_visible_coloured_and_fitted(scene, tmp_path)
     drawn, coloured = _pixel_shares(picture)
     assert drawn > 0.15  # the room fills a good part of the view
     assert coloured > 0.005  # and the class-coloured objects are drawn
+
+
+# ------------------------------------------------- the placement rules alone (standard library)
+
+
+def test_an_inner_corner_poking_into_a_footprint_pushes_it_out():
+    from configurator.freecad.synthdet_freecad import arrangement
+
+    # a square turned 45 degrees around the L room's inner corner (3.5, 2.5): all four of its
+    # corners lie inside the room, but the wall corner lies inside the square
+    square = detection('table', 0.9, [3.4, 2.6, 0.4], [0.5 * 2**0.5] * 2 + [0.75], math.pi / 4)
+    placed, warnings = arrangement.arrange([square], {'corners': L_ROOM, 'floor_z': FLOOR_Z})
+    item = placed[0]
+    assert all(arrangement._point_in_polygon(x, y, L_ROOM) for x, y in item.footprint())
+    assert not any(item.contains_xy(x, y, 1e-6) for x, y in L_ROOM)
+    assert len(warnings) == 1 and 'table 1 crossed a wall by' in warnings[0]
+    assert item.base_z == FLOOR_Z
+
+
+def test_only_strong_overlaps_of_different_classes_merge():
+    from configurator.freecad.synthdet_freecad.arrangement import merge_overlapping
+
+    table = detection('table', 0.9, [1.0, 1.0, 0.4], [1.0, 1.0, 0.8])
+    same_class = detection('table', 0.8, [1.05, 1.0, 0.4], [1.0, 1.0, 0.8])
+    weak = detection('chair', 0.95, [1.6, 1.0, 0.4], [1.0, 1.0, 0.8])  # IoU 0.25
+    strong = detection('sofa', 0.95, [1.1, 1.0, 0.4], [1.0, 1.0, 0.8])  # IoU 0.82, wins
+    def classes(groups):
+        return [(winner['class'], [other['class'] for other in alternatives])
+                for winner, alternatives in groups]
+
+    assert classes(merge_overlapping([table, same_class, weak])) == [('table', []), ('table', []),
+                                                                     ('chair', [])]
+    assert classes(merge_overlapping([table, strong])) == [('sofa', ['table'])]

@@ -30,6 +30,7 @@ def build_room(doc, corners: dict, wall_thickness: float, group, look) -> None:
     sketch, offset and extrusion are bound to it by expressions.
     """
     sheet = doc.addObject('Spreadsheet::Sheet', 'RoomParameters')
+    sheet.setColumnWidth('A', library.LABEL_COLUMN_WIDTH)
     group.addObject(sheet)
     rows = (('height', corners['ceiling_z'] - corners['floor_z'], 'room height'),
             ('wall_thickness', wall_thickness, 'wall thickness'), ('floor_z', corners['floor_z'],
