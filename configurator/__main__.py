@@ -1,4 +1,4 @@
-"""``python -m configurator {corners,freecad,screenshot} ...``: dispatch to the stage's sub-commands."""
+"""``python -m configurator {corners,freecad,screenshot} ...``: run a sub-command."""
 import argparse
 import importlib
 import sys

@@ -70,17 +70,32 @@ def screenshot(document: Path,
         config.write_text(USER_CONFIG, encoding='utf-8')
         result_path = work_dir / 'result.json'
         options = work_dir / 'options.json'
-        options.write_text(json.dumps({'document': str(document), 'out': str(out),
-                                       'width': width, 'height': height,
-                                       'result': str(result_path)}), encoding='utf-8')
+        options.write_text(
+            json.dumps({
+                'document': str(document),
+                'out': str(out),
+                'width': width,
+                'height': height,
+                'result': str(result_path)
+            }),
+            encoding='utf-8')
         env = dict(os.environ, SYNTHDET_SCREENSHOT=str(options), HOME=str(work_dir))
         env.pop('QT_QPA_PLATFORM', None)
-        command = ['xvfb-run', '-a', '-s', f'-screen 0 {width + 200}x{height + 200}x24',
-                   freecad, '-u', str(config), str(GUI_SCRIPT)]
+        command = [
+            'xvfb-run', '-a', '-s', f'-screen 0 {width + 200}x{height + 200}x24', freecad, '-u',
+            str(config),
+            str(GUI_SCRIPT)
+        ]
         try:
-            process = subprocess.run(command, env=env, cwd=work_dir, timeout=timeout,
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     text=True, errors='replace')
+            process = subprocess.run(
+                command,
+                env=env,
+                cwd=work_dir,
+                timeout=timeout,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                text=True,
+                errors='replace')
         except subprocess.TimeoutExpired:
             raise ScreenshotFailed(f'FreeCAD did not finish within {timeout:.0f} s') from None
         if not result_path.is_file():

@@ -183,7 +183,6 @@ GUI_DRIVER = textwrap.dedent('''\
 ''')
 
 
-
 def run_freecad(script: Path, env: dict | None = None) -> subprocess.CompletedProcess:
     return subprocess.run([FREECADCMD, str(script)],
                           env=dict(os.environ, **(env or {})),
@@ -495,8 +494,8 @@ def test_reopened_document_has_groups_placements_and_properties(workspace, inspe
         if entry['class'] == 'yumi':  # the real robot's proportions, scaled to fit the box
             assert np.all(entry['local'][:3] >= box[:3] - 0.5)
             assert np.all(entry['local'][3:] <= box[3:] + 0.5)
-            assert np.isclose(np.subtract(entry['local'][3:], entry['local'][:3]),
-                              2 * half, atol=1.0).any()
+            assert np.isclose(
+                np.subtract(entry['local'][3:], entry['local'][:3]), 2 * half, atol=1.0).any()
         else:
             np.testing.assert_allclose(entry['local'], box, atol=1e-3, err_msg=entry['class'])
         if entry['class'] == 'yumi':  # round arm links do not reach the box's vertical edges
@@ -531,8 +530,7 @@ def test_editing_parameters_in_plain_freecad_recomputes_geometry(inspection):
     table_y, sofa_y = 400.0, 450.0
     np.testing.assert_allclose(
         edited['table'], [-1000, -table_y, 0, 1000, table_y, 750], atol=1e-3)
-    np.testing.assert_allclose(
-        edited['sofa'], [-1500, -sofa_y, 0, 1500, sofa_y, 850], atol=1e-3)
+    np.testing.assert_allclose(edited['sofa'], [-1500, -sofa_y, 0, 1500, sofa_y, 850], atol=1e-3)
     np.testing.assert_allclose(
         edited['walls'], [-300, -300, FLOOR_Z * 1000, 6300, 5300, FLOOR_Z * 1000 + 4000],
         atol=1e-6)

@@ -96,32 +96,66 @@ def scene(tmp_path_factory) -> dict:
     scan = root / 'scan.txt'
     scan.write_text('0 0 0 1 2 3\n1 1 1 4 5 6\n', encoding='utf-8')
     predictions = root / 'room.pred.json'
-    predictions.write_text(json.dumps({
-        'format': 'synthdet.predictions/1', 'scan': 'Area_9/factory_1/factory_1.txt',
-        'model': 'exp2', 'classes': [], 'detections': list(SCENE.values())}), encoding='utf-8')
+    predictions.write_text(
+        json.dumps({
+            'format': 'synthdet.predictions/1',
+            'scan': 'Area_9/factory_1/factory_1.txt',
+            'model': 'exp2',
+            'classes': [],
+            'detections': list(SCENE.values())
+        }),
+        encoding='utf-8')
     corners = root / 'room.corners.json'
-    corners.write_text(json.dumps({
-        'format': 'synthdet.corners/1', 'scan': 'Area_9/factory_1/factory_1.txt',
-        'corners': L_ROOM, 'floor_z': FLOOR_Z, 'ceiling_z': CEILING_Z}), encoding='utf-8')
+    corners.write_text(
+        json.dumps({
+            'format': 'synthdet.corners/1',
+            'scan': 'Area_9/factory_1/factory_1.txt',
+            'corners': L_ROOM,
+            'floor_z': FLOOR_Z,
+            'ceiling_z': CEILING_Z
+        }),
+        encoding='utf-8')
     document = root / 'room.FCStd'
-    code = configurator_main(['freecad', '--scan', str(scan), '--predictions', str(predictions),
-                              '--corners', str(corners), '--out', str(document)])
+    code = configurator_main([
+        'freecad', '--scan',
+        str(scan), '--predictions',
+        str(predictions), '--corners',
+        str(corners), '--out',
+        str(document)
+    ])
     assert code == 0
     labels = label_of(SCENE)
     script, report = root / 'measure_scene.py', root / 'report.json'
     script.write_text(INSPECT, encoding='utf-8')
     params = root / 'params.json'
-    params.write_text(json.dumps({
-        'document': str(document), 'report': str(report), 'chair': labels['chair_floating'],
-        'table': labels['work_table'], 'on_table': [labels['printer']]}), encoding='utf-8')
-    process = subprocess.run(['freecadcmd', str(script)], cwd=root, timeout=300,
-                             env={'SYNTHDET_TEST_PARAMS': str(params), 'PATH': '/usr/bin:/bin',
-                                  'HOME': str(root)},
-                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    params.write_text(
+        json.dumps({
+            'document': str(document),
+            'report': str(report),
+            'chair': labels['chair_floating'],
+            'table': labels['work_table'],
+            'on_table': [labels['printer']]
+        }),
+        encoding='utf-8')
+    process = subprocess.run(['freecadcmd', str(script)],
+                             cwd=root,
+                             timeout=300,
+                             env={
+                                 'SYNTHDET_TEST_PARAMS': str(params),
+                                 'PATH': '/usr/bin:/bin',
+                                 'HOME': str(root)
+                             },
+                             stdout=subprocess.PIPE,
+                             stderr=subprocess.STDOUT,
+                             text=True,
                              errors='replace')
     assert report.is_file(), process.stdout[-3000:]
-    return {'document': document, 'labels': labels, 'root': root,
-            **json.loads(report.read_text(encoding='utf-8'))}
+    return {
+        'document': document,
+        'labels': labels,
+        'root': root,
+        **json.loads(report.read_text(encoding='utf-8'))
+    }
 
 
 def label_of(scene: dict) -> dict:
@@ -189,8 +223,7 @@ def test_yaws_are_the_detections_and_rules_for_axis_aligned_ones(scene):
     assert sofa['bounds'][3] - sofa['bounds'][0] == pytest.approx(900.0, abs=1e-3)
     yumi = parts[labels['yumi']]  # on a table along the y = 6 wall: it faces the room (-y)
     assert yumi['orientation'] == f'faces the free side of {labels["robot_table"]}'
-    assert (math.sin(yumi['yaw']), -math.cos(yumi['yaw'])) == pytest.approx((0.0, -1.0),
-                                                                             abs=1e-9)
+    assert (math.sin(yumi['yaw']), -math.cos(yumi['yaw'])) == pytest.approx((0.0, -1.0), abs=1e-9)
 
 
 def test_overlapping_detections_of_two_classes_give_one_object_with_an_alternative(scene):
@@ -201,8 +234,10 @@ def test_overlapping_detections_of_two_classes_give_one_object_with_an_alternati
     alternative = parts[winner['alternatives'][0]]
     assert alternative['class'] == 'sofa' and not alternative['visible']
     assert 'Alternatives' in alternative['groups']
-    visible_here = [label for label, part in parts.items() if part['visible']
-                    and abs(part['base'][0] - 5000) < 1 and abs(part['base'][1] - 3200) < 1]
+    visible_here = [
+        label for label, part in parts.items()
+        if part['visible'] and abs(part['base'][0] - 5000) < 1 and abs(part['base'][1] - 3200) < 1
+    ]
     assert visible_here == [labels['merged_table']]
 
 
@@ -228,8 +263,11 @@ def _pixel_shares(path: Path) -> tuple[float, float]:
 
 def test_the_gui_opens_the_document_visible_coloured_and_fitted(scene, tmp_path):
     picture = tmp_path / 'room.png'
-    code = configurator_main(['screenshot', str(scene['document']), '--out', str(picture),
-                              '--width', '800', '--height', '600'])
+    code = configurator_main([
+        'screenshot',
+        str(scene['document']), '--out',
+        str(picture), '--width', '800', '--height', '600'
+    ])
     assert code == 0
     with Image.open(picture) as image:
         assert image.size == (800, 600)
@@ -262,6 +300,7 @@ def test_only_strong_overlaps_of_different_classes_merge():
     same_class = detection('table', 0.8, [1.05, 1.0, 0.4], [1.0, 1.0, 0.8])
     weak = detection('chair', 0.95, [1.6, 1.0, 0.4], [1.0, 1.0, 0.8])  # IoU 0.25
     strong = detection('sofa', 0.95, [1.1, 1.0, 0.4], [1.0, 1.0, 0.8])  # IoU 0.82, wins
+
     def classes(groups):
         return [(winner['class'], [other['class'] for other in alternatives])
                 for winner, alternatives in groups]

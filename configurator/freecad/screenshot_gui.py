@@ -15,9 +15,10 @@ try:
     Gui.updateGui()
     view = Gui.getDocument(doc.Name).activeView()
     view.saveImage(options['out'], options['width'], options['height'], 'White')
-    result.update(status='ok',
-                  visible=sum(1 for obj in doc.Objects if obj.ViewObject.Visibility),
-                  objects=len(doc.Objects))
+    result.update(
+        status='ok',
+        visible=sum(1 for obj in doc.Objects if obj.ViewObject.Visibility),
+        objects=len(doc.Objects))
 except Exception as error:  # the process boundary: every failure goes to the result file
     result['error'] = f'{type(error).__name__}: {error}\n{traceback.format_exc()}'
 finally:

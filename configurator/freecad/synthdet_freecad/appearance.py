@@ -98,8 +98,10 @@ class Look:
         providers = []
         for obj in doc.Objects:
             visible = bool(obj.Visibility) and obj.TypeId not in HIDDEN_TYPES
-            properties = [_property('Visibility', 'App::PropertyBool',
-                                    f'<Bool value="{"true" if visible else "false"}"/>')]
+            properties = [
+                _property('Visibility', 'App::PropertyBool',
+                          f'<Bool value="{"true" if visible else "false"}"/>')
+            ]
             if obj.Name in self.colours:
                 rgb, transparency = self.colours[obj.Name]
                 properties.append(

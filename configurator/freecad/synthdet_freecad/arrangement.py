@@ -45,8 +45,8 @@ class Placed:
         c, s = math.cos(self.yaw), math.sin(self.yaw)
         half_l, half_w = self.length / 2.0, self.width / 2.0
         return [(self.x + c * u - s * v, self.y + s * u + c * v)
-                for u, v in ((-half_l, -half_w), (half_l, -half_w), (half_l, half_w),
-                             (-half_l, half_w))]
+                for u, v in ((-half_l, -half_w), (half_l, -half_w), (half_l, half_w), (-half_l,
+                                                                                       half_w))]
 
     def contains_xy(self, x: float, y: float, margin: float = 0.0) -> bool:
         """Whether (x, y) lies inside the footprint shrunk by ``margin``."""
@@ -200,8 +200,8 @@ def find_support(item: Placed, tables: list[Placed]) -> Placed | None:
         return None
     bottom = item.detection['center'][2] - item.detection['size'][2] / 2.0
     candidates = [
-        table for table in tables if table.contains_xy(item.x, item.y)
-        and bottom >= table.detection['center'][2] - 1e-9
+        table for table in tables
+        if table.contains_xy(item.x, item.y) and bottom >= table.detection['center'][2] - 1e-9
     ]
     return max(candidates, key=lambda table: table.detection['center'][2], default=None)
 

@@ -23,11 +23,11 @@ def _group(doc, name: str):
     return doc.addObject('App::DocumentObjectGroup', name)
 
 
-def build_room(doc, corners: dict, wall_thickness: float, group, look) -> None:
+def build_room(doc, corners: dict, wall_thickness: float, group, look):
     """Floor face from the corner sketch, and walls offset outwards and extruded to the ceiling.
 
     ``RoomParameters`` (a sheet) holds ``height``, ``wall_thickness`` and ``floor_z``; the
-    sketch, offset and extrusion are bound to it by expressions.
+    sketch, offset and extrusion are bound to it by expressions. Returns the sheet.
     """
     sheet = doc.addObject('Spreadsheet::Sheet', 'RoomParameters')
     sheet.setColumnWidth('A', library.LABEL_COLUMN_WIDTH)
@@ -75,6 +75,7 @@ def build_room(doc, corners: dict, wall_thickness: float, group, look) -> None:
         obj.Visibility = False
     look.paint(floor, appearance.class_colour('floor'))
     look.paint(walls, appearance.class_colour('wall'), appearance.WALL_TRANSPARENCY)
+    return sheet
 
 
 def find_step_models(library_dir: str | None) -> dict[str, str]:
@@ -128,8 +129,13 @@ def _paint_model(look, container) -> None:
             look.paint(child, colour)
 
 
-def import_detections(doc, predictions: dict, corners: dict | None, library_dir: str | None,
-                      min_score: float, wall_thickness: float, look=None) -> dict:
+def import_detections(doc,
+                      predictions: dict,
+                      corners: dict | None,
+                      library_dir: str | None,
+                      min_score: float,
+                      wall_thickness: float,
+                      look=None) -> dict:
     """Add the room (if corners are given) and every detection scoring >= ``min_score``.
 
     Detections are merged, stood on the floor or their table, oriented and kept inside the
@@ -143,14 +149,12 @@ def import_detections(doc, predictions: dict, corners: dict | None, library_dir:
     equipment = _group(doc, 'Equipment')
     room_sheet = None
     if corners is not None:
-        build_room(doc, corners, wall_thickness, room, look)
-        room_sheet = doc.getObject('RoomParameters')
+        room_sheet = build_room(doc, corners, wall_thickness, room, look)
     kept = [d for d in predictions['detections'] if d['score'] >= min_score]
     skipped = len(predictions['detections']) - len(kept)
     placed_items, warnings = arrangement.arrange(kept, corners)
     step_paths = find_step_models(library_dir)
     step_objects = {}
-    groups = {}
     containers = {}
     warned = set()
 
@@ -186,9 +190,10 @@ def import_detections(doc, predictions: dict, corners: dict | None, library_dir:
             alternative.Visibility = False
             alternatives.append(alternative)
         if alternatives:
-            container.addProperty('App::PropertyLinkList', 'Alternatives', 'Synthdet',
-                                  'other classes detected on this box (hidden in the '
-                                  'Alternatives group: show one and hide this part to switch)')
+            container.addProperty(
+                'App::PropertyLinkList', 'Alternatives', 'Synthdet',
+                'other classes detected on this box (hidden in the '
+                'Alternatives group: show one and hide this part to switch)')
             container.Alternatives = alternatives
         objects.append({
             'name': container.Name,

@@ -44,12 +44,12 @@ YUMI_SHOULDER = {
     'right': ((0.05355, -0.0725, 0.41492), (-0.9795, -0.5682, -2.3155)),
     'left': ((0.05355, 0.0725, 0.41492), (0.9781, -0.5716, 2.3180))
 }
-YUMI_CHAIN = (((0.03, 0.0, 0.1), (math.pi / 2, 0.0, 0.0)),
-              ((-0.03, 0.17283, 0.0), (-math.pi / 2, 0.0, 0.0)),
+YUMI_CHAIN = (((0.03, 0.0, 0.1), (math.pi / 2, 0.0, 0.0)), ((-0.03, 0.17283, 0.0), (-math.pi / 2,
+                                                                                    0.0, 0.0)),
               ((-0.04188, 0.0, 0.07873), (math.pi / 2, -math.pi / 2, 0.0)),
               ((0.0405, 0.16461, 0.0), (-math.pi / 2, 0.0, 0.0)),
-              ((-0.027, 0.0, 0.10039), (math.pi / 2, 0.0, 0.0)),
-              ((0.027, 0.029, 0.0), (-math.pi / 2, 0.0, 0.0)))
+              ((-0.027, 0.0, 0.10039), (math.pi / 2, 0.0, 0.0)), ((0.027, 0.029, 0.0),
+                                                                  (-math.pi / 2, 0.0, 0.0)))
 YUMI_LINK_RADII = (0.045, 0.042, 0.04, 0.038, 0.034, 0.03, 0.028)
 YUMI_FLANGE = 0.03
 YUMI_GRIPPER = (0.09, 0.05, 0.12)  # beyond the flange
@@ -97,9 +97,15 @@ class ModelBuilder:
     def box(self, suffix: str, length: str, width: str, height: str, x: str, y: str, z: str):
         """A ``Part::Box`` with expression-bound size and lower-left-bottom corner."""
         obj = self._add('Part::Box', suffix)
-        self._bind(obj, {'Length': length, 'Width': width, 'Height': height,
-                         '.Placement.Base.x': x, '.Placement.Base.y': y,
-                         '.Placement.Base.z': z})
+        self._bind(
+            obj, {
+                'Length': length,
+                'Width': width,
+                'Height': height,
+                '.Placement.Base.x': x,
+                '.Placement.Base.y': y,
+                '.Placement.Base.z': z
+            })
         return obj
 
     def solid(self, type_name: str, suffix: str, values: dict):
@@ -152,8 +158,8 @@ def build_sofa(model: ModelBuilder) -> None:
               '{P}.width / 2 - {P}.back', '0 mm')
     for suffix, x in (('ArmrestLeft', '-{P}.length / 2'), ('ArmrestRight',
                                                            '{P}.length / 2 - {P}.arm')):
-        model.box(suffix, '{P}.arm', '{P}.width - {P}.back', '{P}.arm_height', x,
-                  '-{P}.width / 2', '0 mm')
+        model.box(suffix, '{P}.arm', '{P}.width - {P}.back', '{P}.arm_height', x, '-{P}.width / 2',
+                  '0 mm')
 
 
 def build_bookcase(model: ModelBuilder) -> None:
@@ -225,13 +231,13 @@ def build_yumi(model: ModelBuilder) -> None:
     angles ``right_joint_N``/``left_joint_N`` (ABB numbering) default to a folded rest pose;
     each arm frame (``right_frame_K``, K along the arm) is a placement cell computed from them.
     """
-    model.parameter('scale', f'=min(height / {1000 * YUMI_HEIGHT} mm; width / '
-                    f'{1000 * YUMI_REST_DEPTH} mm; length / {1000 * YUMI_REST_ACROSS} mm)',
-                    'size relative to the real IRB 14000')
+    model.parameter(
+        'scale', f'=min(height / {1000 * YUMI_HEIGHT} mm; width / '
+        f'{1000 * YUMI_REST_DEPTH} mm; length / {1000 * YUMI_REST_ACROSS} mm)',
+        'size relative to the real IRB 14000')
     for side in ('right', 'left'):
         for joint in (1, 2, 3, 4, 5, 6, 7):
-            angle = YUMI_REST_DEG[joint] * (-1 if side == 'left' and joint in YUMI_MIRRORED
-                                            else 1)
+            angle = YUMI_REST_DEG[joint] * (-1 if side == 'left' and joint in YUMI_MIRRORED else 1)
             model.parameter(f'{side}_joint_{joint}', f'={angle:g} deg',
                             f'{side} arm joint {joint} angle')
     # robot frame (x forward) -> part frame (the robot faces -y, its rest pose centred)
@@ -243,11 +249,20 @@ def build_yumi(model: ModelBuilder) -> None:
     upright = f'{robot} * create(<<placement>>; create(<<vector>>; 0 mm; 0 mm; 0 mm); ' \
               'create(<<rotation>>; 0; 0; 90))'  # wedge y (its taper) along the robot's z
     for index, (low, high) in enumerate(zip(YUMI_TORSO, YUMI_TORSO[1:]), start=1):
-        model.solid('Part::Wedge', f'Body{index}', {
-            'Placement': upright, 'Ymin': _mm(low[0]), 'Ymax': _mm(high[0]),
-            'Xmin': _mm(low[1]), 'Xmax': _mm(low[2]), 'X2min': _mm(high[1]),
-            'X2max': _mm(high[2]), 'Zmin': f'-{_mm(low[3])}', 'Zmax': _mm(low[3]),
-            'Z2min': f'-{_mm(high[3])}', 'Z2max': _mm(high[3])})
+        model.solid(
+            'Part::Wedge', f'Body{index}', {
+                'Placement': upright,
+                'Ymin': _mm(low[0]),
+                'Ymax': _mm(high[0]),
+                'Xmin': _mm(low[1]),
+                'Xmax': _mm(low[2]),
+                'X2min': _mm(high[1]),
+                'X2max': _mm(high[2]),
+                'Zmin': f'-{_mm(low[3])}',
+                'Zmax': _mm(low[3]),
+                'Z2min': f'-{_mm(high[3])}',
+                'Z2max': _mm(high[3])
+            })
     for side in ('right', 'left'):
         title = side.capitalize()
         frame = f'{robot} * {_pose(*YUMI_SHOULDER[side])} * {_spin("{P}." + side + "_joint_1")}'
@@ -261,16 +276,26 @@ def build_yumi(model: ModelBuilder) -> None:
                             f'{side} arm frame {position} (after joint {joint}; computed)')
             offset = offsets[position - 1]
             length = math.sqrt(sum(value * value for value in offset))
-            model.solid('Part::Cylinder', f'{title}Link{position}', {
-                'Placement': f'{{P}}.{side}_frame_{position} * {_z_to(offset)}',
-                'Radius': _mm(YUMI_LINK_RADII[position - 1]),
-                'Height': _mm(length)})
+            model.solid(
+                'Part::Cylinder', f'{title}Link{position}', {
+                    'Placement': f'{{P}}.{side}_frame_{position} * {_z_to(offset)}',
+                    'Radius': _mm(YUMI_LINK_RADII[position - 1]),
+                    'Height': _mm(length)
+                })
         size_x, size_y, size_z = YUMI_GRIPPER
-        model.solid('Part::Box', f'{title}Gripper', {
-            'Placement': f'{{P}}.{side}_frame_7 * create(<<placement>>; create(<<vector>>; '
-                         f'-{_mm(size_x / 2)}; -{_mm(size_y / 2)}; {_mm(YUMI_FLANGE)}); '
-                         'create(<<rotation>>; 0; 0; 0))',
-            'Length': _mm(size_x), 'Width': _mm(size_y), 'Height': _mm(size_z)})
+        model.solid(
+            'Part::Box', f'{title}Gripper', {
+                'Placement':
+                f'{{P}}.{side}_frame_7 * create(<<placement>>; create(<<vector>>; '
+                f'-{_mm(size_x / 2)}; -{_mm(size_y / 2)}; {_mm(YUMI_FLANGE)}); '
+                'create(<<rotation>>; 0; 0; 0))',
+                'Length':
+                _mm(size_x),
+                'Width':
+                _mm(size_y),
+                'Height':
+                _mm(size_z)
+            })
 
 
 def build_box(model: ModelBuilder) -> None:
@@ -348,9 +373,8 @@ def add_detection(doc, placed, scan: str, model_name: str, library_object=None):
     container.Orientation = placed.orientation
     container.StandsOn = placed.support.label if placed.support is not None else 'floor'
     base = App.Vector(1000.0 * placed.x, 1000.0 * placed.y, 1000.0 * placed.base_z)
-    container.Placement = App.Placement(base,
-                                        App.Rotation(App.Vector(0, 0, 1),
-                                                     math.degrees(placed.yaw)))
+    container.Placement = App.Placement(
+        base, App.Rotation(App.Vector(0, 0, 1), math.degrees(placed.yaw)))
     sheet = doc.addObject('Spreadsheet::Sheet', f'{container.Name}_Parameters')
     sheet.Label = f'{placed.label} parameters'
     sheet.setColumnWidth('A', LABEL_COLUMN_WIDTH)
