@@ -70,6 +70,8 @@ INSPECT = textwrap.dedent('''\
                              if child.isDerivedFrom('Part::Feature')],
             'sheet_label': [child.Label for child in obj.Group
                             if child.TypeId == 'Spreadsheet::Sheet'][0],
+            'label_column': [child.getColumnWidth('A') for child in obj.Group
+                             if child.TypeId == 'Spreadsheet::Sheet'][0],
         }
     report = {'parts': parts, 'objects': len(doc.Objects),
               'invalid': [o.Name for o in doc.Objects if not o.isValid()]}
@@ -247,6 +249,7 @@ def test_lean_tree_with_labels_matching_their_part(scene):
         assert part['solid_labels'] and all(
             solid.startswith(label + ' ') for solid in part['solid_labels']), label
         assert part['sheet_label'] == f'{label} parameters'
+        assert part['label_column'] >= 250  # pixels: descriptions are readable, not cut off
     yumi = parts[scene['labels']['yumi']]
     assert len(yumi['solid_labels']) == 1 + 3 + 2 * 8  # plate, 3 body sections, 2 x 7 links
     assert 'yumi 1 right link 7' in yumi['solid_labels']
