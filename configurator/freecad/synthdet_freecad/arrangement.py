@@ -231,12 +231,9 @@ def arrange(detections: list[dict], corners: dict | None) -> tuple[list[Placed],
         item.support = find_support(item, tables)
         orient(item, tables, polygon)
         if polygon is not None:
-            shift = (0.0, 0.0)
             if item.support is not None:  # moves with its table first
-                shift = (item.support.x - item.support.detection['center'][0],
-                         item.support.y - item.support.detection['center'][1])
-                item.x += shift[0]
-                item.y += shift[1]
+                item.x += item.support.x - item.support.detection['center'][0]
+                item.y += item.support.y - item.support.detection['center'][1]
             moved = keep_inside(item, polygon)
             if moved is None:
                 warnings.append(f'{item.label} does not fit inside the walls: left where '
