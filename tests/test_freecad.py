@@ -173,6 +173,10 @@ GUI_DRIVER = textwrap.dedent('''\
     seen['floor_area'] = doc.getObject('Floor').Shape.Area if doc.getObject('Floor') else None
     table = [o for o in doc.Objects if getattr(o, 'DetectedClass', None) == 'table'][0]
     seen['table_colour'] = list(doc.getObject(table.Name + '_Top').ViewObject.ShapeColor)[:3]
+    sofa = [o for o in doc.Objects if getattr(o, 'DetectedClass', None) == 'sofa'][0]
+    seen['sofa_model'] = sofa.CadModel
+    seen['sofa_colour'] = list(doc.getObject(sofa.Name + '_Model').ViewObject.ShapeMaterial
+                               .DiffuseColor)[:3]
     seen['hidden_solids'] = [o.Label for o in doc.Objects if o.isDerivedFrom('Part::Feature')
                              and o.Name not in ('FloorSketch', 'WallOutline', 'WallProfile')
                              and o.getParentGeoFeatureGroup() is not None
@@ -596,7 +600,10 @@ def test_macro_in_the_gui_asks_for_the_files_and_imports(workspace, tmp_path):
         })
     process = subprocess.run(
         ['freecad', '-u', str(config), str(driver)],
-        env=dict(os.environ, QT_QPA_PLATFORM='offscreen', SYNTHDET_TEST_PARAMS=str(params)),
+        env=dict(os.environ,
+                 QT_QPA_PLATFORM='offscreen',
+                 SYNTHDET_TEST_PARAMS=str(params),
+                 SYNTHDET_LIBRARY=str(workspace['library'])),
         cwd=tmp_path,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
@@ -613,3 +620,5 @@ def test_macro_in_the_gui_asks_for_the_files_and_imports(workspace, tmp_path):
     assert seen['floor_area'] == pytest.approx(24e6)
     assert seen['table_colour'] == pytest.approx([31 / 255, 119 / 255, 180 / 255], abs=0.01)
     assert seen['hidden_solids'] == []
+    assert seen['sofa_model'] == 'step'  # a linked STEP model takes the class colour too
+    assert seen['sofa_colour'] == pytest.approx([44 / 255, 160 / 255, 44 / 255], abs=0.01)

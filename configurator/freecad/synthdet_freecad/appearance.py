@@ -61,9 +61,18 @@ class Look:
         import FreeCADGui as Gui
 
         for name, (rgb, transparency) in self.colours.items():
-            view = doc.getObject(name).ViewObject
-            view.ShapeColor = tuple(value / 255.0 for value in rgb)
-            view.Transparency = transparency
+            obj = doc.getObject(name)
+            view = obj.ViewObject
+            colour = tuple(value / 255.0 for value in rgb)
+            if obj.TypeId == 'App::Link':  # a link shows its target unless told otherwise
+                material = view.ShapeMaterial
+                material.DiffuseColor = colour
+                material.Transparency = transparency / 100.0
+                view.ShapeMaterial = material
+                view.OverrideMaterial = True
+            else:
+                view.ShapeColor = colour
+                view.Transparency = transparency
         gui_document = Gui.getDocument(doc.Name)
         view = gui_document.activeView()
         if view is not None and hasattr(view, 'viewIsometric'):
@@ -102,7 +111,17 @@ class Look:
                 _property('Visibility', 'App::PropertyBool',
                           f'<Bool value="{"true" if visible else "false"}"/>')
             ]
-            if obj.Name in self.colours:
+            if obj.Name in self.colours and obj.TypeId == 'App::Link':
+                rgb, transparency = self.colours[obj.Name]
+                properties.append(
+                    _property('OverrideMaterial', 'App::PropertyBool', '<Bool value="true"/>'))
+                properties.append(
+                    _property(
+                        'ShapeMaterial', 'App::PropertyMaterial',
+                        f'<PropertyMaterial ambientColor="{_packed((51, 51, 51))}" '
+                        f'diffuseColor="{_packed(rgb)}" specularColor="0" emissiveColor="0" '
+                        f'shininess="0.2" transparency="{transparency / 100.0:.2f}"/>'))
+            elif obj.Name in self.colours:
                 rgb, transparency = self.colours[obj.Name]
                 properties.append(
                     _property('ShapeColor', 'App::PropertyColor',
