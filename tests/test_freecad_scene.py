@@ -6,6 +6,8 @@ chair, a table crossing a wall, and a table and a sofa detected on the same box.
 ``freecadcmd`` reopens it and measures every part; the FreeCAD GUI under Xvfb opens it and
 saves a screenshot (``python -m configurator screenshot``).
 """
+import contextlib
+import io
 import json
 import math
 import subprocess
@@ -35,6 +37,7 @@ SCENE = {
     'chair_facing': detection('chair', 0.9, [2.0, 3.5, 0.45], [0.5, 0.5, 0.9]),
     'chair_yawed': detection('chair', 0.85, [4.5, 3.5, 0.45], [0.5, 0.55, 0.9], 0.7),
     'chair_floating': detection('chair', 0.8, [1.0, 1.5, 0.64], [0.5, 0.5, 0.9]),
+    'chair_under': detection('chair', 0.8, [2.1, 4.45, 0.45], [0.5, 0.5, 0.9]),  # deep under
     'wall_table': detection('table', 0.9, [0.3, 2.5, 0.4], [1.2, 0.6, 0.75]),
     'sofa': detection('sofa', 0.87, [6.3, 4.0, 0.40], [0.9, 2.0, 0.85]),
     'merged_table': detection('table', 0.7, [5.0, 3.2, 0.38], [1.2, 0.6, 0.75]),
@@ -73,7 +76,11 @@ INSPECT = textwrap.dedent('''\
             'label_column': [child.getColumnWidth('A') for child in obj.Group
                              if child.TypeId == 'Spreadsheet::Sheet'][0],
         }
-    report = {'parts': parts, 'objects': len(doc.Objects),
+    def part(label):
+        return Part.getShape([o for o in doc.Objects if o.Label == label][0])
+
+    report = {'clash': part(params['clash'][0]).common(part(params['clash'][1])).Volume,
+              'parts': parts, 'objects': len(doc.Objects),
               'invalid': [o.Name for o in doc.Objects if not o.isValid()]}
     chair = [o for o in doc.Objects if getattr(o, 'Label', '') == params['chair']][0]
     sheet = [c for c in chair.Group if c.TypeId == 'Spreadsheet::Sheet'][0]
@@ -118,13 +125,14 @@ def scene(tmp_path_factory) -> dict:
         }),
         encoding='utf-8')
     document = root / 'room.FCStd'
-    code = configurator_main([
-        'freecad', '--scan',
-        str(scan), '--predictions',
-        str(predictions), '--corners',
-        str(corners), '--out',
-        str(document)
-    ])
+    with contextlib.redirect_stderr(io.StringIO()) as stderr:
+        code = configurator_main([
+            'freecad', '--scan',
+            str(scan), '--predictions',
+            str(predictions), '--corners',
+            str(corners), '--out',
+            str(document)
+        ])
     assert code == 0
     labels = label_of(SCENE)
     script, report = root / 'measure_scene.py', root / 'report.json'
@@ -136,7 +144,8 @@ def scene(tmp_path_factory) -> dict:
             'report': str(report),
             'chair': labels['chair_floating'],
             'table': labels['work_table'],
-            'on_table': [labels['printer']]
+            'on_table': [labels['printer']],
+            'clash': [labels['chair_under'], labels['work_table']]
         }),
         encoding='utf-8')
     process = subprocess.run(['freecadcmd', str(script)],
@@ -156,6 +165,7 @@ def scene(tmp_path_factory) -> dict:
         'document': document,
         'labels': labels,
         'root': root,
+        'warnings': stderr.getvalue(),
         **json.loads(report.read_text(encoding='utf-8'))
     }
 
@@ -311,3 +321,13 @@ def test_only_strong_overlaps_of_different_classes_merge():
     assert classes(merge_overlapping([table, same_class, weak])) == [('table', []), ('table', []),
                                                                      ('chair', [])]
     assert classes(merge_overlapping([table, strong])) == [('sofa', ['table'])]
+
+
+def test_a_chair_under_a_table_faces_it_and_its_backrest_clears_the_top(scene):
+    parts, labels = scene['parts'], scene['labels']
+    chair = parts[labels['chair_under']]
+    assert chair['orientation'] == f'faces {labels["work_table"]}'
+    assert (math.sin(chair['yaw']), -math.cos(chair['yaw'])) == pytest.approx((0.0, 1.0), abs=1e-9)
+    assert scene['clash'] < 1.0  # mm^3 shared by the chair and the table
+    assert f'{labels["chair_under"]} pulled 0.15 m out from under {labels["work_table"]}' \
+        in scene['warnings']

@@ -6,7 +6,8 @@ it faces, inside the walls (standard library only; metres and radians like the i
 - A detection whose footprint centre lies on a table and whose bottom is above the table's
   mid-height stands on that table's top; everything else stands on the floor (``floor_z``).
 - A detection with a yaw keeps it. An axis-aligned one (yaw 0, as TR3D predicts on S3DIS) is
-  turned by a multiple of 90 degrees by rules users expect: a chair faces the nearest table, a
+  turned by a multiple of 90 degrees by rules users expect: a chair faces the nearest table
+  from the side it is at (and is pulled out until its backrest clears the table top), a
   table or sofa puts its back to the nearest wall, a YuMi on a table faces the table's free
   side (away from the wall nearest to the table).
   Every model's front is its local -y side and its back +y.
@@ -20,6 +21,8 @@ ORIENTED_CLASSES = ('chair', 'table', 'sofa', 'yumi')
 MAX_PUSHES = 50
 PUSH_MARGIN = 1e-4  # metres beyond the wall face a pushed footprint ends
 WALL_TOLERANCE = 1e-3  # metres a footprint may reach into a wall before it is moved
+TABLE_TOP_SHARE = 0.06  # of a table's height: its top (library.build_table's default)
+CHAIR_BACK_SHARE = 0.1  # of a chair's depth: its backrest (library.build_chair's default)
 
 
 class Placed:
@@ -175,14 +178,70 @@ def _facing(dx: float, dy: float) -> int:
     return max(range(4), key=lambda turns: _front(turns)[0] * dx + _front(turns)[1] * dy)
 
 
+def _table_side(item: Placed, table: Placed) -> tuple[float, tuple[float, float]]:
+    """Distance from ``item``'s centre to the table's footprint, and the world outward normal
+    of the table side it is at (the nearest side when it is under the table)."""
+    c, s = math.cos(table.yaw), math.sin(table.yaw)
+    u = c * (item.x - table.x) + s * (item.y - table.y)
+    v = -s * (item.x - table.x) + c * (item.y - table.y)
+    half_u, half_v = table.length / 2.0, table.width / 2.0
+    distance = math.hypot(max(abs(u) - half_u, 0.0), max(abs(v) - half_v, 0.0))
+    _, (normal_u, normal_v) = max([(u - half_u, (1.0, 0.0)), (-u - half_u, (-1.0, 0.0)),
+                                   (v - half_v, (0.0, 1.0)), (-v - half_v, (0.0, -1.0))])
+    return distance, (c * normal_u - s * normal_v, s * normal_u + c * normal_v)
+
+
+def _bounds_2d(points: list[tuple[float, float]]) -> tuple[float, float, float, float]:
+    xs, ys = [x for x, _ in points], [y for _, y in points]
+    return min(xs), min(ys), max(xs), max(ys)
+
+
+def _quarter_turned(yaw: float) -> bool:
+    return abs(math.remainder(yaw, math.pi / 2.0)) < AXIS_ALIGNED
+
+
+def clear_backrest(item: Placed, tables: list[Placed]) -> list[tuple[Placed, float]]:
+    """Pull a chair back until its backrest is off the tops of the tables it is pushed under
+    (a backrest taller than the table would pierce the top); returns (table, distance) pairs.
+
+    Only for a chair and tables turned by multiples of 90 degrees (their footprints are then
+    world-aligned rectangles).
+    """
+    if item.class_name != 'chair' or not _quarter_turned(item.yaw):
+        return []
+    back_x, back_y = -math.sin(item.yaw), math.cos(item.yaw)  # local +y in the world
+    pulls = []
+    for table in tables:
+        if not _quarter_turned(table.yaw) or \
+                item.height <= (1.0 - TABLE_TOP_SHARE) * table.height:
+            continue
+        c, s = math.cos(item.yaw), math.sin(item.yaw)
+        strip = [(item.x + c * u - s * v, item.y + s * u + c * v)
+                 for u in (-item.length / 2.0, item.length / 2.0)
+                 for v in ((0.5 - CHAIR_BACK_SHARE) * item.width, item.width / 2.0)]
+        low_x, low_y, high_x, high_y = _bounds_2d(strip)
+        table_low_x, table_low_y, table_high_x, table_high_y = _bounds_2d(table.footprint())
+        if min(high_x, table_high_x) - max(low_x, table_low_x) <= WALL_TOLERANCE or \
+                min(high_y, table_high_y) - max(low_y, table_low_y) <= WALL_TOLERANCE:
+            continue
+        strip_near = min(x * back_x + y * back_y for x, y in strip)
+        table_far = max(x * back_x + y * back_y for x, y in table.footprint())
+        distance = table_far - strip_near + PUSH_MARGIN
+        item.x += back_x * distance
+        item.y += back_y * distance
+        pulls.append((table, distance))
+    return pulls
+
+
 def orient(item: Placed, tables: list[Placed], polygon: list[list[float]] | None) -> None:
     """Choose the front of an axis-aligned detection by the class's rule (see module doc)."""
     if abs(math.remainder(item.yaw, 2.0 * math.pi)) > AXIS_ALIGNED or \
             item.class_name not in ORIENTED_CLASSES:
         return
     if item.class_name == 'chair' and tables:
-        table = min(tables, key=lambda t: math.hypot(t.x - item.x, t.y - item.y))
-        _turn(item, _facing(table.x - item.x, table.y - item.y), f'faces {table.label}')
+        table = min(tables, key=lambda t: _table_side(item, t)[0])
+        normal_x, normal_y = _table_side(item, table)[1]
+        _turn(item, _facing(-normal_x, -normal_y), f'faces {table.label}')
     elif item.class_name in ('table', 'sofa') and polygon:
         wall_x, wall_y = _nearest_on_boundary(item.x, item.y, polygon)
         _turn(item, _facing(item.x - wall_x, item.y - wall_y), 'back to the nearest wall')
@@ -230,6 +289,9 @@ def arrange(detections: list[dict], corners: dict | None) -> tuple[list[Placed],
     for item in sorted(everything, key=lambda entry: entry.class_name != 'table'):
         item.support = find_support(item, tables)
         orient(item, tables, polygon)
+        for table, distance in clear_backrest(item, tables):
+            warnings.append(f'{item.label} pulled {distance:.2f} m out from under {table.label}: '
+                            'its backrest crossed the table top')
         if polygon is not None:
             if item.support is not None:  # moves with its table first
                 item.x += item.support.x - item.support.detection['center'][0]
