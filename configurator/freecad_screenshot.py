@@ -10,10 +10,11 @@ import argparse
 import json
 import os
 import shutil
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+from configurator.freecad_cli import FreecadFailed, run_freecad_process
 
 GUI_SCRIPT = Path(__file__).resolve().parent / 'freecad' / 'screenshot_gui.py'
 # A user configuration that opens no Start page (its web view cannot start as root).
@@ -23,10 +24,6 @@ USER_CONFIG = '''<?xml version="1.0" encoding="UTF-8" standalone="yes"?>
 <FCText Name="AutoloadModule">NoneWorkbench</FCText>
 </FCParamGroup></FCParamGroup></FCParamGroup></FCParamGroup></FCParameters>
 '''
-
-
-class ScreenshotFailed(RuntimeError):
-    """The FreeCAD GUI did not produce the picture."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -52,7 +49,7 @@ def screenshot(document: Path,
     """Open ``document`` in the FreeCAD GUI under Xvfb and save its 3D view to ``out``.
 
     Returns FreeCAD's report (``visible`` and ``objects`` counts). Raises ``ValueError`` for
-    bad arguments and ``ScreenshotFailed`` when no picture was made.
+    bad arguments and ``FreecadFailed`` when no picture was made.
     """
     document, out = Path(document).resolve(), Path(out).resolve()
     if not document.is_file():
@@ -62,7 +59,7 @@ def screenshot(document: Path,
     if not (16 <= width <= 8000 and 16 <= height <= 8000):
         raise ValueError(f'--width/--height {width}x{height}: expected 16 to 8000 pixels')
     if shutil.which('xvfb-run') is None:
-        raise ScreenshotFailed('xvfb-run not found: install it (apt-get install xvfb xauth)')
+        raise FreecadFailed('xvfb-run not found: install it (apt-get install xvfb xauth)')
     out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix='synthdet-screenshot-') as work:
         work_dir = Path(work)
@@ -86,26 +83,11 @@ def screenshot(document: Path,
             str(config),
             str(GUI_SCRIPT)
         ]
-        try:
-            process = subprocess.run(
-                command,
-                env=env,
-                cwd=work_dir,
-                timeout=timeout,
-                stdout=subprocess.PIPE,
-                stderr=subprocess.STDOUT,
-                text=True,
-                errors='replace')
-        except subprocess.TimeoutExpired:
-            raise ScreenshotFailed(f'FreeCAD did not finish within {timeout:.0f} s') from None
-        if not result_path.is_file():
-            raise ScreenshotFailed(f'FreeCAD exited with code {process.returncode} without a '
-                                   f'result:\n{process.stdout.strip()[-2000:]}')
-        result = json.loads(result_path.read_text(encoding='utf-8'))
+        result = run_freecad_process(command, env, work_dir, timeout, result_path)
     if result['status'] != 'ok':
-        raise ScreenshotFailed(f'{document}: {result["error"]}')
+        raise FreecadFailed(f'{document}: {result["error"]}')
     if not out.is_file():
-        raise ScreenshotFailed(f'FreeCAD reported success but {out} was not written')
+        raise FreecadFailed(f'FreeCAD reported success but {out} was not written')
     return result
 
 
@@ -114,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = screenshot(args.document, args.out, args.width, args.height, args.freecad,
                             args.timeout)
-    except (ValueError, ScreenshotFailed) as error:
+    except (ValueError, FreecadFailed) as error:
         print(f'error: {error}', file=sys.stderr)
         return 1
     print(f'wrote {args.out}: {result["visible"]} of {result["objects"]} objects visible')

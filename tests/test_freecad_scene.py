@@ -331,3 +331,13 @@ def test_a_chair_under_a_table_faces_it_and_its_backrest_clears_the_top(scene):
     assert scene['clash'] < 1.0  # mm^3 shared by the chair and the table
     assert f'{labels["chair_under"]} pulled 0.15 m out from under {labels["work_table"]}' \
         in scene['warnings']
+
+
+def test_the_screenshot_command_reports_a_file_freecad_cannot_open(tmp_path, capsys):
+    bad = tmp_path / 'broken.FCStd'
+    bad.write_text('not a FreeCAD document', encoding='utf-8')
+    picture = tmp_path / 'broken.png'
+    assert configurator_main(['screenshot', str(bad), '--out', str(picture)]) == 1
+    error = capsys.readouterr().err
+    assert error.startswith(f'error: {bad}: FreeCAD cannot open it: ') and error.count('\n') == 1
+    assert not picture.exists()

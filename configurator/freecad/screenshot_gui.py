@@ -11,7 +11,10 @@ import FreeCADGui as Gui
 options = json.load(open(os.environ['SYNTHDET_SCREENSHOT'], encoding='utf-8'))
 result = {'status': 'error', 'error': None}
 try:
-    doc = App.openDocument(options['document'])
+    try:
+        doc = App.openDocument(options['document'])
+    except OSError as error:  # not a FreeCAD document: an expected failure, one line
+        raise RuntimeError(f'FreeCAD cannot open it: {str(error).strip()}') from None
     Gui.updateGui()
     view = Gui.getDocument(doc.Name).activeView()
     view.saveImage(options['out'], options['width'], options['height'], 'White')
@@ -19,6 +22,8 @@ try:
         status='ok',
         visible=sum(1 for obj in doc.Objects if obj.ViewObject.Visibility),
         objects=len(doc.Objects))
+except RuntimeError as error:
+    result['error'] = str(error)
 except Exception as error:  # the process boundary: every failure goes to the result file
     result['error'] = f'{type(error).__name__}: {error}\n{traceback.format_exc()}'
 finally:
