@@ -1,4 +1,6 @@
-"""synthdet's FreeCAD side: schema checks, the CAD library and the document builder.
+"""synthdet's FreeCAD side: schema checks, placement rules, the CAD library, the document
+builder and its look.
 
-Everything but ``schema`` runs inside FreeCAD's own Python and imports nothing from synthdet.
+``schema`` and ``arrangement`` use only the standard library and also run in synthdet's Python;
+the rest runs inside FreeCAD's own Python. None imports anything from synthdet.
 """
