@@ -13,7 +13,7 @@ import traceback
 
 import FreeCAD as App
 
-from . import document, schema
+from . import appearance, document, schema
 
 ENV_JOB = 'SYNTHDET_JOB'
 ENV_RESULT = 'SYNTHDET_RESULT'
@@ -55,12 +55,13 @@ def options_from_environment(overrides: dict | None = None, require_out: bool = 
     return schema.validate_job(raw, 'environment')
 
 
-def import_into(doc, options: dict) -> dict:
-    """Validate the option's files and import them into ``doc``; returns the import report."""
+def import_into(doc, options: dict, look) -> dict:
+    """Validate the option's files and import them into ``doc`` (colours into ``look``, an
+    ``appearance.Look``); returns the import report."""
     predictions = schema.read_predictions(options['predictions'])
     corners = schema.read_corners(options['corners']) if options['corners'] else None
     return document.import_detections(doc, predictions, corners, options['library'],
-                                      options['min_score'], options['wall_thickness'])
+                                      options['min_score'], options['wall_thickness'], look)
 
 
 def write_result(path: str | None, result: dict) -> None:
@@ -84,7 +85,8 @@ def run_headless() -> None:
             raise ValueError(f'output {out!r} must end with .FCStd')
         doc = App.newDocument('SynthdetRoom')
         doc.Label = os.path.splitext(os.path.basename(out))[0]
-        report = import_into(doc, options)
+        look = appearance.Look()
+        report = import_into(doc, options, look)
         try:
             os.makedirs(os.path.dirname(out), exist_ok=True)
         except OSError as error:
@@ -93,6 +95,7 @@ def run_headless() -> None:
         if os.path.exists(out):
             os.remove(out)
         doc.saveAs(out)
+        look.write_gui_document(out, doc)
         App.closeDocument(doc.Name)
     except Exception as error:  # the process boundary: every failure goes to the result file
         if isinstance(error, EXPECTED_ERRORS):
@@ -127,13 +130,14 @@ def run_gui() -> None:
         },
                                            require_out=False)
         doc = App.ActiveDocument or App.newDocument('SynthdetRoom')
-        report = import_into(doc, options)
+        look = appearance.Look()
+        report = import_into(doc, options, look)
     except EXPECTED_ERRORS as error:
         QtGui.QMessageBox.critical(window, 'synthdet import', str(error))
         return
     if report['warnings']:
         QtGui.QMessageBox.warning(window, 'synthdet import', '\n'.join(report['warnings']))
-    Gui.SendMsgToActiveView('ViewFit')
+    look.apply_in_gui(doc)
 
 
 def main() -> None:
