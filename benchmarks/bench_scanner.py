@@ -1,50 +1,156 @@
-"""Ray casting speed on one generated room: the paper's per-ray bpy ``scene.ray_cast`` loop vs
-the batched Embree scanner (Open3D ``RaycastingScene``), on the same scene and the same rays.
+"""Ray casting speed on one generated room: the batched Embree scanner (``Scanner.cast``, Open3D
+``RaycastingScene``) against the per-ray loops a bpy user would write, on the same scene and rays.
 
-    .venv/bin/python benchmarks/bench_scanner.py [--bpy-rays 100000] [--embree-rays 2000000]
+    .venv/bin/python benchmarks/bench_scanner.py [--rays 200000] [--slow-rays 20000]
 
-Prints rays/s for both, checks that both find the same first hits, and ends with
-``scan speedup vs bpy ray_cast loop: <N>x``.
+Every method turns the same numpy rays (origins, unit directions) into numpy hit distances and
+triangle (face) indices, the input of labelling:
+
+- ``BVHTree.ray_cast`` loop: one ``mathutils.bvhtree.BVHTree`` of all world triangles, one call
+  per ray (the fastest bpy loop);
+- ``Object.ray_cast`` loop: the paper's per-object casts, the ray moved into each object's frame
+  (vectorised, outside the loop), the nearest hit over the objects kept;
+- ``scene.ray_cast`` loop: one call per ray on the scene (the previous baseline).
+
+Equal treatment: one warm-up pass on the first 1000 rays, then the median of ``--repeats`` timed
+passes with the garbage collector off, for every method; the slow loops (``Object`` and ``scene``) take the first
+``--slow-rays`` rays. Each loop's hits are checked against Embree's. All methods run on one
+thread (bpy's ray casts are single-threaded); Embree on all cores is printed beside it. Then a
+full 1M-point scan (``Scanner.scan``: ray generation, Embree, labelling) on one thread and on all
+cores, with the share of Embree time. The last line is the one-thread ratio against the fastest
+bpy loop, with the all-core ratio beside it.
 """
 import argparse
+import gc
 import os
+import statistics
+import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Callable
 
 import bpy  # before open3d: both ship libtbb
 import numpy as np
 from mathutils import Vector
+from mathutils.bvhtree import BVHTree
 
-from generator.config import load_config
-from generator.layout import catalog_from_library, generate_layout
-from generator.pipeline import RunOptions, open_library
-from generator.scanner import Scanner, random_directions, sensor_path
-from generator.scene import RoomScene, export_triangles
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's generator
+
+from generator.config import load_config  # noqa: E402
+from generator.layout import catalog_from_library, generate_layout  # noqa: E402
+from generator.pipeline import RunOptions, open_library  # noqa: E402
+from generator.scanner import Scanner, random_directions, sensor_path  # noqa: E402
+from generator.scene import COLLECTION, RoomScene, export_triangles  # noqa: E402
+
+Caster = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
-def bpy_loop(origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, float]:
-    """The paper's approach: one ``scene.ray_cast`` call per ray; returns distances and seconds."""
+def bvhtree_caster(vertices: np.ndarray, triangles: np.ndarray) -> Caster:
+    """Per-ray ``BVHTree.ray_cast`` on one tree of the world triangles."""
+    tree = BVHTree.FromPolygons(vertices.tolist(), triangles.tolist(), all_triangles=True)
+
+    def cast(origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        ray_cast = tree.ray_cast
+        distance, face = [], []
+        for o, d in zip(origins.tolist(), directions.tolist()):
+            _location, _normal, index, t = ray_cast(o, d)
+            distance.append(t)
+            face.append(index)
+        # a miss gives None, which numpy turns into nan
+        distance = np.array(distance, dtype=np.float64)
+        face = np.array(face, dtype=np.float64)
+        return np.nan_to_num(distance, nan=np.inf), np.nan_to_num(face, nan=-1).astype(np.int64)
+
+    return cast
+
+
+def object_caster(objects: list, face_offsets: np.ndarray) -> Caster:
+    """The paper's per-object ``Object.ray_cast``, nearest hit over the objects; the world face
+    index is the object's offset plus its face index."""
+    inverse = [np.linalg.inv(np.array(obj.matrix_world, dtype=np.float64)) for obj in objects]
+
+    def cast(origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        distance = np.full(len(origins), np.inf)
+        face = np.full(len(origins), -1, dtype=np.int64)
+        for obj, matrix, offset in zip(objects, inverse, face_offsets):
+            local_o = (origins @ matrix[:3, :3].T + matrix[:3, 3]).tolist()
+            local_d = (directions @ matrix[:3, :3].T).tolist()  # rigid: lengths kept
+            ray_cast = obj.ray_cast
+            for i, (o, d) in enumerate(zip(local_o, local_d)):
+                hit, location, _normal, index = ray_cast(o, d)
+                if hit:
+                    t = (location - Vector(o)).length
+                    if t < distance[i]:
+                        distance[i], face[i] = t, offset + index
+        return distance, face
+
+    return cast
+
+
+def scene_caster(face_offsets: dict[str, int]) -> Caster:
+    """Per-ray ``scene.ray_cast`` on the evaluated scene (world frame)."""
     scene = bpy.context.scene
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    distances = np.full(len(origins), np.inf)
-    start = time.perf_counter()
-    for i, (o, d) in enumerate(zip(origins.tolist(), directions.tolist())):
-        hit, location, _normal, _index, _obj, _matrix = scene.ray_cast(
-            depsgraph, Vector(o), Vector(d))
-        if hit:
-            distances[i] = (location - Vector(o)).length
-    return distances, time.perf_counter() - start
+
+    def cast(origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        distance = np.full(len(origins), np.inf)
+        face = np.full(len(origins), -1, dtype=np.int64)
+        for i, (o, d) in enumerate(zip(origins.tolist(), directions.tolist())):
+            hit, location, _normal, index, obj, _matrix = scene.ray_cast(depsgraph, o, d)
+            if hit:
+                distance[i] = (location - Vector(o)).length
+                face[i] = face_offsets[obj.name] + index
+        return distance, face
+
+    return cast
+
+
+def timed(cast: Caster, origins: np.ndarray, directions: np.ndarray,
+          repeats: int) -> tuple[float, tuple[np.ndarray, np.ndarray]]:
+    """One warm-up pass on the first 1000 rays, then the median seconds of ``repeats`` passes.
+
+    The garbage collector is off while timing: the per-ray loops allocate a result tuple per
+    ray, and collections over this process's large heap would otherwise slow them down 3-4x.
+    """
+    cast(origins[:1000], directions[:1000])
+    gc.collect()
+    gc.disable()
+    try:
+        seconds = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            result = cast(origins, directions)
+            seconds.append(time.perf_counter() - start)
+    finally:
+        gc.enable()
+    return statistics.median(seconds), result
+
+
+def agreement(found: tuple[np.ndarray, np.ndarray], embree: tuple[np.ndarray,
+                                                                   np.ndarray]) -> str:
+    """Share of rays where a loop and Embree agree on hit/miss and on the first-hit distance."""
+    distance, _ = found
+    reference = embree[0][:len(distance)].astype(np.float64)
+    both = np.isfinite(distance) & np.isfinite(reference)
+    same_hit = np.mean(np.isfinite(distance) == np.isfinite(reference))
+    same_t = np.mean(np.abs(distance[both] - reference[both]) < 1e-3)
+    return f'hit/miss {same_hit:.2%}, |dt| < 1 mm {same_t:.2%}'
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--bpy-rays', type=int, default=100_000)
-    parser.add_argument('--embree-rays', type=int, default=2_000_000)
+    parser.add_argument('--rays', type=int, default=200_000, help='rays for BVHTree and Embree')
+    parser.add_argument(
+        '--slow-rays', type=int, default=20_000, help='rays for Object and scene ray_cast')
+    parser.add_argument('--repeats', type=int, default=5, help='timed passes (median)')
+    parser.add_argument('--scan-points', type=int, default=1_000_000)
     parser.add_argument('--asset-cache', type=Path, default=None)
     parser.add_argument('--seed', type=int, default=3)
     args = parser.parse_args()
 
+    for obj in list(bpy.data.objects):  # bpy's start-up cube, camera and light
+        bpy.data.objects.remove(obj, do_unlink=True)
     config = load_config()
     cache = args.asset_cache or Path(tempfile.mkdtemp(prefix='synthdet-bench-assets-'))
     options = RunOptions(
@@ -56,52 +162,72 @@ def main() -> None:
     room = RoomScene(lambda cls, name: by_name[name].mesh_arrays())
     room.build(layout, np.random.default_rng(0))
     triangles, names, _ = export_triangles()
+    # the bpy objects in export order: their faces are the TriangleScene's triangles, in order
+    objects = sorted(bpy.data.collections[COLLECTION].objects,
+                     key=lambda o: o['synthdet_instance'])
+    offsets = np.cumsum([0] + [len(o.data.polygons) for o in objects])[:-1]
     print(f'scene: {layout.shape} room {np.ptp(layout.polygon, axis=0).round(2).tolist()} m, '
-          f'{len(layout.objects)} objects, {len(triangles.triangles)} triangles')
+          f'{len(objects)} objects, {len(triangles.triangles)} triangles; one warm-up pass, '
+          f'median of {args.repeats}')
 
     rng = np.random.default_rng(0)
     path, _ = sensor_path(layout.polygon, layout.height, rng)
-    n = max(args.bpy_rays, args.embree_rays)
-    origins = path[np.arange(n) % len(path)]
-    directions = random_directions(rng, n)
-
-    bpy_t, bpy_seconds = bpy_loop(origins[:args.bpy_rays], directions[:args.bpy_rays])
-    bpy_rate = args.bpy_rays / bpy_seconds
+    origins = path[np.arange(args.rays) % len(path)]
+    directions = random_directions(rng, args.rays)
 
     import open3d  # noqa: F401
-    rates = {}
-    for threads in (1, 0):  # one thread (as in a 2-worker run on 2 cores) and all cores
-        scanner = Scanner(triangles, threads=threads)
-        scanner.cast(scanner.full_scene, origins[:1000], directions[:1000])  # warm-up
-        times = []
-        for _ in range(3):
-            start = time.perf_counter()
-            t_hit, _ = scanner.cast(scanner.full_scene, origins[:args.embree_rays],
-                                    directions[:args.embree_rays])
-            times.append(time.perf_counter() - start)
-        rates[threads] = (float(np.median(times)), args.embree_rays / float(np.median(times)))
+    embree = {threads: Scanner(triangles, threads=threads) for threads in (1, 0)}
+    results = {}  # label -> (rays, seconds, hits)
+    for threads, scanner in embree.items():
+        label = f'Embree Scanner.cast, {threads or os.cpu_count()} thread(s)'
+        results[label] = (args.rays, *timed(lambda o, d, s=scanner: s.cast(s.full_scene, o, d),
+                                            origins, directions, args.repeats))
+    loops = {
+        'bpy BVHTree.ray_cast loop': (bvhtree_caster(triangles.vertices, triangles.triangles),
+                                      args.rays),
+        'bpy Object.ray_cast loop (per object)': (object_caster(objects, offsets),
+                                                  args.slow_rays),
+        'bpy scene.ray_cast loop': (scene_caster(dict(zip((o.name for o in objects),
+                                                          offsets.tolist()))), args.slow_rays),
+    }
+    for label, (cast, n) in loops.items():
+        results[label] = (n, *timed(cast, origins[:n], directions[:n], args.repeats))
 
-    both = np.isfinite(bpy_t) & np.isfinite(t_hit[:args.bpy_rays])
-    agree = np.mean(np.abs(bpy_t[both] - t_hit[:args.bpy_rays][both]) < 1e-3)
-    hits_same = np.mean(np.isfinite(bpy_t) == np.isfinite(t_hit[:args.bpy_rays]))
-    start = time.perf_counter()
-    scan = scanner.scan(path, 1_000_000, 0.5, np.random.default_rng(1), config['scanner'])
-    scan_seconds = time.perf_counter() - start
-    print(f'same first hit (|dt| < 1 mm) on {agree:.2%} of {both.sum()} rays, '
-          f'hit/miss agreement {hits_same:.2%}')
-    print(f'{"method":<34}{"rays":>10}{"seconds":>10}{"rays/s":>14}')
-    print(f'{"bpy scene.ray_cast loop (paper)":<34}{args.bpy_rays:>10}{bpy_seconds:>10.2f}'
-          f'{bpy_rate:>14,.0f}')
-    for threads, label in ((1, '1 thread'), (0, f'{os.cpu_count()} threads')):
-        seconds, rate = rates[threads]
-        print(
-            f'{"Embree batch, " + label:<34}{args.embree_rays:>10}{seconds:>10.2f}{rate:>14,.0f}')
-    print(
-        f'full scan of 1M labelled points (object ratio 0.5, all threads): {scan_seconds:.2f} s, '
-        f'{scan.rays_cast:,} rays')
-    print(f'all-thread Embree vs bpy loop: {rates[0][1] / bpy_rate:.1f}x; the line below is '
-          f'single-thread vs single-thread')
-    print(f'scan speedup vs bpy ray_cast loop: {rates[1][1] / bpy_rate:.1f}x')
+    reference = results['Embree Scanner.cast, 1 thread(s)'][2]
+    print(f'{"method":<42}{"rays":>9}{"seconds":>9}{"rays/s":>13}  agreement with Embree')
+    rate = {}
+    for label, (n, seconds, found) in results.items():
+        rate[label] = n / seconds
+        check = '' if label.startswith('Embree') else agreement(found, reference)
+        print(f'{label:<42}{n:>9}{seconds:>9.3f}{rate[label]:>13,.0f}  {check}')
+
+    scan_seconds = {}
+    for threads, scanner in embree.items():
+        scanner.scan(path, 10_000, 0.5, np.random.default_rng(1), config['scanner'])  # warm-up
+        cast_seconds = []
+        original_cast = scanner.cast
+
+        def counted_cast(*cast_args, original=original_cast):
+            start = time.perf_counter()
+            answer = original(*cast_args)
+            cast_seconds.append(time.perf_counter() - start)
+            return answer
+
+        scanner.cast = counted_cast
+        start = time.perf_counter()
+        scan = scanner.scan(path, args.scan_points, 0.5, np.random.default_rng(1),
+                            config['scanner'])
+        scan_seconds[threads] = time.perf_counter() - start
+        print(f'full scan of {args.scan_points:,} labelled points, {threads or os.cpu_count()} '
+              f'thread(s): {scan_seconds[threads]:.2f} s, {scan.rays_cast:,} rays, '
+              f'{args.scan_points / scan_seconds[threads]:,.0f} points/s; Embree calls '
+              f'{sum(cast_seconds) / scan_seconds[threads]:.0%} of it')
+
+    fastest = max((label for label in rate if label.startswith('bpy')), key=rate.get)
+    one = rate['Embree Scanner.cast, 1 thread(s)'] / rate[fastest]
+    every = rate[f'Embree Scanner.cast, {os.cpu_count()} thread(s)'] / rate[fastest]
+    print(f'scan speedup vs fastest bpy loop ({fastest}), 1 thread each: {one:.1f}x '
+          f'(Embree on {os.cpu_count()} threads: {every:.1f}x)')
 
 
 if __name__ == '__main__':

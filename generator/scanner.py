@@ -125,8 +125,9 @@ class Scanner:
         self._o3d = o3d
         self.scene = scene
         self.threads = threads
-        movable_tri = scene.movable[scene.part]
-        self.object_tri = np.flatnonzero(movable_tri)
+        # per triangle: does it belong to a movable part (one lookup when labelling hits)
+        self.movable_tri = scene.movable[scene.part]
+        self.object_tri = np.flatnonzero(self.movable_tri)
         # axis-aligned bounds of each movable part: the targets of aimed object rays
         self.targets = np.flatnonzero(scene.movable)
         tri_vertices = scene.vertices[scene.triangles]  # (T, 3, 3)
@@ -136,7 +137,8 @@ class Scanner:
         self.target_hi = np.array([
             tri_vertices[scene.part == p].reshape(-1, 3).max(axis=0) for p in self.targets
         ]).reshape(-1, 3)
-        extent = self.target_hi - self.target_lo
+        self.target_extent = self.target_hi - self.target_lo
+        extent = self.target_extent
         area = 2 * (
             extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] +
             extent[:, 0] * extent[:, 2])
@@ -158,11 +160,12 @@ class Scanner:
     def cast(self, raycaster, origins: np.ndarray,
              directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """First hits of a batch: distance (inf for a miss) and triangle index in that scene."""
-        rays = np.concatenate([origins, directions], axis=1).astype(np.float32)
-        answer = raycaster.cast_rays(self._o3d.core.Tensor(rays), nthreads=self.threads)
-        t_hit = answer['t_hit'].numpy()
-        prim = answer['primitive_ids'].numpy().astype(np.int64)
-        return t_hit, prim
+        rays = np.empty((len(origins), 6), dtype=np.float32)
+        rays[:, :3] = origins
+        rays[:, 3:] = directions
+        # from_numpy shares the buffer: no copy on the way in, none on the way out
+        answer = raycaster.cast_rays(self._o3d.core.Tensor.from_numpy(rays), nthreads=self.threads)
+        return answer['t_hit'].numpy(), answer['primitive_ids'].numpy()
 
     def scan(self, path: np.ndarray, n_points: int, object_ratio: float, rng: np.random.Generator,
              config: Mapping[str, Any]) -> ScanResult:
@@ -185,9 +188,9 @@ class Scanner:
                 origins = path[idx]
                 if aimed:  # towards a random point of a random object's bounds (area-weighted)
                     target = rng.choice(len(self.targets), size=batch, p=self.target_weight)
-                    goal = self.target_lo[target] + rng.random((batch, 3)) * (
-                        self.target_hi[target] - self.target_lo[target])
-                    nominal = goal - origins
+                    nominal = self.target_lo[target] + rng.random(
+                        (batch, 3)) * self.target_extent[target]
+                    nominal -= origins
                     nominal /= np.linalg.norm(nominal, axis=1, keepdims=True) + 1e-12
                 else:
                     nominal = random_directions(rng, batch)
@@ -201,17 +204,20 @@ class Scanner:
                 hit = np.isfinite(t_hit)
                 if config['dropout'] > 0:
                     hit &= rng.random(batch) >= config['dropout']
-                tri = np.where(hit, tri_map[np.where(hit, prim, 0)], -1)
+                # labels of the returns only (a miss has no primitive)
+                rows = np.flatnonzero(hit)
+                tri = prim[rows] if tri_map is None else tri_map[prim[rows]]
                 if not keep_movable:
-                    hit &= ~self.scene.movable[self.scene.part[np.maximum(tri, 0)]]
-                rows = np.flatnonzero(hit)[:wanted - got]
+                    structure = ~self.movable_tri[tri]
+                    rows, tri = rows[structure], tri[structure]
+                rows, tri = rows[:wanted - got], tri[:wanted - got]
                 if len(rows) == 0:
                     continue
                 distance = t_hit[rows].astype(np.float64)
                 if config['range_noise'] > 0:
                     distance = distance + rng.normal(0.0, config['range_noise'], len(rows))
                 xyz = origins[rows] + nominal[rows] * distance[:, None]
-                chunks.append((xyz, tri[rows]))
+                chunks.append((xyz, tri))
                 got += len(rows)
             return got
 
@@ -229,8 +235,7 @@ class Scanner:
                               f'{config["max_object_rays"]} ray batches; the rest goes to the '
                               f'structure')
         remaining = n_points - got_objects
-        identity = np.arange(len(self.scene.triangles))
-        got = collect(self.full_scene, identity, remaining, False,
+        got = collect(self.full_scene, None, remaining, False,
                       max(64, 8 * remaining // batch + 64))
         if got < remaining:
             warnings.warn(f'only {got_objects + got} of {n_points} points: most rays escape the '
