@@ -18,8 +18,8 @@ Both converters run at equal parallelism: one process each (mmdet3d's ``S3DISDat
 thread), and ``--workers`` each, where mmdet3d's collect step, serial as shipped, runs its rooms
 in a pool of ``--workers`` processes (what a user would write to parallelise it) and
 ``S3DISData`` gets ``--workers`` threads. mmdet3d as shipped (serial collect, ``--workers``
-threads) is timed too. Every configuration runs ``--repeats`` times, alternating, after the
-same warm page cache; the best wall time of each is kept. The last line gives the wall-time
+threads) is timed too. Every configuration runs once untimed (warm-up), then ``--repeats``
+times, alternating; the best wall time of each is kept. The last line gives the wall-time
 ratios at equal parallelism (the headline) and synthdet's own parallelism against mmdet3d as
 shipped beside them.
 
@@ -240,6 +240,8 @@ def main() -> None:
             f'synthdet convert_s3dis, {n} workers':
             lambda: (run_synthdet(root, work / 'synthdet', area, n), ),
         }
+        for run in configurations.values():  # warm-up: imports, first-use costs, page cache
+            run()
         runs: dict[str, list[Timer]] = {label: [] for label in configurations}
         for _ in range(args.repeats):
             for label, run in configurations.items():
