@@ -1,7 +1,7 @@
 """Ray casting speed on one generated room: the batched Embree scanner (``Scanner.cast``, Open3D
 ``RaycastingScene``) against the per-ray loops a bpy user would write, on the same scene and rays.
 
-    .venv/bin/python benchmarks/bench_scanner.py [--rays 200000] [--slow-rays 20000]
+    .venv/bin/python benchmarks/bench_scanner.py [--rays 1000000] [--slow-rays 20000]
 
 Every method turns the same numpy rays (origins, unit directions) into numpy hit distances and
 triangle (face) indices, the input of labelling:
@@ -13,12 +13,15 @@ triangle (face) indices, the input of labelling:
 - ``scene.ray_cast`` loop: one call per ray on the scene (the previous baseline).
 
 Equal treatment: one warm-up pass on the first 1000 rays, then the median of ``--repeats`` timed
-passes with the garbage collector off, for every method; the slow loops (``Object`` and ``scene``) take the first
-``--slow-rays`` rays. Each loop's hits are checked against Embree's. All methods run on one
-thread (bpy's ray casts are single-threaded); Embree on all cores is printed beside it. Then a
-full 1M-point scan (``Scanner.scan``: ray generation, Embree, labelling) on one thread and on all
-cores, with the share of Embree time. The last line is the one-thread ratio against the fastest
-bpy loop, with the all-core ratio beside it.
+passes with the garbage collector off, the passes going round the methods in turn; the slow
+loops (``Object`` and ``scene``) take the first ``--slow-rays`` rays. Each loop's hits are checked against Embree's. All methods run on one
+thread (bpy's ray casts are single-threaded); Embree on all cores is printed beside it.
+
+Then full 1M-point scans (``Scanner.scan``: ray generation, casting, labelling, colours) with
+Embree (one thread, all cores) and with the ``BVHTree`` loop as the ray engine in the same
+scan code, with the share of the time spent casting. The last line gives the one-thread ratios
+against the fastest bpy loop (ray casting, the headline, and the full scan), the all-core
+ratios beside them.
 """
 import argparse
 import gc
@@ -40,7 +43,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's 
 from generator.config import load_config  # noqa: E402
 from generator.layout import catalog_from_library, generate_layout  # noqa: E402
 from generator.pipeline import RunOptions, open_library  # noqa: E402
-from generator.scanner import Scanner, random_directions, sensor_path  # noqa: E402
+from generator.scanner import (  # noqa: E402
+    Scanner, TriangleScene, random_directions, sensor_path)
 from generator.scene import COLLECTION, RoomScene, export_triangles  # noqa: E402
 
 Caster = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -106,25 +110,90 @@ def scene_caster(face_offsets: dict[str, int]) -> Caster:
     return cast
 
 
-def timed(cast: Caster, origins: np.ndarray, directions: np.ndarray,
-          repeats: int) -> tuple[float, tuple[np.ndarray, np.ndarray]]:
-    """One warm-up pass on the first 1000 rays, then the median seconds of ``repeats`` passes.
+def timed(methods: dict[str, tuple[Caster, int]], origins: np.ndarray, directions: np.ndarray,
+          repeats: int) -> dict[str, tuple[int, float, tuple[np.ndarray, np.ndarray]]]:
+    """Per method (caster, rays): rays, median seconds of ``repeats`` passes, last result.
 
-    The garbage collector is off while timing: the per-ray loops allocate a result tuple per
-    ray, and collections over this process's large heap would otherwise slow them down 3-4x.
+    Every method gets one warm-up pass on the first 1000 rays; the timed passes go round the
+    methods in turn, so that a change of load on a shared machine falls on all of them. The
+    garbage collector is off while timing: the per-ray loops allocate a result tuple per ray,
+    and collections over this process's large heap would otherwise slow them down 3-4x.
     """
-    cast(origins[:1000], directions[:1000])
+    for cast, _ in methods.values():
+        cast(origins[:1000], directions[:1000])
+    seconds = {label: [] for label in methods}
+    results = {}
     gc.collect()
     gc.disable()
     try:
-        seconds = []
         for _ in range(repeats):
-            start = time.perf_counter()
-            result = cast(origins, directions)
-            seconds.append(time.perf_counter() - start)
+            for label, (cast, n) in methods.items():
+                start = time.perf_counter()
+                results[label] = cast(origins[:n], directions[:n])
+                seconds[label].append(time.perf_counter() - start)
     finally:
         gc.enable()
-    return statistics.median(seconds), result
+    return {
+        label: (n, statistics.median(seconds[label]), results[label])
+        for label, (_, n) in methods.items()
+    }
+
+
+class BVHTreeScanner(Scanner):
+    """The scanner's own scan scheme with the per-ray ``BVHTree.ray_cast`` loop as ray engine."""
+
+    def __init__(self, scene: TriangleScene):
+        super().__init__(scene, threads=1)
+        self.loops = {
+            id(self.full_scene): bvhtree_caster(scene.vertices, scene.triangles),
+            id(self.object_scene): bvhtree_caster(scene.vertices,
+                                                  scene.triangles[self.object_tri]),
+        }
+
+    def cast(self, raycaster, origins: np.ndarray,
+             directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        distance, face = self.loops[id(raycaster)](origins, directions)
+        return distance.astype(np.float32), face
+
+
+def time_scans(scanners: dict[str, Scanner], path: np.ndarray, points: int, config: dict,
+               repeats: int) -> dict[str, tuple[float, float, int]]:
+    """Per scanner: median seconds of a full scan, the share of it in ``cast``, rays cast.
+
+    One warm-up scan of 10,000 points each; the timed scans go round the scanners in turn.
+    """
+    seconds = {label: [] for label in scanners}
+    cast_seconds = {label: [] for label in scanners}
+    rays = {}
+    for scanner in scanners.values():
+        scanner.scan(path, 10_000, 0.5, np.random.default_rng(1), config)
+    for _ in range(repeats):
+        for label, scanner in scanners.items():
+            in_cast = []
+
+            def timed_cast(*cast_args, original=type(scanner).cast, scanner=scanner):
+                start = time.perf_counter()
+                answer = original(scanner, *cast_args)
+                in_cast.append(time.perf_counter() - start)
+                return answer
+
+            scanner.cast = timed_cast
+            gc.collect()
+            gc.disable()
+            try:
+                start = time.perf_counter()
+                scan = scanner.scan(path, points, 0.5, np.random.default_rng(1), config)
+                seconds[label].append(time.perf_counter() - start)
+            finally:
+                gc.enable()
+                del scanner.cast
+            cast_seconds[label].append(sum(in_cast))
+            rays[label] = scan.rays_cast
+    return {
+        label: (statistics.median(seconds[label]),
+                statistics.median(np.divide(cast_seconds[label], seconds[label])), rays[label])
+        for label in scanners
+    }
 
 
 def agreement(found: tuple[np.ndarray, np.ndarray], embree: tuple[np.ndarray,
@@ -140,11 +209,12 @@ def agreement(found: tuple[np.ndarray, np.ndarray], embree: tuple[np.ndarray,
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--rays', type=int, default=200_000, help='rays for BVHTree and Embree')
+    parser.add_argument('--rays', type=int, default=1_000_000, help='rays for BVHTree and Embree')
     parser.add_argument(
         '--slow-rays', type=int, default=20_000, help='rays for Object and scene ray_cast')
     parser.add_argument('--repeats', type=int, default=5, help='timed passes (median)')
     parser.add_argument('--scan-points', type=int, default=1_000_000)
+    parser.add_argument('--scan-repeats', type=int, default=3, help='timed full scans (median)')
     parser.add_argument('--asset-cache', type=Path, default=None)
     parser.add_argument('--seed', type=int, default=3)
     args = parser.parse_args()
@@ -177,21 +247,18 @@ def main() -> None:
 
     import open3d  # noqa: F401
     embree = {threads: Scanner(triangles, threads=threads) for threads in (1, 0)}
-    results = {}  # label -> (rays, seconds, hits)
-    for threads, scanner in embree.items():
-        label = f'Embree Scanner.cast, {threads or os.cpu_count()} thread(s)'
-        results[label] = (args.rays, *timed(lambda o, d, s=scanner: s.cast(s.full_scene, o, d),
-                                            origins, directions, args.repeats))
-    loops = {
-        'bpy BVHTree.ray_cast loop': (bvhtree_caster(triangles.vertices, triangles.triangles),
-                                      args.rays),
-        'bpy Object.ray_cast loop (per object)': (object_caster(objects, offsets),
-                                                  args.slow_rays),
-        'bpy scene.ray_cast loop': (scene_caster(dict(zip((o.name for o in objects),
-                                                          offsets.tolist()))), args.slow_rays),
+    methods = {
+        f'Embree Scanner.cast, {threads or os.cpu_count()} thread(s)':
+        (lambda o, d, s=scanner: s.cast(s.full_scene, o, d), args.rays)
+        for threads, scanner in embree.items()
     }
-    for label, (cast, n) in loops.items():
-        results[label] = (n, *timed(cast, origins[:n], directions[:n], args.repeats))
+    methods['bpy BVHTree.ray_cast loop'] = (bvhtree_caster(triangles.vertices,
+                                                           triangles.triangles), args.rays)
+    methods['bpy Object.ray_cast loop (per object)'] = (object_caster(objects, offsets),
+                                                        args.slow_rays)
+    face_offsets = dict(zip((o.name for o in objects), offsets.tolist()))
+    methods['bpy scene.ray_cast loop'] = (scene_caster(face_offsets), args.slow_rays)
+    results = timed(methods, origins, directions, args.repeats)
 
     reference = results['Embree Scanner.cast, 1 thread(s)'][2]
     print(f'{"method":<42}{"rays":>9}{"seconds":>9}{"rays/s":>13}  agreement with Embree')
@@ -201,34 +268,24 @@ def main() -> None:
         check = '' if label.startswith('Embree') else agreement(found, reference)
         print(f'{label:<42}{n:>9}{seconds:>9.3f}{rate[label]:>13,.0f}  {check}')
 
-    scan_seconds = {}
-    for threads, scanner in embree.items():
-        scanner.scan(path, 10_000, 0.5, np.random.default_rng(1), config['scanner'])  # warm-up
-        cast_seconds = []
-        original_cast = scanner.cast
-
-        def counted_cast(*cast_args, original=original_cast):
-            start = time.perf_counter()
-            answer = original(*cast_args)
-            cast_seconds.append(time.perf_counter() - start)
-            return answer
-
-        scanner.cast = counted_cast
-        start = time.perf_counter()
-        scan = scanner.scan(path, args.scan_points, 0.5, np.random.default_rng(1),
-                            config['scanner'])
-        scan_seconds[threads] = time.perf_counter() - start
-        print(f'full scan of {args.scan_points:,} labelled points, {threads or os.cpu_count()} '
-              f'thread(s): {scan_seconds[threads]:.2f} s, {scan.rays_cast:,} rays, '
-              f'{args.scan_points / scan_seconds[threads]:,.0f} points/s; Embree calls '
-              f'{sum(cast_seconds) / scan_seconds[threads]:.0%} of it')
+    scanners = {f'Embree, {threads or os.cpu_count()} thread(s)': scanner
+                for threads, scanner in embree.items()}
+    scanners['bpy BVHTree.ray_cast loop'] = BVHTreeScanner(triangles)
+    scans = time_scans(scanners, path, args.scan_points, config['scanner'], args.scan_repeats)
+    print(f'full scan of {args.scan_points:,} labelled points (Scanner.scan, median of '
+          f'{args.scan_repeats}), ray engine:')
+    for label, (seconds, cast_share, rays) in scans.items():
+        print(f'  {label:<40}{seconds:>7.2f} s {args.scan_points / seconds:>11,.0f} points/s, '
+              f'{rays:,} rays, ray casting {cast_share:.0%} of the time')
 
     fastest = max((label for label in rate if label.startswith('bpy')), key=rate.get)
     one = rate['Embree Scanner.cast, 1 thread(s)'] / rate[fastest]
     every = rate[f'Embree Scanner.cast, {os.cpu_count()} thread(s)'] / rate[fastest]
-    print(f'scan speedup vs fastest bpy loop ({fastest}), 1 thread each: {one:.1f}x '
-          f'(Embree on {os.cpu_count()} threads: {every:.1f}x)')
-
+    bvh_scan = scans['bpy BVHTree.ray_cast loop'][0]
+    print(f'scan speedup vs fastest bpy loop ({fastest}), 1 thread each: ray casting {one:.1f}x '
+          f'(Embree on {os.cpu_count()} threads: {every:.1f}x); full scan '
+          f'{bvh_scan / scans["Embree, 1 thread(s)"][0]:.1f}x '
+          f'({bvh_scan / scans[f"Embree, {os.cpu_count()} thread(s)"][0]:.1f}x)')
 
 if __name__ == '__main__':
     main()
