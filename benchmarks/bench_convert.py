@@ -259,7 +259,8 @@ def main() -> None:
     print(f'{"converter (best of " + str(args.repeats) + ")":<50} {"wall s":>8} {"CPU s":>8} '
           f'{"Mpoints/s":>10}')
     for label, timer in best.items():
-        print(f'{label:<50} {timer.wall:8.2f} {timer.cpu:8.2f} {n_points / timer.wall / 1e6:10.2f}')
+        print(
+            f'{label:<50} {timer.wall:8.2f} {timer.cpu:8.2f} {n_points / timer.wall / 1e6:10.2f}')
     labels = list(best)
     mm_1, mm_shipped, mm_n, ours_1, ours_n = (best[label].wall for label in labels)
     cpu_ratio = best[labels[0]].cpu / best[labels[3]].cpu
@@ -267,6 +268,7 @@ def main() -> None:
     print(f'convert speedup vs mmdet3d at equal parallelism: {mm_1 / ours_1:.1f}x (1 process '
           f'each), {mm_n / ours_n:.1f}x ({args.workers} each); synthdet {args.workers} workers vs '
           f'mmdet3d as shipped: {mm_shipped / ours_n:.1f}x')
+
 
 if __name__ == '__main__':
     main()

@@ -131,8 +131,8 @@ def evaluate(method, points: np.ndarray, truth: np.ndarray) -> Result:
         return Result(float('nan'), float('nan'), False, False)
     errors = corner_errors(found, truth)
     return Result(
-        float(errors.mean()), float(errors.max()), len(found) == len(truth),
-        right_order(found, truth))
+        float(errors.mean()), float(errors.max()),
+        len(found) == len(truth), right_order(found, truth))
 
 
 METHODS = {
@@ -207,10 +207,10 @@ def generate_rooms(out: Path, rooms: int, points: int) -> list[Path]:
 
 def mean_of(runs: list[Result]) -> tuple[float, float, float, float]:
     """Mean error (cm), worst corner (cm), right-count share and right-order share of runs."""
-    return (np.nanmean([r.mean_error for r in runs]) * 100,
-            np.nanmax([r.worst_error for r in runs]) * 100,
-            float(np.mean([r.right_count for r in runs])),
-            float(np.mean([r.right_order for r in runs])))
+    return (np.nanmean([r.mean_error
+                        for r in runs]) * 100, np.nanmax([r.worst_error for r in runs]) * 100,
+            float(np.mean([r.right_count
+                           for r in runs])), float(np.mean([r.right_order for r in runs])))
 
 
 def summary(results: dict[str, dict[str, list[Result]]], noisy: bool) -> list[Result]:
@@ -236,8 +236,9 @@ def time_methods(rooms: int) -> dict[str, float]:
             cpu[name].append(time.process_time() - start_cpu)
     seconds = {name: float(np.median(values)) for name, values in wall.items()}
     cpu_seconds = {name: float(np.median(values)) for name, values in cpu.items()}
-    print(f'time per 1M-point room (median of {rooms}), wall / CPU: ' + ', '.join(
-        f'{LABELS[name]} {seconds[name]:.3f} / {cpu_seconds[name]:.3f} s' for name in METHODS))
+    print(f'time per 1M-point room (median of {rooms}), wall / CPU: ' +
+          ', '.join(f'{LABELS[name]} {seconds[name]:.3f} / {cpu_seconds[name]:.3f} s'
+                    for name in METHODS))
     return seconds
 
 
@@ -286,7 +287,7 @@ def main() -> None:
     print('err = mean corner error (cm); count, order = share of rooms with the right number '
           'of corners, and with them in the right clockwise order')
     print(f'{"rooms":<22}{"n":>4}' + ''.join(f' | {name + " err":>11} {"count":>6} {"order":>6}'
-                                            for name in METHODS))
+                                             for name in METHODS))
     totals = {name: [] for name in METHODS}
     for label, by_method in results.items():
         row = f'{label:<22}{len(by_method["traced"]):>4}'
@@ -300,7 +301,7 @@ def main() -> None:
     if args.timing_rooms > 0:
         seconds = time_methods(args.timing_rooms)
         timing = '; time per 1M points ' + ', '.join(f'{name} {seconds[name]:.2f} s'
-                                                      for name in METHODS)
+                                                     for name in METHODS)
     generated = []
     for name, noisy in (('clean', False), ('noisy', True)):
         runs = summary(results, noisy)

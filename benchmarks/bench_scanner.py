@@ -14,8 +14,9 @@ triangle (face) indices, the input of labelling:
 
 Equal treatment: one warm-up pass on the first 1000 rays, then the median of ``--repeats`` timed
 passes with the garbage collector off, the passes going round the methods in turn; the slow
-loops (``Object`` and ``scene``) take the first ``--slow-rays`` rays. Each loop's hits are checked against Embree's. All methods run on one
-thread (bpy's ray casts are single-threaded); Embree on all cores is printed beside it.
+loops (``Object`` and ``scene``) take the first ``--slow-rays`` rays. Each loop's hits are
+checked against Embree's. All methods run on one thread (bpy's ray casts are single-threaded);
+Embree on all cores is printed beside it.
 
 Then full 1M-point scans (``Scanner.scan``: ray generation, casting, labelling, colours) with
 Embree (one thread, all cores) and with the ``BVHTree`` loop as the ray engine in the same
@@ -196,8 +197,7 @@ def time_scans(scanners: dict[str, Scanner], path: np.ndarray, points: int, conf
     }
 
 
-def agreement(found: tuple[np.ndarray, np.ndarray], embree: tuple[np.ndarray,
-                                                                   np.ndarray]) -> str:
+def agreement(found: tuple[np.ndarray, np.ndarray], embree: tuple[np.ndarray, np.ndarray]) -> str:
     """Share of rays where a loop and Embree agree on hit/miss and on the first-hit distance."""
     distance, _ = found
     reference = embree[0][:len(distance)].astype(np.float64)
@@ -233,8 +233,8 @@ def main() -> None:
     room.build(layout, np.random.default_rng(0))
     triangles, names, _ = export_triangles()
     # the bpy objects in export order: their faces are the TriangleScene's triangles, in order
-    objects = sorted(bpy.data.collections[COLLECTION].objects,
-                     key=lambda o: o['synthdet_instance'])
+    objects = sorted(
+        bpy.data.collections[COLLECTION].objects, key=lambda o: o['synthdet_instance'])
     offsets = np.cumsum([0] + [len(o.data.polygons) for o in objects])[:-1]
     print(f'scene: {layout.shape} room {np.ptp(layout.polygon, axis=0).round(2).tolist()} m, '
           f'{len(objects)} objects, {len(triangles.triangles)} triangles; one warm-up pass, '
@@ -254,8 +254,8 @@ def main() -> None:
     }
     methods['bpy BVHTree.ray_cast loop'] = (bvhtree_caster(triangles.vertices,
                                                            triangles.triangles), args.rays)
-    methods['bpy Object.ray_cast loop (per object)'] = (object_caster(objects, offsets),
-                                                        args.slow_rays)
+    methods['bpy Object.ray_cast loop (per object)'] = (object_caster(objects,
+                                                                      offsets), args.slow_rays)
     face_offsets = dict(zip((o.name for o in objects), offsets.tolist()))
     methods['bpy scene.ray_cast loop'] = (scene_caster(face_offsets), args.slow_rays)
     results = timed(methods, origins, directions, args.repeats)
@@ -268,8 +268,10 @@ def main() -> None:
         check = '' if label.startswith('Embree') else agreement(found, reference)
         print(f'{label:<42}{n:>9}{seconds:>9.3f}{rate[label]:>13,.0f}  {check}')
 
-    scanners = {f'Embree, {threads or os.cpu_count()} thread(s)': scanner
-                for threads, scanner in embree.items()}
+    scanners = {
+        f'Embree, {threads or os.cpu_count()} thread(s)': scanner
+        for threads, scanner in embree.items()
+    }
     scanners['bpy BVHTree.ray_cast loop'] = BVHTreeScanner(triangles)
     scans = time_scans(scanners, path, args.scan_points, config['scanner'], args.scan_repeats)
     print(f'full scan of {args.scan_points:,} labelled points (Scanner.scan, median of '
@@ -286,6 +288,7 @@ def main() -> None:
           f'(Embree on {os.cpu_count()} threads: {every:.1f}x); full scan '
           f'{bvh_scan / scans["Embree, 1 thread(s)"][0]:.1f}x '
           f'({bvh_scan / scans[f"Embree, {os.cpu_count()} thread(s)"][0]:.1f}x)')
+
 
 if __name__ == '__main__':
     main()

@@ -199,8 +199,9 @@ class Scanner:
                 origins = np.take(path, idx, axis=0)
                 if aimed:  # towards a random point of a random object's bounds (area-weighted)
                     target = rng.choice(len(self.targets), size=batch, p=self.target_weight)
-                    nominal = np.take(self.target_lo, target, axis=0) + rng.random(
-                        (batch, 3)) * np.take(self.target_extent, target, axis=0)
+                    low = np.take(self.target_lo, target, axis=0)
+                    extent = np.take(self.target_extent, target, axis=0)
+                    nominal = low + rng.random((batch, 3)) * extent
                     nominal -= origins
                     nominal /= row_norms(nominal) + 1e-12
                 else:
@@ -227,8 +228,8 @@ class Scanner:
                 distance = t_hit[rows].astype(np.float64)
                 if config['range_noise'] > 0:
                     distance = distance + rng.normal(0.0, config['range_noise'], len(rows))
-                xyz = np.take(origins, rows, axis=0) + np.take(
-                    nominal, rows, axis=0) * distance[:, None]
+                hit_origins = np.take(origins, rows, axis=0)
+                xyz = hit_origins + np.take(nominal, rows, axis=0) * distance[:, None]
                 chunks.append((xyz, tri))
                 got += len(rows)
             return got
@@ -247,8 +248,8 @@ class Scanner:
                               f'{config["max_object_rays"]} ray batches; the rest goes to the '
                               f'structure')
         remaining = n_points - got_objects
-        got = collect(self.full_scene, None, remaining, False,
-                      max(64, 8 * remaining // batch + 64))
+        max_batches = max(64, 8 * remaining // batch + 64)
+        got = collect(self.full_scene, None, remaining, False, max_batches)
         if got < remaining:
             warnings.warn(f'only {got_objects + got} of {n_points} points: most rays escape the '
                           f'scene (is the room closed?)')

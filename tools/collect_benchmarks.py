@@ -38,15 +38,20 @@ ARGUMENTS = {
     'corners': [],
 }
 WHAT = {
-    'scanner': 'ray casting: batched Embree scanner vs per-ray bpy `BVHTree`, `Object` and '
+    'scanner':
+    'ray casting: batched Embree scanner vs per-ray bpy `BVHTree`, `Object` and '
     '`scene` `ray_cast` loops, 1 thread each',
-    'writer': 'S3DIS text formatting: vectorised writer vs per-line Python and `np.savetxt`',
+    'writer':
+    'S3DIS text formatting: vectorised writer vs per-line Python and `np.savetxt`',
     'generate':
     'generation wall time, 3 areas x 50 rooms x 1M points, 2 workers, vs the 10 min goal',
-    'convert': 'conversion: synthdet convert_s3dis vs mmdet3d collect + S3DISData, equal '
+    'convert':
+    'conversion: synthdet convert_s3dis vs mmdet3d collect + S3DISData, equal '
     'parallelism',
-    'model': 'TR3D train step, inference and peak memory, 1 cm vs 2 cm voxels',
-    'corners': 'room corners: traced outline vs the paper\'s method and a convex hull (error, '
+    'model':
+    'TR3D train step, inference and peak memory, 1 cm vs 2 cm voxels',
+    'corners':
+    'room corners: traced outline vs the paper\'s method and a convex hull (error, '
     'count, order, time)',
 }
 # The issues' goals, shown next to the results.
@@ -129,8 +134,9 @@ def machine() -> str:
 
 def render(records: list[dict], not_run: list[str], output_dir: Path) -> str:
     """docs/benchmarks.md from the kept benchmark records (and the benchmarks without one)."""
-    where = output_dir.relative_to(REPO_ROOT / 'docs') if output_dir.is_relative_to(
-        REPO_ROOT / 'docs') else output_dir
+    where = output_dir.relative_to(REPO_ROOT /
+                                   'docs') if output_dir.is_relative_to(REPO_ROOT /
+                                                                        'docs') else output_dir
     lines = [
         '# Benchmarks',
         '',
