@@ -98,7 +98,10 @@ def paper_corners(points: np.ndarray, cell: float = 0.05, eps: float = 0.05) -> 
         raise CornerDetectionError('no walls found')
     largest = np.argmax(np.bincount(components.ravel())[1:]) + 1
     footprint = ndimage.binary_fill_holes(components == largest)
-    contour = max(measure.find_contours(footprint.astype(np.float64), 0.5), key=len)
+    contours = measure.find_contours(footprint.astype(np.float64), 0.5)
+    if not contours:
+        raise CornerDetectionError('no outline found')
+    contour = max(contours, key=len)
     candidates = measure.approximate_polygon(contour, tolerance=1.5)[:-1]  # closed: drop last
     candidates = (candidates - 0.5) * cell + low  # cell index space to metres
     extent = float(np.ptp(candidates, axis=0).max())
