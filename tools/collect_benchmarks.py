@@ -134,20 +134,25 @@ def machine() -> str:
 
 def render(records: list[dict], not_run: list[str], output_dir: Path) -> str:
     """docs/benchmarks.md from the kept benchmark records (and the benchmarks without one)."""
-    where = output_dir.relative_to(REPO_ROOT /
-                                   'docs') if output_dir.is_relative_to(REPO_ROOT /
-                                                                        'docs') else output_dir
+    docs = REPO_ROOT / 'docs'
+    # links relative to this page; in the text, the folder as seen from the repository root
+    where = output_dir.relative_to(docs) if output_dir.is_relative_to(docs) else output_dir
+    shown = output_dir.relative_to(REPO_ROOT) if output_dir.is_relative_to(
+        REPO_ROOT) else output_dir
+    loads = [x for r in records for x in (r['load_before'][0], r['load_after'][0])]
+    load = f'{min(loads)}-{max(loads)}' if loads else 'not measured'
     lines = [
         '# Benchmarks',
         '',
         'Written by `make bench` (`tools/collect_benchmarks.py`), which runs every '
         '`benchmarks/bench_*.py` one after the other, keeps each full output in '
-        f'`{where}/<name>.txt` (progress bars left out) and writes this page from them. Every '
+        f'`{shown}/<name>.txt` (progress bars left out) and writes this page from them. Every '
         'benchmark measures all sides of its comparison in the same run, on the same input, '
         'with the same warm-up, repeats and thread or process counts. '
         f'Machine: {machine()}. Load average = 1/5/15-minute load before and after the run; '
         'the project machine is shared with other jobs, so absolute times vary with it more '
-        'than the ratios do.',
+        f'than the ratios do. The 1-minute load around these runs: {load} (on 2 cores, above 2 '
+        'means jobs were waiting for a core).',
         '',
         '| benchmark | what | result (last line) | goal | wall s | load before | load after | '
         'finished |',
