@@ -1,7 +1,8 @@
 """Run the benchmarks, keep their outputs in docs/benchmarks/ and write docs/benchmarks.md
 from them (``make bench``).
 
-    python tools/collect_benchmarks.py [--only scanner convert ...] [--out docs/benchmarks.md]
+    python tools/collect_benchmarks.py [--only scanner convert ...] [--render-only]
+        [--out docs/benchmarks.md] [--output-dir docs/benchmarks]
 
 Every ``benchmarks/bench_<name>.py`` runs in turn, as its own process, with the arguments of
 ``ARGUMENTS`` (the documented, paper-scale settings; a benchmark not listed runs without
@@ -10,7 +11,8 @@ summary line. Its full output (without progress-bar lines) is kept in
 ``docs/benchmarks/<name>.txt`` and its record (exact command, exit code, wall time, the
 machine's load average before and after, the finishing time) in ``docs/benchmarks/<name>.json``.
 ``docs/benchmarks.md`` is then written from all kept outputs: a table of the last lines and
-every output in full. With ``--only``, the other benchmarks keep their earlier outputs.
+every output in full. With ``--only``, the other benchmarks keep their earlier outputs;
+``--render-only`` runs nothing and rewrites the page from the kept outputs.
 The machine may be shared: ratios measured within one run are more robust to load than
 absolute times, and the load is printed with every output.
 """
@@ -182,6 +184,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         '--only', nargs='+', metavar='NAME', help='run only these benchmarks (bench_<NAME>.py)')
     parser.add_argument('--out', type=Path, default=REPO_ROOT / 'docs/benchmarks.md')
     parser.add_argument(
+        '--render-only',
+        action='store_true',
+        help='run nothing: rewrite the page from the kept outputs')
+    parser.add_argument(
         '--output-dir',
         type=Path,
         default=OUTPUT_DIR,
@@ -200,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr)
         return 2
     for name in names:
-        if args.only and name not in args.only:
+        if args.render_only or (args.only and name not in args.only):
             continue
         print(f'[bench] {name}: {" ".join(command_of(name))}', flush=True)
         record = run_benchmark(name, args.output_dir)
