@@ -118,7 +118,8 @@ def timed(methods: dict[str, tuple[Caster, int]], origins: np.ndarray, direction
     Every method gets one warm-up pass on the first 1000 rays; the timed passes go round the
     methods in turn, so that a change of load on a shared machine falls on all of them. The
     garbage collector is off while timing: the per-ray loops allocate a result tuple per ray,
-    and collections over this process's large heap would otherwise slow them down 3-4x.
+    and collections over this process's large heap would otherwise slow them down several
+    times.
     """
     for cast, _ in methods.values():
         cast(origins[:1000], directions[:1000])
@@ -198,13 +199,15 @@ def time_scans(scanners: dict[str, Scanner], path: np.ndarray, points: int, conf
 
 
 def agreement(found: tuple[np.ndarray, np.ndarray], embree: tuple[np.ndarray, np.ndarray]) -> str:
-    """Share of rays where a loop and Embree agree on hit/miss and on the first-hit distance."""
-    distance, _ = found
+    """Shares of rays where a loop and Embree agree: hit or miss, first-hit distance within
+    1 mm, and the same triangle (rays on an edge shared by two triangles may differ)."""
+    distance, face = found
     reference = embree[0][:len(distance)].astype(np.float64)
     both = np.isfinite(distance) & np.isfinite(reference)
     same_hit = np.mean(np.isfinite(distance) == np.isfinite(reference))
     same_t = np.mean(np.abs(distance[both] - reference[both]) < 1e-3)
-    return f'hit/miss {same_hit:.2%}, |dt| < 1 mm {same_t:.2%}'
+    same_face = np.mean(face[both] == embree[1][:len(distance)][both])
+    return f'hit/miss {same_hit:.2%}, |dt| < 1 mm {same_t:.2%}, triangle {same_face:.2%}'
 
 
 def main() -> None:
