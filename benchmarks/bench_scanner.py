@@ -225,7 +225,8 @@ def main() -> None:
     for obj in list(bpy.data.objects):  # bpy's start-up cube, camera and light
         bpy.data.objects.remove(obj, do_unlink=True)
     config = load_config()
-    cache = args.asset_cache or Path(tempfile.mkdtemp(prefix='synthdet-bench-assets-'))
+    workspace = tempfile.TemporaryDirectory(prefix='synthdet-bench-assets-')  # removed at exit
+    cache = args.asset_cache or Path(workspace.name)
     options = RunOptions(
         out='', points=1, object_ratio=0.5, seed=0, config=config, asset_cache=str(cache))
     library = open_library(options)
