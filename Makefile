@@ -27,9 +27,8 @@ demo: setup
 # and the test uses the final epoch's checkpoint (named in last_checkpoint).
 EXP2_DATA ?= data/s3dis
 EXP2_WORK ?= work_dirs/exp2_cpu
-# One OpenMP thread per process by default: on a busy machine torch's default (all cores) runs
-# 3x slower from oversubscription (measured: 27 s vs 8 s per tiny iteration at load 6 on 2
-# cores). Set EXP2_THREADS=2 on an idle 2-core machine.
+# One OpenMP thread per process by default: on a busy machine torch's default (all cores)
+# oversubscribes the cores. Set EXP2_THREADS=2 on an idle 2-core machine.
 EXP2_THREADS ?= 1
 exp2-cpu: export OMP_NUM_THREADS = $(EXP2_THREADS)
 exp2-cpu: setup
@@ -42,8 +41,9 @@ exp2-cpu: setup
 	$(PY) tools/test.py configs/tr3d/exp2_cpu.py $$(cat $(EXP2_WORK)/last_checkpoint) \
 	    --work-dir $(EXP2_WORK)/test
 
-# Every benchmarks/bench_*.py, one after the other; their last lines go to docs/benchmarks.md.
-# BENCH_ARGS="--only scanner convert" runs a subset (the other rows come from earlier logs).
+# Every benchmarks/bench_*.py, one after the other; each full output is kept in
+# docs/benchmarks/<name>.txt and docs/benchmarks.md is written from them.
+# BENCH_ARGS="--only scanner convert" runs a subset (the others keep their earlier outputs).
 BENCH_ARGS ?=
 bench: setup
 	$(PY) tools/collect_benchmarks.py $(BENCH_ARGS)

@@ -1,22 +1,30 @@
-"""Room corners: the traced-outline method vs a convex-hull baseline, side by side.
+"""Room corners: the traced-outline method against the paper's method and a convex hull.
 
     .venv/bin/python benchmarks/bench_corners.py [--rooms 10] [--points 300000]
         [--generate 30] [--generated DIR ...]
 
-For every room shape (rect, L, U, T) and noise setting (clean; LiDAR noise: 1 cm range noise,
-0.03 degree angular jitter, 10 % dropout, dropout patches, 0.05 % outliers) it generates
+For every room shape (rect, L, U, T, chamfer) and noise setting (clean; LiDAR noise: 1 cm range
+noise, 0.03 degree angular jitter, 10 % dropout, dropout patches, 0.05 % outliers) it generates
 ``--rooms`` rooms (``tests/room_scans.py``, random rotation, furniture, a door and a window)
-and prints, for both methods, the mean corner error (each true corner to the nearest found
-corner, cm) and the share of rooms with the right corner count. ``--generate N`` runs
+and prints, for each method, the mean corner error (each true corner to the nearest found
+corner, cm), the share of rooms with the right corner count and the share with the corners in
+the right clockwise order (what the FreeCAD floor needs). ``--generate N`` runs
 ``python -m generator`` for N rooms without and N rooms with its noise models (box, L and U
 shapes in equal shares, ``--points`` each) in a temporary folder; ``--generated DIR`` adds
 existing generator rooms. For generator rooms the ``meta.json`` polygon is the truth; they are
 the issue's accuracy goal (<= 3 cm, >= 95 % right count; <= 5 cm with noise).
-Then it times both methods on 1M-point rooms. The convex-hull baseline uses the same floor and
-ceiling levels, wall band and polygon simplification; only the outline differs.
+Then it times the methods on 1M-point rooms.
 
-Ends with one line: the traced method on the generator rooms (clean, noisy), then both methods
-on all rooms (error ratio, count accuracy, time per 1M points).
+The baselines share the traced method's floor and ceiling levels and wall band: ``paper`` is the
+paper's method as its Figure 3 describes it (outline of the wall points, corner candidates
+clustered with DBSCAN at a normalised threshold, corners ordered by angle around the centre;
+see :func:`paper_corners`), ``hull`` the convex hull of the wall points with the traced
+method's simplification.
+
+Ends with one line: the traced method on the generator rooms (clean, noisy; mean and worst
+corner error), then every method on all rooms (mean error, worst corner, right count, right
+order) and the time per 1M points. Errors are given side by side, not as ratios: the traced
+error is a fraction of a millimetre to a few millimetres, too small to divide by.
 """
 import argparse
 import json
@@ -25,9 +33,13 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
+from scipy import ndimage
 from scipy.spatial import ConvexHull
+from skimage import measure
+from sklearn.cluster import DBSCAN
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for tests/room_scans.py
 
@@ -42,33 +54,100 @@ from synthdet.scan_io import read_scan  # noqa: E402
 from tests.room_scans import SHAPES, NoiseModel, make_room  # noqa: E402
 
 
+class Result(NamedTuple):
+    """One method on one room (errors in metres; nan if the method found no room)."""
+
+    mean_error: float
+    worst_error: float
+    right_count: bool
+    right_order: bool
+
+
 def convex_hull_corners(points: np.ndarray, params: CornerParams = CornerParams()) -> np.ndarray:
     """Baseline: convex hull of the wall-band points, simplified like the traced outline."""
-    floor_z, ceiling_z = find_levels(points[:, 2], params)
-    band = (points[:, 2] > floor_z + params.wall_margin) & \
-        (points[:, 2] < ceiling_z - params.wall_margin)
-    xy = points[band, :2]
+    xy = wall_band_xy(points, params)
     hull = xy[ConvexHull(xy).vertices][::-1]  # scipy lists 2D hulls counter-clockwise
     return simplify_outline(
         hull, tolerance=0.05, min_edge=params.min_edge, min_turn=params.min_turn)
 
 
-def corner_error(found: np.ndarray, truth: np.ndarray) -> float:
-    """Mean distance from each true corner to the nearest found corner (metres)."""
-    return float(np.linalg.norm(truth[:, None] - found[None], axis=2).min(axis=1).mean())
+def wall_band_xy(points: np.ndarray, params: CornerParams) -> np.ndarray:
+    """The plan (x, y) of the points between the floor and ceiling levels, a margin away."""
+    floor_z, ceiling_z = find_levels(points[:, 2], params)
+    band = (points[:, 2] > floor_z + params.wall_margin) & \
+        (points[:, 2] < ceiling_z - params.wall_margin)
+    return points[band, :2]
 
 
-def evaluate(method, points: np.ndarray, truth: np.ndarray) -> tuple[float, bool]:
+def paper_corners(points: np.ndarray, cell: float = 0.05, eps: float = 0.05) -> np.ndarray:
+    """Baseline: the paper's method (Sec. 3.3, Figure 3), as its caption describes it.
+
+    The points projected to the plane and rasterised (``cell``); the outline of the largest
+    footprint (holes under furniture filled) and its corner candidates (polygon approximation,
+    1.5 cells); the candidates normalised by the room's larger extent and clustered with
+    DBSCAN at the normalised threshold ``eps``; one corner per cluster (its mean), ordered
+    clockwise by the angle around the centre. Steps (1) to (4) of the figure are not described
+    in the text; this reads them as the projection, rasterisation, outline and candidates.
+    """
+    xy = points[:, :2]
+    low = xy.min(axis=0)
+    cells = np.floor((xy - low) / cell).astype(np.int64) + 1  # an empty border of one cell
+    image = np.zeros(cells.max(axis=0) + 2, dtype=bool)
+    image[cells[:, 0], cells[:, 1]] = True
+    components, count = ndimage.label(ndimage.binary_closing(image))
+    if count == 0:
+        raise CornerDetectionError('no walls found')
+    largest = np.argmax(np.bincount(components.ravel())[1:]) + 1
+    footprint = ndimage.binary_fill_holes(components == largest)
+    contours = measure.find_contours(footprint.astype(np.float64), 0.5)
+    if not contours:
+        raise CornerDetectionError('no outline found')
+    contour = max(contours, key=len)
+    candidates = measure.approximate_polygon(contour, tolerance=1.5)[:-1]  # closed: drop last
+    candidates = (candidates - 0.5) * cell + low  # cell index space to metres
+    extent = float(np.ptp(candidates, axis=0).max())
+    normalised = (candidates - candidates.min(axis=0)) / extent
+    labels = DBSCAN(eps=eps, min_samples=1).fit_predict(normalised)
+    corners = np.array([candidates[labels == k].mean(axis=0) for k in np.unique(labels)])
+    centre = corners.mean(axis=0)
+    angle = np.arctan2(corners[:, 1] - centre[1], corners[:, 0] - centre[0])
+    return corners[np.argsort(-angle)]  # clockwise seen from above
+
+
+def corner_errors(found: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Distance from each true corner to the nearest found corner (metres)."""
+    return np.linalg.norm(truth[:, None] - found[None], axis=2).min(axis=1)
+
+
+def right_order(found: np.ndarray, truth: np.ndarray) -> bool:
+    """One found corner per true corner, in the true (clockwise) cyclic order."""
+    if len(found) != len(truth):
+        return False
+    nearest = np.linalg.norm(found[:, None] - truth[None], axis=2).argmin(axis=1)
+    return bool(np.array_equal(np.roll(nearest, -int(np.argmin(nearest))), np.arange(len(truth))))
+
+
+def evaluate(method, points: np.ndarray, truth: np.ndarray) -> Result:
+    """Mean and worst corner error, right count, right order (nan errors if detection fails)."""
     try:
         found = method(points)
     except CornerDetectionError:
-        return float('nan'), False
-    return corner_error(found, truth), len(found) == len(truth)
+        return Result(float('nan'), float('nan'), False, False)
+    errors = corner_errors(found, truth)
+    return Result(
+        float(errors.mean()), float(errors.max()),
+        len(found) == len(truth), right_order(found, truth))
 
 
 METHODS = {
     'traced': lambda points: detect_corners(points).corners,
+    'paper': paper_corners,
     'hull': convex_hull_corners,
+}
+LABELS = {
+    'traced': 'traced',
+    'paper': 'paper (DBSCAN + angle order)',
+    'hull': 'convex hull',
 }
 
 
@@ -128,16 +207,21 @@ def generate_rooms(out: Path, rooms: int, points: int) -> list[Path]:
     return folders
 
 
-def summary(results: dict[str, dict[str, list]], noisy: bool) -> tuple[float, float]:
-    """Traced mean error (cm) and right-count share over the clean or noisy generator rooms."""
-    runs = [
+def mean_of(runs: list[Result]) -> tuple[float, float, float, float]:
+    """Mean error (cm), worst corner (cm), right-count share and right-order share of runs."""
+    return (np.nanmean([r.mean_error
+                        for r in runs]) * 100, np.nanmax([r.worst_error for r in runs]) * 100,
+            float(np.mean([r.right_count
+                           for r in runs])), float(np.mean([r.right_order for r in runs])))
+
+
+def summary(results: dict[str, dict[str, list[Result]]], noisy: bool) -> list[Result]:
+    """The traced method's results on the clean or the noisy generator rooms."""
+    return [
         run for label, by_method in results.items()
         if label.startswith('generator') and label.endswith('noisy') == noisy
         for run in by_method['traced']
     ]
-    if not runs:
-        return float('nan'), float('nan')
-    return np.nanmean([e for e, _ in runs]) * 100, float(np.mean([ok for _, ok in runs]))
 
 
 def time_methods(rooms: int) -> dict[str, float]:
@@ -154,9 +238,9 @@ def time_methods(rooms: int) -> dict[str, float]:
             cpu[name].append(time.process_time() - start_cpu)
     seconds = {name: float(np.median(values)) for name, values in wall.items()}
     cpu_seconds = {name: float(np.median(values)) for name, values in cpu.items()}
-    print(f'time per 1M-point room (median of {rooms}), wall / CPU: traced '
-          f'{seconds["traced"]:.3f} / {cpu_seconds["traced"]:.3f} s, hull '
-          f'{seconds["hull"]:.3f} / {cpu_seconds["hull"]:.3f} s')
+    print(f'time per 1M-point room (median of {rooms}), wall / CPU: ' +
+          ', '.join(f'{LABELS[name]} {seconds[name]:.3f} / {cpu_seconds[name]:.3f} s'
+                    for name in METHODS))
     return seconds
 
 
@@ -182,7 +266,7 @@ def main() -> None:
     if args.generate:
         args.generated += generate_rooms(Path(workspace.name), args.generate, args.points)
 
-    results: dict[str, dict[str, list]] = {}
+    results: dict[str, dict[str, list[Result]]] = {}
     cases = []
     for noisy in (False, True):
         for shape in SHAPES:
@@ -202,37 +286,38 @@ def main() -> None:
                                    {}).setdefault(name,
                                                   []).append(evaluate(method, points, truth))
 
-    print(f'{"rooms":<22}{"n":>4} | {"traced err cm":>13} {"count ok":>9} | '
-          f'{"hull err cm":>11} {"count ok":>9}')
+    print('err = mean corner error (cm); count, order = share of rooms with the right number '
+          'of corners, and with them in the right clockwise order')
+    print(f'{"rooms":<22}{"n":>4}' + ''.join(f' | {name + " err":>11} {"count":>6} {"order":>6}'
+                                             for name in METHODS))
     totals = {name: [] for name in METHODS}
     for label, by_method in results.items():
-        row = f'{label:<22}{len(by_method["traced"]):>4} |'
+        row = f'{label:<22}{len(by_method["traced"]):>4}'
         for name in METHODS:
-            errors = np.array([e for e, _ in by_method[name]])
-            correct = np.mean([ok for _, ok in by_method[name]])
             totals[name] += by_method[name]
-            width = 13 if name == 'traced' else 11
-            row += f' {np.nanmean(errors) * 100:>{width}.2f} {correct:>9.0%} |'
-        print(row.rstrip(' |'))
+            error, _, count, order = mean_of(by_method[name])
+            row += f' | {error:>11.2f} {count:>6.0%} {order:>6.0%}'
+        print(row)
 
     timing = ''
     if args.timing_rooms > 0:
         seconds = time_methods(args.timing_rooms)
-        timing = (f'; time per 1M points traced {seconds["traced"]:.2f} s vs hull '
-                  f'{seconds["hull"]:.2f} s ({seconds["traced"] / seconds["hull"]:.1f}x)')
-
-    error = {name: np.nanmean([e for e, _ in totals[name]]) * 100 for name in METHODS}
-    correct = {name: np.mean([ok for _, ok in totals[name]]) for name in METHODS}
-    generated = [
-        f'{name} {err:.2f} cm / {ok:.0%} right count'
-        for name, (err, ok) in (('clean', summary(results, False)),
-                                ('noisy', summary(results, True))) if not np.isnan(err)
-    ]
-    print(f'corners, generator rooms: traced {", ".join(generated) or "none"}; all rooms: '
-          f'traced {error["traced"]:.2f} cm '
-          f'/ {correct["traced"]:.0%} vs convex hull {error["hull"]:.2f} cm / '
-          f'{correct["hull"]:.0%}: hull error {error["hull"] / error["traced"]:.1f}x traced'
-          f'{timing}')
+        timing = '; time per 1M points ' + ', '.join(f'{name} {seconds[name]:.2f} s'
+                                                     for name in METHODS)
+    generated = []
+    for name, noisy in (('clean', False), ('noisy', True)):
+        runs = summary(results, noisy)
+        if runs:
+            error, worst, count, _ = mean_of(runs)
+            generated.append(f'{name} {error:.2f} cm (worst corner {worst:.2f} cm) / '
+                             f'{count:.0%} right count')
+    overall = []
+    for name in METHODS:
+        error, worst, count, order = mean_of(totals[name])
+        overall.append(f'{LABELS[name]} {error:.2f} cm (worst {worst:.1f}) / {count:.0%} / '
+                       f'{order:.0%}')
+    print(f'corners, generator rooms: traced {", ".join(generated) or "none"}; all rooms '
+          f'(mean error, right count, right order): {"; ".join(overall)}{timing}')
     workspace.cleanup()
 
 

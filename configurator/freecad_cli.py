@@ -60,23 +60,32 @@ def _corners_from_scan(scan: Path) -> dict:
     return validate_corners(corners_for_scan(scan), f'corners computed from {scan}')
 
 
-def _run_freecad(job: dict, work_dir: Path, freecadcmd: str, timeout: float) -> dict:
-    job_path = work_dir / 'job.json'
-    result_path = work_dir / 'result.json'
-    job_path.write_text(json.dumps(job, indent=1), encoding='utf-8')
-    env = dict(os.environ, SYNTHDET_JOB=str(job_path), SYNTHDET_RESULT=str(result_path))
+def run_freecad_process(command: list[str], env: dict, work_dir: Path, timeout: float,
+                        result_path: Path) -> dict:
+    """Run a FreeCAD process that reports through a JSON file; returns that report.
+
+    Raises ``FreecadFailed`` when the program is missing, times out or writes no report.
+    """
     try:
-        process = _run_process_group([freecadcmd, str(MACRO)], env, work_dir, timeout)
+        process = _run_process_group(command, env, work_dir, timeout)
     except FileNotFoundError:
-        raise FreecadFailed(f'{freecadcmd!r} not found: install FreeCAD (apt-get install '
-                            'freecad) or pass --freecadcmd') from None
+        raise FreecadFailed(f'{command[0]!r} not found: install FreeCAD (apt-get install '
+                            'freecad) or pass its path') from None
     except subprocess.TimeoutExpired:
         raise FreecadFailed(f'FreeCAD did not finish within {timeout:.0f} s') from None
     if not result_path.is_file():
         output = (process.stderr.strip() or process.stdout.strip())[-2000:]
         raise FreecadFailed(f'FreeCAD exited with code {process.returncode} without a result '
-                            f'from {MACRO.name}:\n{output}')
-    result = load_json(str(result_path))
+                            f'from {Path(command[-1]).name}:\n{output}')
+    return load_json(str(result_path))
+
+
+def _run_freecad(job: dict, work_dir: Path, freecadcmd: str, timeout: float) -> dict:
+    job_path = work_dir / 'job.json'
+    result_path = work_dir / 'result.json'
+    job_path.write_text(json.dumps(job, indent=1), encoding='utf-8')
+    env = dict(os.environ, SYNTHDET_JOB=str(job_path), SYNTHDET_RESULT=str(result_path))
+    result = run_freecad_process([freecadcmd, str(MACRO)], env, work_dir, timeout, result_path)
     if not isinstance(result, dict) or result.get('format') != RESULT_FORMAT:
         raise FreecadFailed(f'{result_path}: not a {RESULT_FORMAT} result')
     if result.get('status') != 'ok':

@@ -7,6 +7,7 @@ Every name has one meaning across the project:
   classes;
 - ``DETECTION_CLASSES``: the 7 classes the detector learns, in the dataset's label order
   (``bbox_label_3d`` indexes into it);
+- ``S3DIS_DETECTION_CLASSES``: the detection classes of the real S3DIS (experiment 1);
 - ``GENERATED_CLASSES``: the detection classes the generator places in its rooms;
 - ``STRUCTURE_CLASSES``: the room structure and clutter, never detected;
 - ``GENERATED_STRUCTURE_CLASSES``: the structure the generator builds.
@@ -18,6 +19,7 @@ SYNTHETIC_CLASSES = ('yumi', '3dprinter')
 SEMANTIC_CLASSES = S3DIS_CLASSES + SYNTHETIC_CLASSES
 
 DETECTION_CLASSES = ('table', 'chair', 'sofa', 'bookcase', 'board', 'yumi', '3dprinter')
+S3DIS_DETECTION_CLASSES = ('table', 'chair', 'sofa', 'bookcase', 'board')
 GENERATED_CLASSES = ('table', 'chair', 'sofa', 'yumi', '3dprinter')
 STRUCTURE_CLASSES = ('ceiling', 'floor', 'wall', 'beam', 'column', 'window', 'door', 'clutter')
 GENERATED_STRUCTURE_CLASSES = ('ceiling', 'floor', 'wall', 'door', 'window', 'clutter')

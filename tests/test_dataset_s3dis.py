@@ -6,7 +6,7 @@ from mmdet3d.registry import DATASETS
 from mmengine.registry import init_default_scope
 
 import projects.synthdet.datasets.synthdet_s3dis  # noqa: F401  (registers SynthdetS3DISDataset)
-from synthdet.classes import DETECTION_CLASSES, SEMANTIC_CLASSES
+from synthdet.classes import DETECTION_CLASSES, S3DIS_DETECTION_CLASSES, SEMANTIC_CLASSES
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from tests.s3dis_fixtures import write_synthetic_area
 
@@ -59,13 +59,8 @@ def data_root(tmp_path_factory):
     root = tmp_path_factory.mktemp('s3dis')
     truth = {
         1:
-        write_synthetic_area(
-            root,
-            1,
-            2,
-            seed=1,
-            points_per_object=120,
-            classes=('table', 'chair', 'sofa', 'bookcase', 'board')),
+        write_synthetic_area(root, 1, 2, seed=1, points_per_object=120,
+                             classes=S3DIS_DETECTION_CLASSES),
         7:
         write_synthetic_area(root, 7, 2, seed=7, points_per_object=120, classes=DETECTION_CLASSES),
         8:

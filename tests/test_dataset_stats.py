@@ -12,6 +12,7 @@ import pytest
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis, info_metainfo
 from projects.synthdet.evaluation.table1 import (TABLE1_CLASSES, count_instances, format_table1,
                                                  table1, table1_rows)
+from synthdet.classes import S3DIS_DETECTION_CLASSES
 from tests.s3dis_fixtures import write_synthetic_area
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -20,13 +21,8 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 def test_counts_from_converted_fixture_match_the_written_objects(tmp_path):
     truth = {
         1:
-        write_synthetic_area(
-            tmp_path,
-            1,
-            2,
-            seed=11,
-            points_per_object=40,
-            classes=('table', 'chair', 'sofa', 'bookcase', 'board')),
+        write_synthetic_area(tmp_path, 1, 2, seed=11, points_per_object=40,
+                             classes=S3DIS_DETECTION_CLASSES),
         8:
         write_synthetic_area(tmp_path, 8, 3, seed=12, points_per_object=40)
     }

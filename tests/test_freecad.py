@@ -19,6 +19,7 @@ import pytest
 
 from configurator import freecad_cli
 from configurator.freecad_cli import MACRO, FreecadFailed, build_document
+from configurator.freecad_screenshot import USER_CONFIG as GUI_USER_CONFIG
 from synthdet.contracts import SchemaError, load_json, validate_corners, validate_predictions
 from synthdet.scan_io import write_scan
 
@@ -106,8 +107,11 @@ INSPECT_SCRIPT = textwrap.dedent('''\
     doc = App.openDocument(params['main'])
     report['main'] = describe(doc)
     table, sofa, yumi = by_class(doc, 'table'), by_class(doc, 'sofa'), by_class(doc, 'yumi')
-    arm = doc.getObject(yumi.Name + '_RightShoulder')
-    report['arm_before'] = box(Part.getShape(arm))
+    def arm(side):
+        return box(Part.makeCompound([doc.getObject(f'{yumi.Name}_{side}Link{k}').Shape
+                                      for k in range(1, 8)]))
+
+    report['arms_before'] = [arm('Right'), arm('Left')]
     set_cell(doc.getObject(table.Name + '_Parameters'), 'length', '=2000 mm')
     set_cell(doc.getObject(sofa.Name + '_Parameters'), 'length', '=3000 mm')
     set_cell(doc.getObject(yumi.Name + '_Parameters'), 'right_joint_2', '=90 deg')
@@ -117,7 +121,7 @@ INSPECT_SCRIPT = textwrap.dedent('''\
     report['edited'] = {
         'table': box(Part.getShape(table, transform=False)),
         'sofa': box(Part.getShape(sofa, transform=False)),
-        'arm': box(Part.getShape(arm)),
+        'arms': [arm('Right'), arm('Left')],
         'walls': box(doc.Walls.Shape),
         'invalid': [o.Name for o in doc.Objects if not o.isValid()],
     }
@@ -166,18 +170,19 @@ GUI_DRIVER = textwrap.dedent('''\
     seen['gui'] = App.GuiUp
     seen['classes'] = sorted(o.DetectedClass for o in doc.Objects if hasattr(o, 'DetectedClass'))
     seen['floor_area'] = doc.getObject('Floor').Shape.Area if doc.getObject('Floor') else None
+    table = [o for o in doc.Objects if getattr(o, 'DetectedClass', None) == 'table'][0]
+    seen['table_colour'] = list(doc.getObject(table.Name + '_Top').ViewObject.ShapeColor)[:3]
+    sofa = [o for o in doc.Objects if getattr(o, 'DetectedClass', None) == 'sofa'][0]
+    seen['sofa_model'] = sofa.CadModel
+    seen['sofa_colour'] = list(doc.getObject(sofa.Name + '_Model').ViewObject.ShapeMaterial
+                               .DiffuseColor)[:3]
+    seen['hidden_solids'] = [o.Label for o in doc.Objects if o.isDerivedFrom('Part::Feature')
+                             and o.Name not in ('FloorSketch', 'WallOutline', 'WallProfile')
+                             and o.getParentGeoFeatureGroup() is not None
+                             and not o.ViewObject.Visibility]
     with open(params['report'], 'w', encoding='utf-8') as stream:
         json.dump(seen, stream)
     os._exit(0)  # the offscreen platform has no OpenGL context to tear the 3D view down
-''')
-
-# A user configuration that opens no Start page (its web view cannot start as root offscreen).
-GUI_USER_CONFIG = textwrap.dedent('''\
-    <?xml version="1.0" encoding="UTF-8" standalone="yes"?>
-    <FCParameters><FCParamGroup Name="Root"><FCParamGroup Name="BaseApp">
-    <FCParamGroup Name="Preferences"><FCParamGroup Name="General">
-    <FCText Name="AutoloadModule">NoneWorkbench</FCText>
-    </FCParamGroup></FCParamGroup></FCParamGroup></FCParamGroup></FCParameters>
 ''')
 
 
@@ -227,7 +232,7 @@ def workspace(tmp_path_factory) -> dict:
     scan.write_text('0 0 0 1 2 3\n1 1 1 4 5 6\n', encoding='utf-8')
     hostile = hostile_names(marker)
     detections = MAIN_DETECTIONS + [
-        detection(name, 0.9, (1.0 + 0.5 * index, 1.0, 0.5), (0.3, 0.3, 0.3))
+        detection(name, 0.9, (0.5 + 0.45 * index, 0.4, 0.5), (0.3, 0.3, 0.3))
         for index, name in enumerate(hostile)
     ]
     hostile_scan = f"$(touch {marker}); ' \" \n {{0}} <<x>>"
@@ -481,14 +486,22 @@ def test_reopened_document_has_groups_placements_and_properties(workspace, inspe
         source = expected[entry['class']]
         assert entry['score'] == pytest.approx(source['score'])
         assert entry['scan'] == workspace['hostile_scan']
-        np.testing.assert_allclose(entry['base'], np.array(source['center']) * 1000, atol=1e-6)
+        bottom = [source['center'][0], source['center'][1], FLOOR_Z]  # each stands on the floor
+        np.testing.assert_allclose(entry['base'], np.array(bottom) * 1000, atol=1e-6)
         yaw = math.atan2(math.sin(source['yaw']), math.cos(source['yaw']))
         signed = entry['angle'] * np.sign(entry['axis'][2]) if entry['angle'] else 0.0
         assert math.isclose(math.remainder(signed - yaw, 2 * math.pi), 0.0, abs_tol=1e-9)
         half = np.array(source['size']) * 500
-        np.testing.assert_allclose(
-            entry['local'], np.concatenate([-half, half]), atol=1e-3, err_msg=entry['class'])
-        aabb = rotated_aabb(source['center'], source['size'], source['yaw'])
+        box = np.array([-half[0], -half[1], 0, half[0], half[1], 2 * half[2]])
+        standing = bottom[:2] + [FLOOR_Z + source['size'][2] / 2]
+        aabb = rotated_aabb(standing, source['size'], source['yaw'])
+        if entry['class'] == 'yumi':  # the real robot's proportions, scaled to fit the box
+            assert np.all(entry['local'][:3] >= box[:3] - 0.5)
+            assert np.all(entry['local'][3:] <= box[3:] + 0.5)
+            assert np.isclose(
+                np.subtract(entry['local'][3:], entry['local'][:3]), 2 * half, atol=1.0).any()
+        else:
+            np.testing.assert_allclose(entry['local'], box, atol=1e-3, err_msg=entry['class'])
         if entry['class'] == 'yumi':  # round arm links do not reach the box's vertical edges
             assert np.all(entry['world'][:3] >= aabb[:3] - 0.5)
             assert np.all(entry['world'][3:] <= aabb[3:] + 0.5)
@@ -520,16 +533,16 @@ def test_editing_parameters_in_plain_freecad_recomputes_geometry(inspection):
     assert edited['invalid'] == []
     table_y, sofa_y = 400.0, 450.0
     np.testing.assert_allclose(
-        edited['table'], [-1000, -table_y, -375, 1000, table_y, 375], atol=1e-3)
-    np.testing.assert_allclose(
-        edited['sofa'], [-1500, -sofa_y, -425, 1500, sofa_y, 425], atol=1e-3)
+        edited['table'], [-1000, -table_y, 0, 1000, table_y, 750], atol=1e-3)
+    np.testing.assert_allclose(edited['sofa'], [-1500, -sofa_y, 0, 1500, sofa_y, 850], atol=1e-3)
     np.testing.assert_allclose(
         edited['walls'], [-300, -300, FLOOR_Z * 1000, 6300, 5300, FLOOR_Z * 1000 + 4000],
         atol=1e-6)
-    before, after = inspection['arm_before'], edited['arm']
-    # the right arm hung down beside the body; a 90 degree shoulder joint lifts it sideways
-    assert after[2] - before[2] > 0.3 * 600
-    assert after[3] - after[0] > 3 * (before[3] - before[0])
+    (right_before, left_before), (right_after, left_after) = (inspection['arms_before'],
+                                                              edited['arms'])
+    # right joint 2 from the folded rest pose (-129 deg) to 90 deg swings the right arm only
+    assert np.abs(np.subtract(right_after, right_before)).max() > 100.0
+    np.testing.assert_allclose(left_after, left_before, atol=1e-6)
 
 
 def test_hostile_strings_are_data_never_code(workspace, inspection):
@@ -540,7 +553,7 @@ def test_hostile_strings_are_data_never_code(workspace, inspection):
         entry = by_class[name]
         assert entry['cad'] == 'box' and entry['scan'] == workspace['hostile_scan']
         assert entry['label'] == f'{name} 1'
-        np.testing.assert_allclose(entry['local'], [-150, -150, -150, 150, 150, 150], atol=1e-3)
+        np.testing.assert_allclose(entry['local'], [-150, -150, 0, 150, 150, 300], atol=1e-3)
 
 
 def test_empty_predictions_give_a_room_only_document(empty_build, inspection):
@@ -587,7 +600,10 @@ def test_macro_in_the_gui_asks_for_the_files_and_imports(workspace, tmp_path):
         })
     process = subprocess.run(
         ['freecad', '-u', str(config), str(driver)],
-        env=dict(os.environ, QT_QPA_PLATFORM='offscreen', SYNTHDET_TEST_PARAMS=str(params)),
+        env=dict(os.environ,
+                 QT_QPA_PLATFORM='offscreen',
+                 SYNTHDET_TEST_PARAMS=str(params),
+                 SYNTHDET_LIBRARY=str(workspace['library'])),
         cwd=tmp_path,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
@@ -602,3 +618,7 @@ def test_macro_in_the_gui_asks_for_the_files_and_imports(workspace, tmp_path):
     expected = [d['class'] for d in MAIN_DETECTIONS if d['score'] >= 0.3] + workspace['hostile']
     assert seen['classes'] == sorted(expected)
     assert seen['floor_area'] == pytest.approx(24e6)
+    assert seen['table_colour'] == pytest.approx([31 / 255, 119 / 255, 180 / 255], abs=0.01)
+    assert seen['hidden_solids'] == []
+    assert seen['sofa_model'] == 'step'  # a linked STEP model takes the class colour too
+    assert seen['sofa_colour'] == pytest.approx([44 / 255, 160 / 255, 44 / 255], abs=0.01)

@@ -2,30 +2,14 @@
 tools/train.py (the Runner) on configs/tr3d/tiny.py and tested on themselves with tools/test.py,
 reach mAP@0.25 >= 0.9 with mmdet3d's IndoorMetric (issue 5)."""
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from tests.s3dis_fixtures import write_synthetic_area
+from tests.tool_process import run_tool
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = REPO / 'configs' / 'tr3d' / 'tiny.py'
-
-
-def run_tool(*args) -> subprocess.CompletedProcess:
-    """Run a tool with one OpenMP thread (MinkowskiEngine's CPU kernels were ~4x slower with a
-    thread per core on the shared 2-core machine) unless the caller chose otherwise."""
-    env = {**os.environ, 'OMP_NUM_THREADS': os.environ.get('OMP_NUM_THREADS', '1')}
-    proc = subprocess.run([sys.executable, *map(str, args)],
-                          cwd=REPO,
-                          capture_output=True,
-                          text=True,
-                          timeout=900,
-                          env=env)
-    assert proc.returncode == 0, f'{args[0]} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}'
-    return proc
 
 
 def test_tr3d_overfits_tiny_generated_rooms(tmp_path: Path) -> None:

@@ -8,9 +8,6 @@ run in this process with command-line arguments.
 """
 import importlib.util
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 from types import ModuleType
 
@@ -26,6 +23,7 @@ from projects.synthdet.evaluation.table3 import format_table3, table3, table3_ro
 from projects.synthdet.evaluation.table4 import truth_from_infos
 from synthdet.scan_io import read_scan, write_scan
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
+from tests.tool_process import run_tool
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIG_DIR = REPO / 'configs' / 'tr3d'
@@ -51,23 +49,6 @@ def load_tool(name: str) -> ModuleType:
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
-
-
-def run_tool(*args: str) -> subprocess.CompletedProcess:
-    """Run a tool as a user would; fail with its output if it exits non-zero.
-
-    One OpenMP thread unless the caller chose otherwise: MinkowskiEngine's CPU kernels were
-    about 4x slower with a thread per core on this shared 2-core machine.
-    """
-    env = {**os.environ, 'OMP_NUM_THREADS': os.environ.get('OMP_NUM_THREADS', '1')}
-    proc = subprocess.run([sys.executable, *map(str, args)],
-                          cwd=REPO,
-                          capture_output=True,
-                          text=True,
-                          timeout=600,
-                          env=env)
-    assert proc.returncode == 0, f'{args[0]} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}'
-    return proc
 
 
 def data_options(data_root: Path) -> list[str]:

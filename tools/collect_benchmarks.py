@@ -1,16 +1,20 @@
-"""Run the benchmarks and collect their last lines into docs/benchmarks.md (``make bench``).
+"""Run the benchmarks, keep their outputs in docs/benchmarks/ and write docs/benchmarks.md
+from them (``make bench``).
 
-    python tools/collect_benchmarks.py [--only scanner convert ...] [--out docs/benchmarks.md]
-        [--log-dir work_dirs/bench]
+    python tools/collect_benchmarks.py [--only scanner convert ...] [--render-only]
+        [--out docs/benchmarks.md] [--output-dir docs/benchmarks]
 
 Every ``benchmarks/bench_<name>.py`` runs in turn, as its own process, with the arguments of
 ``ARGUMENTS`` (the documented, paper-scale settings; a benchmark not listed runs without
 arguments). Each one prints a side-by-side comparison measured in that one run and ends with a
-ratio line. The report lists, per benchmark, the exact command, the last line, the wall time
-and the machine's load average before and after (the machine may be shared: ratios measured
-within one run are more robust to load than absolute times), followed by the tail of every
-output. Full outputs stay in ``--log-dir``. With ``--only``, the other benchmarks' rows are
-taken from their logs of an earlier run, if any.
+summary line. Its full output (without progress-bar lines) is kept in
+``docs/benchmarks/<name>.txt`` and its record (exact command, exit code, wall time, the
+machine's load average before and after, the finishing time) in ``docs/benchmarks/<name>.json``.
+``docs/benchmarks.md`` is then written from all kept outputs: a table of the last lines and
+every output in full. With ``--only``, the other benchmarks keep their earlier outputs;
+``--render-only`` runs nothing and rewrites the page from the kept outputs.
+The machine may be shared: ratios measured within one run are more robust to load than
+absolute times, and the load is printed with every output.
 """
 from __future__ import annotations
 
@@ -30,27 +34,36 @@ ARGUMENTS = {
     'scanner': [],
     'writer': [],
     'generate': ['--rooms-per-area', '50', '--points', '1000000', '--workers', '2'],
-    'convert': ['--rooms', '20', '--points-per-object', '18000', '--workers', '2'],
+    'convert':
+    ['--rooms', '20', '--points-per-object', '18000', '--workers', '2', '--repeats', '2'],
     'model': ['--points', '100000', '--iters', '3', '--threads', '1'],
     'corners': [],
 }
 WHAT = {
-    'scanner': 'ray casting: per-ray bpy `scene.ray_cast` loop vs batched Embree scanner',
-    'writer': 'S3DIS text formatting: per-line Python vs vectorised writer',
+    'scanner':
+    'ray casting: batched Embree scanner vs per-ray bpy `BVHTree`, `Object` and '
+    '`scene` `ray_cast` loops, 1 thread each',
+    'writer':
+    'S3DIS text formatting: vectorised writer vs per-line Python and `np.savetxt`',
     'generate':
     'generation wall time, 3 areas x 50 rooms x 1M points, 2 workers, vs the 10 min goal',
-    'convert': 'conversion: mmdet3d collect + S3DISData vs synthdet convert_s3dis',
-    'model': 'TR3D train step, inference and peak memory, 1 cm vs 2 cm voxels',
-    'corners': 'room corners: traced outline vs convex-hull baseline (error, count, time)',
+    'convert':
+    'conversion: synthdet convert_s3dis vs mmdet3d collect + S3DISData, equal '
+    'parallelism',
+    'model':
+    'TR3D train step, inference and peak memory, 1 cm vs 2 cm voxels',
+    'corners':
+    'room corners: traced outline vs the paper\'s method and a convex hull (error, '
+    'count, order, time)',
 }
 # The issues' goals, shown next to the results.
 GOALS = {
-    'scanner': '>= 30x',
+    'scanner': '>= 10x the fastest bpy loop, 1 thread each',
     'generate': '<= 600 s for 150 rooms',
-    'convert': '>= 3x',
+    'convert': '>= 3x at equal parallelism',
     'corners': 'traced <= 3 cm, >= 95% right count, <= 1 s per 1M points',
 }
-TAIL_LINES = 25
+OUTPUT_DIR = REPO_ROOT / 'docs' / 'benchmarks'
 
 
 def discover() -> list[str]:
@@ -63,9 +76,9 @@ def command_of(name: str) -> list[str]:
     return [f'benchmarks/bench_{name}.py', *ARGUMENTS.get(name, [])]
 
 
-def run_benchmark(name: str, log_dir: Path) -> dict:
-    """Run one benchmark, echo its output live, keep it in ``<log_dir>/<name>.log`` and return
-    its record (command, exit code, wall seconds, load averages, last line)."""
+def run_benchmark(name: str, output_dir: Path) -> dict:
+    """Run one benchmark, echo its output live, keep it in ``<output_dir>/<name>.txt`` and its
+    record (command, exit code, wall seconds, load averages, last line) in ``<name>.json``."""
     command = [sys.executable, *command_of(name)]
     load_before = os.getloadavg()
     start = time.monotonic()
@@ -91,12 +104,21 @@ def run_benchmark(name: str, log_dir: Path) -> dict:
         'finished': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC'),
     }
     text = ''.join(output).replace('\r', '\n')
-    lines = [line for line in text.splitlines() if line.strip() and '%|' not in line]
+    lines = [line.rstrip() for line in text.splitlines() if line.strip() and '%|' not in line]
     record['last_line'] = lines[-1].strip() if lines else ''
-    record['tail'] = lines[-TAIL_LINES:]
-    log_dir.mkdir(parents=True, exist_ok=True)
-    (log_dir / f'{name}.log').write_text(text)
-    (log_dir / f'{name}.json').write_text(json.dumps(record, indent=1) + '\n')
+    output_dir.mkdir(parents=True, exist_ok=True)
+    (output_dir / f'{name}.txt').write_text('\n'.join(lines) + '\n')
+    (output_dir / f'{name}.json').write_text(json.dumps(record, indent=1) + '\n')
+    return record
+
+
+def kept_output(name: str, output_dir: Path) -> dict | None:
+    """The record and output of an earlier run kept in ``output_dir``, if any."""
+    record_path = output_dir / f'{name}.json'
+    if not record_path.is_file():
+        return None
+    record = json.loads(record_path.read_text())
+    record['output'] = (output_dir / f'{name}.txt').read_text().splitlines()
     return record
 
 
@@ -112,17 +134,27 @@ def machine() -> str:
     return f'{model}, {os.cpu_count()} cores, Python {platform.python_version()}'
 
 
-def render(records: list[dict], not_run: list[str]) -> str:
-    """docs/benchmarks.md from the benchmark records (and the benchmarks without one)."""
+def render(records: list[dict], not_run: list[str], output_dir: Path) -> str:
+    """docs/benchmarks.md from the kept benchmark records (and the benchmarks without one)."""
+    docs = REPO_ROOT / 'docs'
+    # links relative to this page; in the text, the folder as seen from the repository root
+    where = output_dir.relative_to(docs) if output_dir.is_relative_to(docs) else output_dir
+    shown = output_dir.relative_to(REPO_ROOT) if output_dir.is_relative_to(
+        REPO_ROOT) else output_dir
+    loads = [x for r in records for x in (r['load_before'][0], r['load_after'][0])]
+    load = f'{min(loads)}-{max(loads)}' if loads else 'not measured'
     lines = [
         '# Benchmarks',
         '',
         'Written by `make bench` (`tools/collect_benchmarks.py`), which runs every '
-        '`benchmarks/bench_*.py` one after the other and collects the last line of each. Every '
-        'benchmark measures both sides of its comparison in the same run, on the same input. '
-        f'Machine: {machine()}. Load average = 1/5/15-minute load before and after the run; the '
-        'project machine is shared with other jobs, so absolute times vary with it more than '
-        'the ratios do.',
+        '`benchmarks/bench_*.py` one after the other, keeps each full output in '
+        f'`{shown}/<name>.txt` (progress bars left out) and writes this page from them. Every '
+        'benchmark measures all sides of its comparison in the same run, on the same input, '
+        'with the same warm-up, repeats and thread or process counts. '
+        f'Machine: {machine()}. Load average = 1/5/15-minute load before and after the run; '
+        'the project machine is shared with other jobs, so absolute times vary with it more '
+        f'than the ratios do. The 1-minute load around these runs: {load} (on 2 cores, above 2 '
+        'means jobs were waiting for a core).',
         '',
         '| benchmark | what | result (last line) | goal | wall s | load before | load after | '
         'finished |',
@@ -135,11 +167,14 @@ def render(records: list[dict], not_run: list[str]) -> str:
                      f'{" / ".join(map(str, r["load_before"]))} | '
                      f'{" / ".join(map(str, r["load_after"]))} | {r["finished"]} |')
     for name in not_run:
-        lines.append(f'| `{name}` | {WHAT.get(name, "")} | not run in this collection | '
+        lines.append(f'| `{name}` | {WHAT.get(name, "")} | not run yet | '
                      f'{GOALS.get(name, "")} | | | | |')
     lines += ['', '## Outputs', '']
     for r in records:
-        lines += [f'### {r["name"]}', '', f'`{r["command"]}`', '', '```', *r['tail'], '```', '']
+        lines += [
+            f'### {r["name"]}', '', f'`{r["command"]}` ([{where}/{r["name"]}.txt]'
+            f'({where}/{r["name"]}.txt))', '', '```', *r['output'], '```', ''
+        ]
     return '\n'.join(lines)
 
 
@@ -148,7 +183,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         '--only', nargs='+', metavar='NAME', help='run only these benchmarks (bench_<NAME>.py)')
     parser.add_argument('--out', type=Path, default=REPO_ROOT / 'docs/benchmarks.md')
-    parser.add_argument('--log-dir', type=Path, default=REPO_ROOT / 'work_dirs/bench')
+    parser.add_argument(
+        '--render-only',
+        action='store_true',
+        help='run nothing: rewrite the page from the kept outputs')
+    parser.add_argument(
+        '--output-dir',
+        type=Path,
+        default=OUTPUT_DIR,
+        help='where each benchmark\'s output and record are kept')
     return parser.parse_args(argv)
 
 
@@ -162,20 +205,17 @@ def main(argv: list[str] | None = None) -> int:
             f'{", ".join(names)})',
             file=sys.stderr)
         return 2
-    records = []
     for name in names:
-        if args.only and name not in args.only:
-            previous = args.log_dir / f'{name}.json'
-            if previous.is_file():
-                records.append(json.loads(previous.read_text()))
+        if args.render_only or (args.only and name not in args.only):
             continue
         print(f'[bench] {name}: {" ".join(command_of(name))}', flush=True)
-        records.append(run_benchmark(name, args.log_dir))
-        print(
-            f'[bench] {name}: {records[-1]["seconds"]} s, exit {records[-1]["returncode"]}',
-            flush=True)
-    done = {r['name'] for r in records}
-    args.out.write_text(render(records, [n for n in names if n not in done]))
+        record = run_benchmark(name, args.output_dir)
+        print(f'[bench] {name}: {record["seconds"]} s, exit {record["returncode"]}', flush=True)
+    kept = {name: kept_output(name, args.output_dir) for name in names}
+    records = [record for record in kept.values() if record is not None]
+    args.out.write_text(
+        render(records, [name for name, record in kept.items() if record is None],
+               args.output_dir.resolve()))
     print(f'[bench] wrote {args.out}')
     return 0 if all(r['returncode'] == 0 for r in records) else 1
 

@@ -1,7 +1,8 @@
 """Builds the room and the detections into a FreeCAD document (runs inside FreeCAD).
 
 Groups: ``Room`` (parameter sheet, floor sketch and face, walls), ``Furniture`` (table, chair,
-sofa, bookcase) and ``Equipment`` (everything else). Lengths are millimetres.
+sofa, bookcase), ``Equipment`` (everything else) and, hidden, ``Alternatives`` (the other
+classes detected on the same box as an object). Lengths are millimetres.
 """
 import os
 
@@ -9,7 +10,7 @@ import FreeCAD as App
 import Part
 import Sketcher
 
-from . import library
+from . import appearance, arrangement, library
 
 FURNITURE_CLASSES = ('table', 'chair', 'sofa', 'bookcase')
 STEP_SUFFIXES = ('.step', '.stp')
@@ -22,13 +23,14 @@ def _group(doc, name: str):
     return doc.addObject('App::DocumentObjectGroup', name)
 
 
-def build_room(doc, corners: dict, wall_thickness: float, group) -> None:
+def build_room(doc, corners: dict, wall_thickness: float, group, look):
     """Floor face from the corner sketch, and walls offset outwards and extruded to the ceiling.
 
     ``RoomParameters`` (a sheet) holds ``height``, ``wall_thickness`` and ``floor_z``; the
-    sketch, offset and extrusion are bound to it by expressions.
+    sketch, offset and extrusion are bound to it by expressions. Returns the sheet.
     """
     sheet = doc.addObject('Spreadsheet::Sheet', 'RoomParameters')
+    sheet.setColumnWidth('A', library.LABEL_COLUMN_WIDTH)
     group.addObject(sheet)
     rows = (('height', corners['ceiling_z'] - corners['floor_z'], 'room height'),
             ('wall_thickness', wall_thickness, 'wall thickness'), ('floor_z', corners['floor_z'],
@@ -71,6 +73,9 @@ def build_room(doc, corners: dict, wall_thickness: float, group) -> None:
         group.addObject(obj)
     for obj in (sketch, outline, profile):
         obj.Visibility = False
+    look.paint(floor, appearance.class_colour('floor'))
+    look.paint(walls, appearance.class_colour('wall'), appearance.WALL_TRANSPARENCY)
+    return sheet
 
 
 def find_step_models(library_dir: str | None) -> dict[str, str]:
@@ -105,52 +110,103 @@ def _import_step(doc, class_name: str, path: str, group):
     return obj
 
 
-def import_detections(doc, predictions: dict, corners: dict | None, library_dir: str | None,
-                      min_score: float, wall_thickness: float) -> dict:
+def _stand(container, placed, containers: dict, room_sheet) -> None:
+    """Bind the part's base height to what it stands on, so that it follows edits of the
+    table's height (or of the room's ``floor_z``)."""
+    support = placed.support
+    if support is not None and support in containers:
+        table = containers[support]
+        container.setExpression('.Placement.Base.z',
+                                f'{table.Name}.Placement.Base.z + {table.Name}_Parameters.height')
+    elif support is None and room_sheet is not None:
+        container.setExpression('.Placement.Base.z', f'{room_sheet.Name}.floor_z')
+
+
+def _paint_model(look, container) -> None:
+    colour = appearance.class_colour(container.DetectedClass)
+    for child in container.Group:
+        if hasattr(child, 'Shape') or child.TypeId == 'App::Link':
+            look.paint(child, colour)
+
+
+def import_detections(doc,
+                      predictions: dict,
+                      corners: dict | None,
+                      library_dir: str | None,
+                      min_score: float,
+                      wall_thickness: float,
+                      look=None) -> dict:
     """Add the room (if corners are given) and every detection scoring >= ``min_score``.
 
-    Returns a report: ``objects`` (name, label, class, group, model), ``warnings`` and
-    ``skipped_low_score``.
+    Detections are merged, stood on the floor or their table, oriented and kept inside the
+    walls by ``arrangement``; ``look`` (an ``appearance.Look``) collects the colours. Returns a
+    report: ``objects`` (name, label, class, group, model, stands_on, orientation,
+    alternatives), ``warnings`` and ``skipped_low_score``.
     """
-    warnings = []
+    look = look if look is not None else appearance.Look()
     room = _group(doc, 'Room')
     furniture = _group(doc, 'Furniture')
     equipment = _group(doc, 'Equipment')
+    room_sheet = None
     if corners is not None:
-        build_room(doc, corners, wall_thickness, room)
+        room_sheet = build_room(doc, corners, wall_thickness, room, look)
+    kept = [d for d in predictions['detections'] if d['score'] >= min_score]
+    skipped = len(predictions['detections']) - len(kept)
+    placed_items, warnings = arrangement.arrange(kept, corners)
     step_paths = find_step_models(library_dir)
     step_objects = {}
-    library_group = None
-    objects = []
-    skipped = 0
-    counts = {}
-    for detection in predictions['detections']:
-        if detection['score'] < min_score:
-            skipped += 1
-            continue
-        class_name = detection['class']
-        counts[class_name] = counts.get(class_name, 0) + 1
+    containers = {}
+    warned = set()
+
+    def build(placed):
+        class_name = placed.class_name
         library_object = None
         if class_name in step_paths:
             if class_name not in step_objects:
-                if library_group is None:
-                    library_group = _group(doc, 'Library')
                 step_objects[class_name] = _import_step(doc, class_name, step_paths[class_name],
-                                                        library_group)
+                                                        _group(doc, 'Library'))
             library_object = step_objects[class_name]
-        detection = dict(detection, scan=predictions['scan'], model=predictions['model'])
-        container, kind = library.add_detection(doc, detection, counts[class_name], library_object)
-        if kind == 'box' and counts[class_name] == 1:
+        container, kind = library.add_detection(doc, placed, predictions['scan'],
+                                                predictions['model'], library_object)
+        if kind == 'box' and class_name not in warned:
+            warned.add(class_name)
             warnings.append(f'no CAD model for class {class_name!r}: placed labelled boxes')
-        group = furniture if class_name in FURNITURE_CLASSES else equipment
+        _stand(container, placed, containers, room_sheet)
+        _paint_model(look, container)
+        containers[placed] = container
+        return container, kind
+
+    objects = []
+    tables_first = sorted(placed_items, key=lambda item: item.class_name != 'table')
+    built = {placed: build(placed) for placed in tables_first}
+    for placed in placed_items:
+        container, kind = built[placed]
+        group = furniture if placed.class_name in FURNITURE_CLASSES else equipment
         group.addObject(container)
+        alternatives = []
+        for other in placed.alternatives:
+            alternative, _ = build(other)
+            _group(doc, 'Alternatives').addObject(alternative)
+            alternative.Visibility = False
+            alternatives.append(alternative)
+        if alternatives:
+            container.addProperty(
+                'App::PropertyLinkList', 'Alternatives', 'Synthdet',
+                'other classes detected on this box (hidden in the '
+                'Alternatives group: show one and hide this part to switch)')
+            container.Alternatives = alternatives
         objects.append({
             'name': container.Name,
             'label': container.Label,
-            'class': class_name,
+            'class': placed.class_name,
             'group': group.Name,
-            'model': kind
+            'model': kind,
+            'stands_on': container.StandsOn,
+            'orientation': placed.orientation,
+            'alternatives': [alternative.Label for alternative in alternatives],
         })
+    if doc.getObject('Alternatives') is not None:
+        doc.getObject('Alternatives').Visibility = False
     doc.recompute()
     broken = [obj.Name for obj in doc.Objects if not obj.isValid()]
     if broken:

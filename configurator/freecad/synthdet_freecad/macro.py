@@ -14,7 +14,7 @@ import zipfile
 
 import FreeCAD as App
 
-from . import document, schema
+from . import appearance, document, schema
 
 ENV_JOB = 'SYNTHDET_JOB'
 ENV_RESULT = 'SYNTHDET_RESULT'
@@ -56,12 +56,13 @@ def options_from_environment(overrides: dict | None = None, require_out: bool = 
     return schema.validate_job(raw, 'environment')
 
 
-def import_into(doc, options: dict) -> dict:
-    """Validate the option's files and import them into ``doc``; returns the import report."""
+def import_into(doc, options: dict, look) -> dict:
+    """Validate the option's files and import them into ``doc`` (colours into ``look``, an
+    ``appearance.Look``); returns the import report."""
     predictions = schema.read_predictions(options['predictions'])
     corners = schema.read_corners(options['corners']) if options['corners'] else None
     return document.import_detections(doc, predictions, corners, options['library'],
-                                      options['min_score'], options['wall_thickness'])
+                                      options['min_score'], options['wall_thickness'], look)
 
 
 def write_result(path: str | None, result: dict) -> None:
@@ -81,8 +82,9 @@ def partial_path(out: str) -> str:
     return os.path.join(folder, f'.{name[:-len(".FCStd")]}.partial.FCStd')  # FreeCAD wants it
 
 
-def save_atomically(doc, out: str) -> None:
-    """Save ``doc`` to a temporary file next to ``out`` and rename it into place.
+def save_atomically(doc, out: str, look) -> None:
+    """Save ``doc`` (with the GUI view ``look`` writes) to a temporary file next to ``out``
+    and rename it into place.
 
     A failing save (also one FreeCAD only reports on its console, such as a full disk, found by
     reading the archive back) leaves the previous ``out`` untouched; a temporary file left by a
@@ -92,10 +94,10 @@ def save_atomically(doc, out: str) -> None:
     if os.path.isfile(partial):
         os.remove(partial)
     try:
-        doc.saveCopy(partial)  # FreeCAD reports some write errors only on its console
-        if not _complete_document(partial):
-            raise OSError(f'FreeCAD could not write a complete document to {partial!r} (disk '
-                          'full?); the previous document is kept')
+        doc.saveCopy(partial)
+        _check_complete(partial)  # FreeCAD reports some write errors only on its console
+        look.write_gui_document(partial, doc)
+        _check_complete(partial)
         os.replace(partial, out)
     except BaseException:
         if os.path.isfile(partial):
@@ -103,13 +105,16 @@ def save_atomically(doc, out: str) -> None:
         raise
 
 
-def _complete_document(path: str) -> bool:
-    """Whether ``path`` is a whole FCStd archive (a zip whose members all read back)."""
+def _check_complete(path: str) -> None:
+    """Raise ``OSError`` unless ``path`` is a whole FCStd archive (its members read back)."""
     try:
         with zipfile.ZipFile(path) as archive:
-            return 'Document.xml' in archive.namelist() and archive.testzip() is None
+            complete = 'Document.xml' in archive.namelist() and archive.testzip() is None
     except (OSError, zipfile.BadZipFile):
-        return False
+        complete = False
+    if not complete:
+        raise OSError(f'FreeCAD could not write a complete document to {path!r} (disk full?); '
+                      'the previous document is kept')
 
 
 def run_headless() -> None:
@@ -122,13 +127,14 @@ def run_headless() -> None:
             raise ValueError(f'output {out!r} must end with .FCStd')
         doc = App.newDocument('SynthdetRoom')
         doc.Label = os.path.splitext(os.path.basename(out))[0]
-        report = import_into(doc, options)
+        look = appearance.Look()
+        report = import_into(doc, options, look)
         try:
             os.makedirs(os.path.dirname(out), exist_ok=True)
         except OSError as error:
             raise OSError(f'cannot create the output folder {os.path.dirname(out)!r}: '
                           f'{error.strerror}') from None
-        save_atomically(doc, out)
+        save_atomically(doc, out, look)
         App.closeDocument(doc.Name)
     except Exception as error:  # the process boundary: every failure goes to the result file
         if isinstance(error, EXPECTED_ERRORS):
@@ -163,13 +169,14 @@ def run_gui() -> None:
         },
                                            require_out=False)
         doc = App.ActiveDocument or App.newDocument('SynthdetRoom')
-        report = import_into(doc, options)
+        look = appearance.Look()
+        report = import_into(doc, options, look)
     except EXPECTED_ERRORS as error:
         QtGui.QMessageBox.critical(window, 'synthdet import', str(error))
         return
     if report['warnings']:
         QtGui.QMessageBox.warning(window, 'synthdet import', '\n'.join(report['warnings']))
-    Gui.SendMsgToActiveView('ViewFit')
+    look.apply_in_gui(doc)
 
 
 def main() -> None:

@@ -1,0 +1,157 @@
+"""What the document looks like when opened: visibility, a colour per class, the first view.
+
+Runs inside FreeCAD. Colours, visibility and the camera belong to FreeCAD's GUI side (view
+providers), which ``freecadcmd`` neither creates nor saves: a document it writes has no
+``GuiDocument.xml`` and opens with every object hidden. So the build records a ``Look`` (object
+name -> colour, transparency) and then either applies it to the view providers (macro in the
+GUI) or writes it as the ``GuiDocument.xml`` FreeCAD itself would have saved (headless), with
+an isometric camera fitted to the room.
+"""
+import os
+import shutil
+import tempfile
+import zipfile
+from xml.sax.saxutils import escape, quoteattr
+
+import FreeCAD as App
+
+# the project's one palette (standard library only; the macro puts synthdet on sys.path)
+from synthdet.classes import class_colour
+
+WALL_TRANSPARENCY = 75  # percent: the walls stay visible without hiding the room's contents
+# FreeCAD's isometric view: camera x to the right along (1, 1, 0), looking along (-1, 1, -1)
+ISOMETRIC = App.Rotation(App.Vector(1, 1, 0), App.Vector(-1, 1, 2), App.Vector(1, -1, 1), 'ZXY')
+HIDDEN_TYPES = ('App::Origin', 'App::Line', 'App::Plane')
+VIEW_MARGIN = 1.05
+
+
+def _packed(rgb: tuple[int, int, int]) -> int:
+    red, green, blue = rgb
+    return (red << 24) | (green << 16) | (blue << 8)
+
+
+class Look:
+    """Colours (and transparency) of the document's solids, keyed by object name."""
+
+    def __init__(self):
+        self.colours: dict[str, tuple[tuple[int, int, int], int]] = {}
+
+    def paint(self, obj, rgb: tuple[int, int, int], transparency: int = 0) -> None:
+        """Give ``obj`` a colour (0-255 RGB) and a transparency (percent)."""
+        self.colours[obj.Name] = (tuple(rgb), transparency)
+
+    def apply_in_gui(self, doc) -> None:
+        """Colour the view providers of ``doc`` in a running GUI and fit an isometric view."""
+        import FreeCADGui as Gui
+
+        for name, (rgb, transparency) in self.colours.items():
+            obj = doc.getObject(name)
+            view = obj.ViewObject
+            colour = tuple(value / 255.0 for value in rgb)
+            if obj.TypeId == 'App::Link':  # a link shows its target unless told otherwise
+                material = view.ShapeMaterial
+                material.DiffuseColor = colour
+                material.Transparency = transparency / 100.0
+                view.ShapeMaterial = material
+                view.OverrideMaterial = True
+            else:
+                view.ShapeColor = colour
+                view.Transparency = transparency
+        gui_document = Gui.getDocument(doc.Name)
+        view = gui_document.activeView()
+        if view is not None and hasattr(view, 'viewIsometric'):
+            view.viewIsometric()
+            view.fitAll()
+
+    def write_gui_document(self, path: str, doc) -> None:
+        """Insert into the saved ``path`` the ``GuiDocument.xml`` the GUI would have written.
+
+        Every object gets its stored visibility (origin helpers hidden), painted solids their
+        colour, and the camera an isometric view fitted to the visible shapes. FreeCAD reads
+        the zip's files in the order it asks for them, so the new file goes after the
+        document's own files (the shapes), where a GUI-saved document has it.
+        """
+        xml = self._gui_xml(doc)
+        folder = os.path.dirname(os.path.abspath(path))
+        handle, temporary = tempfile.mkstemp(suffix='.FCStd', dir=folder)
+        os.close(handle)
+        try:
+            with zipfile.ZipFile(path) as source, \
+                    zipfile.ZipFile(temporary, 'w', zipfile.ZIP_DEFLATED) as target:
+                for info in source.infolist():
+                    if info.filename != 'GuiDocument.xml':
+                        target.writestr(info, source.read(info.filename))
+                target.writestr('GuiDocument.xml', xml)
+            shutil.move(temporary, path)
+        finally:
+            if os.path.exists(temporary):
+                os.remove(temporary)
+
+    def _gui_xml(self, doc) -> str:
+        providers = []
+        for obj in doc.Objects:
+            visible = bool(obj.Visibility) and obj.TypeId not in HIDDEN_TYPES
+            properties = [
+                _property('Visibility', 'App::PropertyBool',
+                          f'<Bool value="{"true" if visible else "false"}"/>')
+            ]
+            if obj.Name in self.colours and obj.TypeId == 'App::Link':
+                rgb, transparency = self.colours[obj.Name]
+                properties.append(
+                    _property('OverrideMaterial', 'App::PropertyBool', '<Bool value="true"/>'))
+                properties.append(
+                    _property(
+                        'ShapeMaterial', 'App::PropertyMaterial',
+                        f'<PropertyMaterial ambientColor="{_packed((51, 51, 51))}" '
+                        f'diffuseColor="{_packed(rgb)}" specularColor="0" emissiveColor="0" '
+                        f'shininess="0.2" transparency="{transparency / 100.0:.2f}"/>'))
+            elif obj.Name in self.colours:
+                rgb, transparency = self.colours[obj.Name]
+                properties.append(
+                    _property('ShapeColor', 'App::PropertyColor',
+                              f'<PropertyColor value="{_packed(rgb)}"/>'))
+                properties.append(
+                    _property('Transparency', 'App::PropertyPercent',
+                              f'<Integer value="{int(transparency)}"/>'))
+            providers.append(f'        <ViewProvider name={quoteattr(obj.Name)} expanded="0">\n'
+                             f'            <Properties Count="{len(properties)}" '
+                             f'TransientCount="0">\n{"".join(properties)}'
+                             '            </Properties>\n        </ViewProvider>\n')
+        camera = escape(isometric_camera(_visible_bounds(doc)), {'\n': '&#10;', '"': '&quot;'})
+        return ("<?xml version='1.0' encoding='utf-8'?>\n<Document SchemaVersion=\"1\">\n"
+                f'    <ViewProviderData Count="{len(providers)}">\n{"".join(providers)}'
+                f'    </ViewProviderData>\n    <Camera settings="{camera}"/>\n</Document>\n')
+
+
+def _property(name: str, type_name: str, value: str) -> str:
+    return (f'                <Property name="{name}" type="{type_name}">\n'
+            f'                    {value}\n                </Property>\n')
+
+
+def _visible_bounds(doc):
+    """World bounds of the visible solids (parents' placements applied)."""
+    bounds = App.BoundBox()
+    for obj in doc.Objects:
+        if obj.isDerivedFrom('Part::Feature') and obj.Visibility and not obj.Shape.isNull() \
+                and all(parent.Visibility for parent in obj.InListRecursive
+                        if parent.TypeId == 'App::Part'):
+            placed = obj.Shape.copy()
+            placed.Placement = obj.getGlobalPlacement()
+            bounds.add(placed.BoundBox)
+    return bounds
+
+
+def isometric_camera(bounds) -> str:
+    """An Open Inventor orthographic camera looking isometrically at ``bounds`` (all in view)."""
+    if not bounds.isValid():
+        bounds = App.BoundBox(-1000, -1000, 0, 1000, 1000, 1000)
+    radius = VIEW_MARGIN * bounds.DiagonalLength / 2.0
+    towards_viewer = ISOMETRIC.multVec(App.Vector(0, 0, 1))
+    position = bounds.Center + towards_viewer * (2.0 * radius)
+    axis, angle = ISOMETRIC.Axis, ISOMETRIC.Angle
+    return ('OrthographicCamera {\n  viewportMapping ADJUST_CAMERA\n'
+            f'  position {position.x:.4f} {position.y:.4f} {position.z:.4f}\n'
+            f'  orientation {axis.x:.8f} {axis.y:.8f} {axis.z:.8f}  {angle:.8f}\n'
+            f'  nearDistance {0.5 * radius:.4f}\n  farDistance {3.5 * radius:.4f}\n'
+            f'  aspectRatio 1\n  focalDistance {2.0 * radius:.4f}\n'
+            f'  height {2.0 * radius:.4f}\n\n}}\n')

@@ -1,0 +1,103 @@
+"""Picture of a FreeCAD document as the FreeCAD GUI shows it on opening (under Xvfb).
+
+``python -m configurator screenshot DOC.FCStd --out DOC.png [--width 1000] [--height 750]``
+
+The real ``freecad`` GUI opens the document on a virtual X display (``xvfb-run``), with a
+fresh user configuration (no Start page), and saves its 3D view: what a user sees when they
+open the file, with the view, colours and visibility the document stores.
+"""
+import argparse
+import json
+import os
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+from configurator.freecad_cli import FreecadFailed, run_freecad_process
+
+GUI_SCRIPT = Path(__file__).resolve().parent / 'freecad' / 'screenshot_gui.py'
+# A user configuration that opens no Start page (its web view cannot start as root).
+USER_CONFIG = '''<?xml version="1.0" encoding="UTF-8" standalone="yes"?>
+<FCParameters><FCParamGroup Name="Root"><FCParamGroup Name="BaseApp">
+<FCParamGroup Name="Preferences"><FCParamGroup Name="General">
+<FCText Name="AutoloadModule">NoneWorkbench</FCText>
+</FCParamGroup></FCParamGroup></FCParamGroup></FCParamGroup></FCParameters>
+'''
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Register the ``screenshot`` sub-command's options."""
+    parser.add_argument('document', help='FreeCAD document (.FCStd)')
+    parser.add_argument('--out', required=True, help='PNG to write')
+    parser.add_argument('--width', type=int, default=1000, help='pixels (default 1000)')
+    parser.add_argument('--height', type=int, default=750, help='pixels (default 750)')
+    parser.add_argument(
+        '--freecad',
+        default=os.environ.get('SYNTHDET_FREECAD', 'freecad'),
+        help='FreeCAD GUI executable (default: freecad)')
+    parser.add_argument(
+        '--timeout', type=float, default=300.0, help='seconds to wait for FreeCAD (default 300)')
+
+
+def screenshot(document: Path,
+               out: Path,
+               width: int = 1000,
+               height: int = 750,
+               freecad: str = 'freecad',
+               timeout: float = 300.0) -> dict:
+    """Open ``document`` in the FreeCAD GUI under Xvfb and save its 3D view to ``out``.
+
+    Returns FreeCAD's report (``visible`` and ``objects`` counts). Raises ``ValueError`` for
+    bad arguments and ``FreecadFailed`` when no picture was made.
+    """
+    document, out = Path(document).resolve(), Path(out).resolve()
+    if not document.is_file():
+        raise ValueError(f'{document}: document not found')
+    if out.suffix.lower() != '.png':
+        raise ValueError(f'{out}: the picture must end with .png')
+    if not (16 <= width <= 8000 and 16 <= height <= 8000):
+        raise ValueError(f'--width/--height {width}x{height}: expected 16 to 8000 pixels')
+    if shutil.which('xvfb-run') is None:
+        raise FreecadFailed('xvfb-run not found: install it (apt-get install xvfb xauth)')
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix='synthdet-screenshot-') as work:
+        work_dir = Path(work)
+        config = work_dir / 'user.cfg'
+        config.write_text(USER_CONFIG, encoding='utf-8')
+        result_path = work_dir / 'result.json'
+        options = work_dir / 'options.json'
+        options.write_text(
+            json.dumps({
+                'document': str(document),
+                'out': str(out),
+                'width': width,
+                'height': height,
+                'result': str(result_path)
+            }),
+            encoding='utf-8')
+        env = dict(os.environ, SYNTHDET_SCREENSHOT=str(options), HOME=str(work_dir))
+        env.pop('QT_QPA_PLATFORM', None)
+        command = [
+            'xvfb-run', '-a', '-s', f'-screen 0 {width + 200}x{height + 200}x24', freecad, '-u',
+            str(config),
+            str(GUI_SCRIPT)
+        ]
+        result = run_freecad_process(command, env, work_dir, timeout, result_path)
+    if result['status'] != 'ok':
+        raise FreecadFailed(f'{document}: {result["error"]}')
+    if not out.is_file():
+        raise FreecadFailed(f'FreeCAD reported success but {out} was not written')
+    return result
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the sub-command; returns the exit code."""
+    try:
+        result = screenshot(args.document, args.out, args.width, args.height, args.freecad,
+                            args.timeout)
+    except (ValueError, FreecadFailed) as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 1
+    print(f'wrote {args.out}: {result["visible"]} of {result["objects"]} objects visible')
+    return 0
