@@ -1,4 +1,5 @@
-"""Safe and fault-tolerant (issue 14), tried with real processes as an attacker and an unlucky user.
+"""Safe and fault-tolerant (issue 14), tried with real processes as an attacker and an unlucky
+user.
 
 - checkpoints: a checkpoint that runs code when unpickled is refused by predict, test, train
   --resume and publish_model, and creates no file; training writes an inference checkpoint that
@@ -14,7 +15,6 @@
 - converter: class names from ``<class>_<index>.txt`` (any case of the suffix), float32
   overflow named, exit codes (2 bad input, 1 run-time failure).
 """
-import filecmp
 import hashlib
 import json
 import os
@@ -37,6 +37,8 @@ from synthdet.classes import SEMANTIC_CLASSES
 from synthdet.scan_io import write_scan
 from tests.room_scans import NoiseModel, make_room
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
+from tests.test_generator_pipeline import _same_tree as same_tree
+from tests.test_tr3d_tools import data_options
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = REPO / 'configs' / 'tr3d' / 'tiny.py'
@@ -85,12 +87,26 @@ def alive(processes: list[psutil.Process]) -> list[psutil.Process]:
     return running
 
 
-def same_tree(a: Path, b: Path) -> None:
-    files_a = sorted(p.relative_to(a) for p in a.rglob('*') if p.is_file())
-    files_b = sorted(p.relative_to(b) for p in b.rglob('*') if p.is_file())
-    assert files_a == files_b
-    for rel in files_a:
-        assert filecmp.cmp(a / rel, b / rel, shallow=False), f'{rel} differs'
+def signal_when(process: subprocess.Popen, ready, signum: int) -> tuple:
+    """Once ``ready()`` holds, send ``signum`` to the process (started with piped, text
+    stderr); returns its CompletedProcess and the child processes it had then."""
+    try:
+        assert wait_until(lambda: ready() or process.poll() is not None, 300)
+        workers = psutil.Process(process.pid).children(recursive=True)
+        assert process.poll() is None, 'the run ended before the signal'
+        process.send_signal(signum)
+        _, stderr = process.communicate(timeout=120)
+    finally:
+        kill_group(process)
+    return subprocess.CompletedProcess(process.args, process.returncode, '', stderr), workers
+
+
+def kill_group(process: subprocess.Popen) -> None:
+    """End whatever is left of a test's process group (started with ``start_new_session``)."""
+    try:
+        os.killpg(process.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
 
 
 # ------------------------------------------------------------------------------ checkpoints
@@ -104,14 +120,6 @@ class _OpensMarker:
 
     def __reduce__(self):
         return open, (self.marker, 'w')
-
-
-def data_options(data_root: Path) -> list[str]:
-    return [
-        f'train_dataloader.dataset.dataset.datasets.0.data_root={data_root}/',
-        f'val_dataloader.dataset.data_root={data_root}/',
-        f'test_dataloader.dataset.data_root={data_root}/'
-    ]
 
 
 @pytest.fixture(scope='module')
@@ -152,12 +160,16 @@ def test_malicious_checkpoint_is_refused_by_every_tool(trained):
     evil, root = trained['evil'], trained['root']
     commands = {
         'predict': ['tools/predict.py', TINY, evil, trained['scan'], '--out', root / 'pred'],
-        'test': ['tools/test.py', TINY, evil, '--work-dir', root / 'test', '--cfg-options',
-                 *data_options(trained['data'])],
+        'test': [
+            'tools/test.py', TINY, evil, '--work-dir', root / 'test', '--cfg-options',
+            *data_options(trained['data'])
+        ],
         'publish': ['tools/publish_model.py', evil, root / 'published.pth'],
-        'resume': ['tools/train.py', TINY, '--work-dir', root / 'resumed', '--resume', evil,
-                   '--cfg-options', *data_options(trained['data']), 'train_cfg.max_epochs=2',
-                   'val_cfg=None', 'val_dataloader=None', 'val_evaluator=None'],
+        'resume': [
+            'tools/train.py', TINY, '--work-dir', root / 'resumed', '--resume', evil,
+            '--cfg-options', *data_options(trained['data']), 'train_cfg.max_epochs=2',
+            'val_cfg=None', 'val_dataloader=None', 'val_evaluator=None'
+        ],
         'trust outside the work dir': [
             'tools/train.py', TINY, '--work-dir', root / 'trusted', '--resume', evil,
             '--trust-checkpoint', '--cfg-options', *data_options(trained['data'])
@@ -182,9 +194,9 @@ def test_trust_checkpoint_unpickles_only_the_resumed_file_of_the_work_dir(traine
                *data_options(trained['data']), 'train_cfg.max_epochs=2')
     assert_clean_error(proc, 2, 'refused', '--trust-checkpoint')  # the hint names the flag
     assert not marker.exists()
-    proc = run('tools/train.py', TINY, '--work-dir', work, '--resume', inside,
-               '--trust-checkpoint', '--cfg-options', *data_options(trained['data']),
-               'train_cfg.max_epochs=2')
+    proc = run('tools/train.py', TINY, '--work-dir', work,
+               '--resume', inside, '--trust-checkpoint', '--cfg-options',
+               *data_options(trained['data']), 'train_cfg.max_epochs=2')
     # the user vouched for this file: it was unpickled fully (the payload ran), then mmengine
     # found no epoch in its meta
     assert marker.exists() and proc.returncode != 0
@@ -222,8 +234,8 @@ def test_predict_with_either_checkpoint_and_scans_checked_before_the_model(train
     outputs = {}
     for name in ('inference.pth', 'epoch_1.pth'):
         out = tmp_path / name
-        proc = run('tools/predict.py', TINY, trained['work'] / name, trained['scan'], '--out',
-                   out, '--score-thr', '0')
+        proc = run('tools/predict.py', TINY, trained['work'] / name, trained['scan'], '--out', out,
+                   '--score-thr', '0')
         assert proc.returncode == 0, proc.stderr[-2000:]
         outputs[name] = json.loads((out / 'office_1.pred.json').read_text())
     assert outputs['inference.pth'] == outputs['epoch_1.pth']
@@ -284,10 +296,7 @@ def test_kill_9_of_the_generator_ends_its_workers_and_a_rerun_is_byte_identical(
         assert _rooms(killed) == published, 'a room was published after the parent died'
         assert len(published) < 5
     finally:
-        try:
-            os.killpg(process.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
+        kill_group(process)
     assert main([*args, '--out', str(killed), '--workers', '2']) == 0
     same_tree(clean, killed)
     assert not list(killed.glob('Area_*/.tmp.*'))
@@ -296,25 +305,16 @@ def test_kill_9_of_the_generator_ends_its_workers_and_a_rerun_is_byte_identical(
 @pytest.mark.slow
 def test_sigint_stops_the_generator_without_traceback(asset_cache, tmp_path):
     out = tmp_path / 'out'
-    process = subprocess.Popen(
-        [sys.executable, '-m', 'generator', *_generator_args(asset_cache, rooms=6), '--out',
-         str(out), '--workers', '2'],
-        cwd=REPO,
-        start_new_session=True,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True)
-    try:
-        assert wait_until(lambda: len(_rooms(out)) >= 1, 300)
-        workers = psutil.Process(process.pid).children(recursive=True)
-        process.send_signal(signal.SIGINT)
-        _, stderr = process.communicate(timeout=60)
-    finally:
-        try:
-            os.killpg(process.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-    proc = subprocess.CompletedProcess(process.args, process.returncode, '', stderr)
+    process = subprocess.Popen([
+        sys.executable, '-m', 'generator', *_generator_args(asset_cache, rooms=6), '--out',
+        str(out), '--workers', '2'
+    ],
+                               cwd=REPO,
+                               start_new_session=True,
+                               stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE,
+                               text=True)
+    proc, workers = signal_when(process, lambda: _rooms(out), signal.SIGINT)
     assert_clean_error(proc, 130, 'stopped by SIGINT')
     assert wait_until(lambda: not alive(workers), 10)
 
@@ -340,7 +340,9 @@ def _start(command: list, **kwargs) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, *map(str, command)],
                             cwd=REPO,
                             start_new_session=True,
-                            env={**os.environ, 'OMP_NUM_THREADS': '1'},
+                            env={
+                                **os.environ, 'OMP_NUM_THREADS': '1'
+                            },
                             **kwargs)
 
 
@@ -349,8 +351,7 @@ def _partials(out: Path) -> list[Path]:
 
 
 @pytest.mark.slow
-def test_kill_9_of_create_data_ends_its_workers_and_a_rerun_is_byte_identical(
-        big_area, tmp_path):
+def test_kill_9_of_create_data_ends_its_workers_and_a_rerun_is_byte_identical(big_area, tmp_path):
     clean, killed = tmp_path / 'clean', tmp_path / 'killed'
     proc = run(*_create_data(big_area, clean, '--workers', '1'))
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -367,10 +368,7 @@ def test_kill_9_of_create_data_ends_its_workers_and_a_rerun_is_byte_identical(
         process.wait()
         assert wait_until(lambda: not alive(workers), 10), f'orphans: {alive(workers)}'
     finally:
-        try:
-            os.killpg(process.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
+        kill_group(process)
     assert _partials(killed) and not (killed / 's3dis_infos_Area_1.pkl').exists()
     proc = run(*_create_data(big_area, killed, '--workers', '2'))
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -386,19 +384,7 @@ def test_sigterm_stops_create_data_cleanly(big_area, tmp_path):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True)
-    try:
-        parent = psutil.Process(process.pid)
-        assert wait_until(lambda: _partials(out) or process.poll() is not None, 120)
-        workers = parent.children(recursive=True)
-        assert process.poll() is None, 'the run ended before the signal'
-        process.send_signal(signal.SIGTERM)
-        _, stderr = process.communicate(timeout=120)
-    finally:
-        try:
-            os.killpg(process.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-    proc = subprocess.CompletedProcess(process.args, process.returncode, '', stderr)
+    proc, workers = signal_when(process, lambda: _partials(out), signal.SIGTERM)
     assert_clean_error(proc, 143, 'stopped by SIGTERM')
     assert not _partials(out) and not (out / 's3dis_infos_Area_1.pkl').exists()
     assert wait_until(lambda: not alive(workers), 10)
@@ -426,8 +412,8 @@ def l_room():
 
 
 def test_far_outliers_cost_no_memory(l_room, tmp_path):
-    points = np.vstack([l_room.points, [[1000.0, 1000.0, 1.0, 0, 0, 0],
-                                        [5000.0, -5000.0, 2.0, 0, 0, 0]]])
+    points = np.vstack(
+        [l_room.points, [[1000.0, 1000.0, 1.0, 0, 0, 0], [5000.0, -5000.0, 2.0, 0, 0, 0]]])
     scan = tmp_path / 'far.txt'
     write_scan(scan, points)
     proc = _corners(scan, tmp_path / 'far.json')
@@ -479,9 +465,12 @@ def test_georeferenced_scans(l_room, tmp_path):
 def _pred(path: Path, center, yaw: float = 0.0) -> Path:
     path.write_text(
         json.dumps({
-            'format': 'synthdet.predictions/1',
-            'scan': 'scan.txt',
-            'model': 'tiny',
+            'format':
+            'synthdet.predictions/1',
+            'scan':
+            'scan.txt',
+            'model':
+            'tiny',
             'classes': ['table'],
             'detections': [{
                 'class': 'table',

@@ -16,8 +16,8 @@ from pathlib import Path
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
 
-from projects.synthdet.checkpoint import (CheckpointError, load_checkpoint_file,  # noqa: E402
-                                          save_inference_checkpoint, sha256_prefix)
+from projects.synthdet.checkpoint import (  # noqa: E402
+    CheckpointError, load_checkpoint_file, save_inference_checkpoint, sha256_prefix)
 
 
 def publish(in_file: str | Path, out_file: str | Path) -> Path:
@@ -41,8 +41,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f'publish_model.py: error: {error}', file=sys.stderr)
         return 2
     except OSError as error:
-        print(f'publish_model.py: error: {args.out_file}: cannot write ({error.strerror})',
-              file=sys.stderr)
+        print(
+            f'publish_model.py: error: {args.out_file}: cannot write ({error.strerror})',
+            file=sys.stderr)
         return 1
     print(f'published {final}')
     return 0

@@ -47,9 +47,13 @@ def _history_buffer_statistic(owner: object, name: str) -> object:
 
 def _training_checkpoint_types() -> list:
     from mmengine.logging.history_buffer import HistoryBuffer
-    numpy_types = [np.ndarray, np.dtype, np.core.multiarray._reconstruct, np.core.multiarray.scalar]
-    dtype_classes = [type(np.dtype(name)) for name in ('f2', 'f4', 'f8', 'i1', 'i2', 'i4', 'i8',
-                                                        'u1', 'u2', 'u4', 'u8', '?')]
+    numpy_types = [
+        np.ndarray, np.dtype, np.core.multiarray._reconstruct, np.core.multiarray.scalar
+    ]
+    dtype_classes = [
+        type(np.dtype(name))
+        for name in ('f2', 'f4', 'f8', 'i1', 'i2', 'i4', 'i8', 'u1', 'u2', 'u4', 'u8', '?')
+    ]
     getattr_names = [(_history_buffer_statistic, f'{module}.getattr')
                      for module in ('builtins', '__builtin__')]
     return [HistoryBuffer, *numpy_types, *dtype_classes, *getattr_names]
@@ -89,13 +93,16 @@ def refused(path: str | os.PathLike, error: pickle.UnpicklingError, hint: str) -
 def load_model_weights(model: torch.nn.Module, path: str | os.PathLike) -> dict:
     """Load a checkpoint's weights into ``model`` (every key must match); returns its ``meta``."""
     checkpoint = load_checkpoint_file(path)
-    state_dict = {key.removeprefix('module.'): value
-                  for key, value in checkpoint['state_dict'].items()}
+    state_dict = {
+        key.removeprefix('module.'): value
+        for key, value in checkpoint['state_dict'].items()
+    }
     try:
         model.load_state_dict(state_dict, strict=True)
     except RuntimeError as error:
         first = str(error).splitlines()[1].strip() if '\n' in str(error) else str(error)
-        raise CheckpointError(f'{path}: weights do not fit the config\'s model ({first})') from None
+        raise CheckpointError(
+            f'{path}: weights do not fit the config\'s model ({first})') from None
     meta = checkpoint.get('meta')
     return meta if isinstance(meta, dict) else {}
 
@@ -173,5 +180,5 @@ def trusted_resume_path(checkpoint: str | os.PathLike, work_dir: str | os.PathLi
 
 def _load_trusted(filename: str, map_location: object = None) -> dict:
     """Full unpickling of the one checkpoint the user vouched for (``trusted://`` paths)."""
-    return torch.load(filename[len(TRUSTED_PREFIX):], map_location=map_location,
-                      weights_only=False)
+    return torch.load(
+        filename[len(TRUSTED_PREFIX):], map_location=map_location, weights_only=False)
