@@ -77,7 +77,10 @@ def screenshot(document: Path,
             }),
             encoding='utf-8')
         env = dict(os.environ, SYNTHDET_SCREENSHOT=str(options), HOME=str(work_dir))
-        env.pop('QT_QPA_PLATFORM', None)
+        # opencv (imported with mmcv) points Qt at its own plugins and fonts: FreeCAD's Qt
+        # then aborts, so a process that imported it must not pass them on
+        for variable in ('QT_QPA_PLATFORM', 'QT_QPA_PLATFORM_PLUGIN_PATH', 'QT_QPA_FONTDIR'):
+            env.pop(variable, None)
         command = [
             'xvfb-run', '-a', '-s', f'-screen 0 {width + 200}x{height + 200}x24', freecad, '-u',
             str(config),
