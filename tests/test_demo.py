@@ -32,7 +32,7 @@ import FreeCAD
 doc = FreeCAD.openDocument(os.environ['DEMO_FCSTD'])
 groups = {o.Label: [c.Name for c in o.Group] for o in doc.Objects
           if o.TypeId == 'App::DocumentObjectGroup'}
-parts = [{'class': o.DetectedClass, 'score': o.Score, 'base_mm': list(o.Placement.Base)}
+parts = [{'class': o.DetectedClass, 'score': o.Score}
          for o in doc.Objects if hasattr(o, 'DetectedClass')]
 walls = doc.getObjectsByLabel('Walls')
 json.dump({'objects': len(doc.Objects), 'groups': groups, 'parts': parts,
@@ -218,11 +218,10 @@ def test_freecad_documents_reopen(demo, tmp_path):
         assert {'Room', 'Furniture', 'Equipment'} <= set(found['groups'])
         assert len(found['groups']['Room']) >= 3 and found['walls_volume'] > 0
         predictions = json.loads((demo / f'predictions/{name}.pred.json').read_text())
-        # every detection is one part of its class, with its score, placed at its centre (mm)
-        parts = sorted((p['class'], round(p['score'], 6), tuple(round(v, 3) for v in p['base_mm']))
-                       for p in found['parts'])
-        expected = sorted((d['class'], d['score'], tuple(round(1000 * v, 3) for v in d['center']))
-                          for d in predictions['detections'])
+        # every detection is one part of its class with its score (where it stands is up to
+        # the FreeCAD side: on the floor or a table, inside the walls)
+        parts = sorted((part['class'], round(part['score'], 6)) for part in found['parts'])
+        expected = sorted((d['class'], d['score']) for d in predictions['detections'])
         assert parts and parts == expected
 
 
