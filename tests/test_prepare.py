@@ -83,7 +83,8 @@ def test_boxes_go_back_to_the_scan_frame_with_their_yaw(room):
         footprint = box_corners_xy(centers[k], sizes[k], yaws[k])
         expected = prepared.points_to_scan(np.column_stack([footprint, np.full(4, centers[k, 2])]))
         np.testing.assert_allclose(
-            box_corners_xy(scan_centers[k], scan_sizes[k], scan_yaws[k]), expected[:, :2],
+            box_corners_xy(scan_centers[k], scan_sizes[k], scan_yaws[k]),
+            expected[:, :2],
             atol=1e-4)  # up to the levelled tilt of a few thousandths of a degree
     assert scan_centers[0][0] > 499000 and scan_centers[0][1] > 5399000
 
@@ -140,13 +141,15 @@ def test_density_resampling_and_warning(room):
 
 
 def test_geometry_helpers():
-    for a, b in (([0, 0, 1], [0, 0, 1]), ([0, 1, 0], [0, 0, 1]), ([0, 0, -1], [0, 0, 1]),
-                 ([1, 2, 3], [-3, 0.5, 2])):
+    for a, b in (([0, 0, 1], [0, 0, 1]), ([0, 1, 0], [0, 0, 1]), ([0, 0,
+                                                                   -1], [0, 0,
+                                                                         1]), ([1, 2,
+                                                                                3], [-3, 0.5, 2])):
         rotation = rotation_between(a, b)
         np.testing.assert_allclose(rotation @ rotation.T, np.eye(3), atol=1e-12)
         assert np.linalg.det(rotation) == pytest.approx(1.0)
-        np.testing.assert_allclose(rotation @ a / np.linalg.norm(a), np.asarray(b) /
-                                   np.linalg.norm(b), atol=1e-12)
+        np.testing.assert_allclose(
+            rotation @ a / np.linalg.norm(a), np.asarray(b) / np.linalg.norm(b), atol=1e-12)
     walls = make_room('rect', n_points=60_000, seed=2, rotate=False).points
     walls = walls[(walls[:, 2] > walls[:, 2].min() + 0.5)][:, :2] @ \
         rotation_z(math.radians(30))[:2, :2].T
