@@ -267,7 +267,15 @@ def _read_bin(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
         return
     rows = np.memmap(path, dtype=np.float32, mode='r').reshape(-1, 6)
     for start in range(0, len(rows), chunk_points):
-        yield rows[start:start + chunk_points].astype(np.float64)
+        chunk = rows[start:start + chunk_points].astype(np.float64)
+        if start == 0:
+            largest = float(np.abs(chunk[:, :3]).max())
+            step = float(np.spacing(np.float32(largest)))
+            if step > 0.001:
+                notes.append(f'{path}: warning: float32 coordinates as large as {largest:,.0f} '
+                             f'are only exact to {step * 1000:,.0f} mm; write the scan as LAS, '
+                             f'PLY or PCD to keep georeferenced coordinates')
+        yield chunk
 
 
 PLY_COLOUR_NAMES = (

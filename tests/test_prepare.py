@@ -105,6 +105,13 @@ def test_a_stray_point_5_km_away_changes_nothing(room):
         with_stray.report[0] != plain.report[0]  # one more point removed
 
 
+def test_corners_of_a_scan_with_a_stray_point_5_km_away_are_unchanged(tmp_path, room):
+    write_scan(tmp_path / 'room.pcd', room.points)
+    write_scan(tmp_path / 'stray.pcd', np.vstack([room.points, [[3000.0, -4000.0, 0, 0, 0, 0]]]))
+    plain, stray = (corners_for_scan(tmp_path / f'{name}.pcd') for name in ('room', 'stray'))
+    assert stray['corners'] == plain['corners'] and stray['floor_z'] == plain['floor_z']
+
+
 def test_outliers_in_sparse_isolated_cells_are_removed(room):
     rng = np.random.default_rng(4)
     strays = np.column_stack([rng.uniform(-300, 300, (50, 3)), np.zeros((50, 3))])

@@ -47,10 +47,17 @@ def test_every_format_reads_back_the_same_points_whole_and_in_chunks(tmp_path, g
     assert notes == []  # colours present: nothing to say
 
 
-def test_float32_bin_keeps_a_local_room_to_the_micrometre(tmp_path, room):
+def test_float32_bin_keeps_a_local_room_and_warns_for_georeferenced_ones(
+        tmp_path, room, geo_points):
     path = tmp_path / 'room.bin'
     write_scan(path, room.points)
-    assert np.abs(read_scan(path)[:, :3] - room.points[:, :3]).max() < 1e-5
+    notes = []
+    points = np.concatenate(list(read_scan_chunks(path, notes=notes)))
+    assert np.abs(points[:, :3] - room.points[:, :3]).max() < 1e-5 and notes == []
+    write_scan(path, geo_points)
+    list(read_scan_chunks(path, notes=notes))
+    assert len(notes) == 1 and 'only exact to 500 mm' in notes[0]
+    assert notes[0].startswith(f'{path}: warning: float32 coordinates as large as 5,400,')
 
 
 def test_every_format_gives_the_same_corners_and_a_shifted_copy_shifted_corners(
