@@ -95,8 +95,14 @@ def prepare_scan(loaded: LoadedScan,
     keep = np.ones(len(xyz), dtype=bool)
     if remove_outliers:
         keep = ~sparse_points(xyz)
-        report.append(f'outliers: removed {int((~keep).sum()):,} points in sparse isolated '
-                      f'{OUTLIER_CELL * 100:g} cm cells')
+        dropped = int((~keep).sum())
+        if dropped > len(xyz) / 2:  # not outliers: the whole scan is sparse
+            keep[:] = True
+            report.append(f'outliers: the scan is too sparse for the density test ({dropped:,} '
+                          f'of {len(xyz):,} points in sparse cells); all kept')
+        else:
+            report.append(f'outliers: removed {dropped:,} points in sparse isolated '
+                          f'{OUTLIER_CELL * 100:g} cm cells')
     points = loaded.points[keep]
     xyz = points[:, :3]
     sample = xyz[::max(1, len(xyz) // FIT_POINTS)]

@@ -112,6 +112,17 @@ def test_corners_of_a_scan_with_a_stray_point_5_km_away_are_unchanged(tmp_path, 
     assert stray['corners'] == plain['corners'] and stray['floor_z'] == plain['floor_z']
 
 
+def test_a_sparse_scan_is_prepared_without_losing_its_points():
+    points = np.column_stack(
+        [np.random.default_rng(5).uniform(0, 10, (1000, 3)),
+         np.zeros((1000, 3))])
+    prepared = prepare_scan(loaded(points))
+    assert len(prepared.points) == 1000 and 'too sparse for the density test' in \
+        prepared.report[0]
+    back = prepared.points_to_scan(prepared.points[:, :3])
+    np.testing.assert_allclose(np.sort(back, axis=0), np.sort(points[:, :3], axis=0), atol=1e-9)
+
+
 def test_outliers_in_sparse_isolated_cells_are_removed(room):
     rng = np.random.default_rng(4)
     strays = np.column_stack([rng.uniform(-300, 300, (50, 3)), np.zeros((50, 3))])
