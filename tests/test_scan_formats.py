@@ -249,3 +249,19 @@ def test_write_las_chunks_streams_a_large_scan(tmp_path, room):
     points = read_scan(tmp_path / 'big.laz')
     assert np.abs(points[:, :3] - room.points[:, :3] - GEO).max() <= 0.0005 + 1e-9
     assert set(scan_io.WRITERS) >= {'.las', '.laz', '.e57', '.pcd', '.xyz'}
+
+
+def test_corners_command_reads_any_format_and_writes_the_scan_frame(tmp_path, room, geo_points,
+                                                                    capsys):
+    from configurator.__main__ import main
+    from synthdet.contracts import read_corners
+    write_scan(tmp_path / 'geo.laz', geo_points)
+    assert main(['corners', str(tmp_path / 'geo.laz'), '--out', str(tmp_path / 'c.json')]) == 0
+    output = capsys.readouterr().out
+    assert 'corners: levelling:' in output and 'corners: yaw:' in output
+    corners = np.array(read_corners(tmp_path / 'c.json')['corners'])
+    assert np.abs(corners - GEO[:2]).max() < 30 and len(corners) == len(room.polygon)
+    (tmp_path / 'bad.xyz').write_text('1 2\n')
+    assert main(['corners', str(tmp_path / 'bad.xyz'), '--out', str(tmp_path / 'd.json')]) == 2
+    assert 'corners: bad scan: ' in capsys.readouterr().err
+    assert not (tmp_path / 'd.json').exists()
