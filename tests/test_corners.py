@@ -19,12 +19,34 @@ def signed_area(polygon: np.ndarray) -> float:
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
 
-def matched_error(found: np.ndarray, truth: np.ndarray) -> float:
-    """Mean corner distance under the best cyclic shift of the found corners (same order)."""
+# Corner tolerances, metres. docs/corners.md measures a mean error of 0.00-0.09 cm; the rooms of
+# these tests (fixed seeds) give at most 0.06 cm mean and 0.17 cm for the worst corner on the
+# synthetic rooms of tests/room_scans.py, 0.003 cm (clean) and 0.05 cm (noisy) worst corner on
+# the generator's rooms. The bounds sit a few times above that, and every corner is bounded, so a
+# single misplaced corner fails (one corner 24 cm off in a U room is only 3 cm of mean error).
+MEAN_TOL, WORST_TOL = 0.0015, 0.005
+GENERATED_TOL = {False: (0.0005, 0.001), True: (0.002, 0.005)}  # noisy -> (mean, worst)
+
+
+def corner_errors(found: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Distance of every true corner to its found corner, under the cyclic shift of the found
+    corners (same order) that fits best."""
     assert len(found) == len(truth), f'{len(found)} corners found, {len(truth)} expected'
     return min(
-        float(np.linalg.norm(np.roll(found, k, axis=0) - truth, axis=1).mean())
-        for k in range(len(found)))
+        (np.linalg.norm(np.roll(found, k, axis=0) - truth, axis=1) for k in range(len(found))),
+        key=lambda errors: errors.mean())
+
+
+def assert_corners_close(found: np.ndarray,
+                         truth: np.ndarray,
+                         mean_tol: float = MEAN_TOL,
+                         worst_tol: float = WORST_TOL) -> None:
+    """The found corners match the true ones: the mean error and the worst corner's error."""
+    errors = corner_errors(found, truth)
+    assert errors.mean() < mean_tol and errors.max() < worst_tol, (
+        f'corner errors (cm) {np.round(errors * 100, 3).tolist()}: mean '
+        f'{errors.mean() * 100:.3f} (< {mean_tol * 100}), worst {errors.max() * 100:.3f} '
+        f'(< {worst_tol * 100})')
 
 
 @pytest.mark.parametrize('shape', SHAPES)
@@ -33,7 +55,7 @@ def test_clean_rooms_of_each_shape(shape):
     outline = detect_corners(room.points)
     assert signed_area(room.polygon) < 0  # the generator's truth is clockwise too
     assert signed_area(outline.corners) < 0, 'corners must be clockwise seen from above'
-    assert matched_error(outline.corners, room.polygon) < 0.03
+    assert_corners_close(outline.corners, room.polygon)
     assert abs(outline.floor_z - room.floor_z) < 0.01
     assert abs(outline.ceiling_z - room.ceiling_z) < 0.01
     assert outline.quality['wall_points_on_polygon'] > 0.8
@@ -44,7 +66,7 @@ def test_noisy_rooms_of_each_shape(shape):
     room = make_room(shape, n_points=150_000, seed=21, noise=NoiseModel())
     outline = detect_corners(room.points)
     assert signed_area(outline.corners) < 0
-    assert matched_error(outline.corners, room.polygon) < 0.05
+    assert_corners_close(outline.corners, room.polygon)
     assert abs(outline.floor_z - room.floor_z) < 0.02
 
 
@@ -54,7 +76,7 @@ def test_axis_aligned_and_rotated_room_agree():
     turned = make_room('L', n_points=100_000, seed=5)
     assert not np.allclose(aligned.polygon, turned.polygon)
     for room in (aligned, turned):
-        assert matched_error(detect_corners(room.points).corners, room.polygon) < 0.03
+        assert_corners_close(detect_corners(room.points).corners, room.polygon)
 
 
 def test_reflex_corners_of_u_room_are_found():
@@ -76,7 +98,7 @@ def test_sparsely_scanned_arm_of_a_u_room():
     keep = ~arm | (np.random.default_rng(0).random(len(points)) < 0.015)
     assert arm.sum() > 20_000 and (arm & keep).sum() < 0.02 * arm.sum()
     outline = detect_corners(points[keep])
-    assert matched_error(outline.corners, room.polygon) < 0.03
+    assert_corners_close(outline.corners, room.polygon)
 
 
 @pytest.fixture(scope='module')
@@ -107,8 +129,8 @@ def generator_rooms(tmp_path_factory) -> list:
 
 @pytest.mark.parametrize('noisy', [False, True], ids=['clean', 'noisy'])
 def test_corners_of_generated_rooms_of_each_shape(generator_rooms, noisy):
-    """The issue's goal on the generator's own rooms: the right corner count and a mean error
-    under 3 cm (5 cm with its noise models) against the polygon in meta.json."""
+    """The generator's own rooms against the polygon in meta.json: the right corner count and
+    every corner within a millimetre (5 mm with the generator's noise models)."""
     shapes = set()
     for shape, room_noisy, room in generator_rooms:
         if room_noisy != noisy:
@@ -117,7 +139,7 @@ def test_corners_of_generated_rooms_of_each_shape(generator_rooms, noisy):
         assert meta['room']['shape'] == shape
         outline = detect_corners(read_scan(room / f'{room.name}.txt'))
         truth = np.asarray(meta['room']['polygon'], dtype=float)
-        assert matched_error(outline.corners, truth) < (0.05 if noisy else 0.03), room
+        assert_corners_close(outline.corners, truth, *GENERATED_TOL[noisy])
         assert abs(outline.ceiling_z - outline.floor_z - meta['room']['height']) < 0.02
         shapes.add(shape)
     assert shapes == {'box', 'L', 'U'}
@@ -135,7 +157,7 @@ def test_floor_seen_through_a_door_is_not_part_of_the_room():
         rng.uniform(0.05, 1.5, (3000, 1)) * outward
     patch = np.column_stack([xy, np.full(3000, room.floor_z), np.zeros((3000, 3))])
     outline = detect_corners(np.vstack([room.points, patch]))
-    assert matched_error(outline.corners, room.polygon) < 0.03
+    assert_corners_close(outline.corners, room.polygon)
     assert outline.quality['points_outside_polygon'] > 0.01  # the patch is reported
 
 
@@ -244,7 +266,7 @@ def test_cli_writes_json_and_preview(tmp_path):
     assert result.returncode == 0, result.stderr
     data = read_corners(out)
     assert data['format'] == CORNERS_FORMAT and data['scan'] == str(scan)
-    assert matched_error(np.array(data['corners']), room.polygon) < 0.05
+    assert_corners_close(np.array(data['corners']), room.polygon)
     assert data['ceiling_z'] - data['floor_z'] == pytest.approx(
         room.ceiling_z - room.floor_z, abs=0.02)
     from PIL import Image

@@ -8,9 +8,9 @@ user.
 - process hygiene: ``kill -9`` of the generator's and of create_data's parent leaves no worker
   and publishes nothing more, and the same command then gives the bytes of a clean run;
   SIGINT/SIGTERM stop with a message, no traceback and no partial output;
-- configurator: far outliers cost no memory, a scan without floor and a georeferenced float32
-  scan are errors, a georeferenced float64 scan is exact; a failing FreeCAD save keeps the old
-  document; placements that overflow in millimetres or degrees are rejected; --timeout ends
+- configurator: far outliers cost no memory, a scan without floor is an error, a georeferenced
+  float64 scan is exact and a georeferenced float32 one gets a warning; a failing FreeCAD save
+  keeps the old document; placements that overflow in millimetres or degrees are rejected; --timeout ends
   FreeCAD's whole process group;
 - converter: class names from ``<class>_<index>.txt`` (any case of the suffix), float32
   overflow named, exit codes (2 bad input, 1 run-time failure).
@@ -412,16 +412,19 @@ def l_room():
 
 
 def test_far_outliers_cost_no_memory(l_room, tmp_path):
-    points = np.vstack(
-        [l_room.points, [[1000.0, 1000.0, 1.0, 0, 0, 0], [5000.0, -5000.0, 2.0, 0, 0, 0]]])
+    rng = np.random.default_rng(0)
+    far = [  # dense clusters, so the density test of the preparation keeps them
+        np.column_stack([centre + rng.normal(0.0, 0.02, (50, 3)), np.zeros((50, 3))])
+        for centre in ([1000.0, 1000.0, 1.0], [5000.0, -5000.0, 2.0])
+    ]
     scan = tmp_path / 'far.txt'
-    write_scan(scan, points)
+    write_scan(scan, np.vstack([l_room.points, *far]))
     proc = _corners(scan, tmp_path / 'far.json')
     assert proc.returncode == 0, proc.stderr[-2000:]
     result = json.loads((tmp_path / 'far.json').read_text())
     assert len(result['corners']) == 6
     assert _corner_error(result['corners'], l_room.polygon) < 0.01
-    assert result['quality']['far_points'] == 2
+    assert result['quality']['far_points'] > 0  # left out by the corner search itself
 
 
 def test_corners_output_that_cannot_be_written_is_a_run_time_failure(l_room, tmp_path):
@@ -454,12 +457,11 @@ def test_georeferenced_scans(l_room, tmp_path):
     assert len(corners) == 6 and _corner_error(corners, l_room.polygon) < 0.01
     assert result['floor_z'] == pytest.approx(l_room.floor_z, abs=0.01)
 
-    binary = tmp_path / 'geo.bin'
-    with pytest.raises(ValueError, match='float32'):
-        write_scan(binary, points)
-    points.astype(np.float32).tofile(binary)  # as another tool would write it
+    binary = tmp_path / 'geo.bin'  # float32 cannot hold these coordinates to centimetres
+    write_scan(binary, points)
     proc = _corners(binary, tmp_path / 'geo_bin.json')
-    assert_clean_error(proc, 2, str(binary), 'float32 coordinates')
+    assert 'Traceback' not in proc.stderr
+    assert f'{binary}: warning: float32 coordinates as large as' in proc.stdout + proc.stderr
 
 
 def _pred(path: Path, center, yaw: float = 0.0) -> Path:

@@ -1,10 +1,11 @@
-"""Axis-aligned 3D NMS: torch CPU implementation and device dispatch vs a brute-force reference."""
+"""Axis-aligned 3D NMS: torch CPU implementation, device dispatch and the arguments of mmcv's CUDA
+kernel vs a brute-force reference."""
 import pytest
 import torch
 
 from projects.synthdet.core import (axis_aligned_nms3d, axis_aligned_nms3d_cpu,
-                                    multiclass_axis_aligned_nms3d, pairwise_bev_iou,
-                                    uses_mmcv_kernel)
+                                    mmcv_nms3d_arguments, multiclass_axis_aligned_nms3d,
+                                    pairwise_bev_iou, uses_mmcv_kernel)
 
 
 def reference_bev_iou(a, b):
@@ -80,6 +81,46 @@ def test_dispatch_decision_by_device():
     assert uses_mmcv_kernel(torch.device('cuda', 1))
     assert not uses_mmcv_kernel(torch.device('cpu'))
     assert not uses_mmcv_kernel(torch.zeros(1).device)
+
+
+@pytest.mark.parametrize('columns', [6, 7])
+def test_mmcv_kernel_arguments_layout_and_padding(columns):
+    """What the CUDA branch hands to ``nms3d_normal``: (N, 7) boxes (x, y, z, dx, dy, dz, yaw),
+    a zero yaw column appended to (N, 6) boxes, a given yaw kept (the kernel ignores it),
+    contiguous float32 tensors and the threshold as a float."""
+    boxes, scores = random_boxes(20, 5)
+    given = torch.cat((boxes, torch.rand(20, 1)), dim=1) if columns == 7 else boxes
+    given = given.double().t().contiguous().t()  # float64 and not contiguous, as a caller may
+    kernel_boxes, kernel_scores, kernel_thr = mmcv_nms3d_arguments(given, scores.double(), 0.25)
+    assert kernel_boxes.shape == (20, 7) and kernel_boxes.dtype == torch.float32
+    assert kernel_boxes.is_contiguous() and kernel_scores.is_contiguous()
+    assert torch.equal(kernel_boxes[:, :6], boxes)  # centre and size columns unchanged
+    expected_yaw = given[:, 6].float() if columns == 7 else torch.zeros(20)
+    assert torch.equal(kernel_boxes[:, 6], expected_yaw)
+    assert kernel_scores.dtype == torch.float32 and torch.equal(kernel_scores, scores)
+    assert type(kernel_thr) is float and kernel_thr == 0.25
+    empty_boxes, empty_scores, _ = mmcv_nms3d_arguments(torch.zeros((0, 6)), torch.zeros(0), 0.5)
+    assert empty_boxes.shape == (0, 7) and empty_scores.shape == (0, )
+
+
+@pytest.mark.parametrize('iou_thr', [0.25, 0.5])
+def test_mmcv_kernel_arguments_give_the_reference_result(iou_thr):
+    """The kernel's semantics (BEV IoU of the centre-size columns, yaw ignored, highest score
+    first) applied to the prepared arguments give the reference result of the original boxes."""
+    boxes, scores = random_boxes(80, 9)
+    kernel_boxes, kernel_scores, kernel_thr = mmcv_nms3d_arguments(boxes, scores, iou_thr)
+    assert reference_nms(kernel_boxes[:, :6], kernel_scores, kernel_thr) == \
+        reference_nms(boxes, scores, iou_thr)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason='needs CUDA: runs mmcv nms3d_normal')
+@pytest.mark.parametrize('columns', [6, 7])
+def test_cuda_branch_matches_brute_force(columns):
+    boxes, scores = random_boxes(120, 4)
+    given = torch.cat((boxes, torch.rand(120, 1)), dim=1) if columns == 7 else boxes
+    keep = axis_aligned_nms3d(given.cuda(), scores.cuda(), 0.3)
+    assert keep.is_cuda
+    assert keep.cpu().tolist() == reference_nms(boxes, scores, 0.3)
 
 
 @pytest.mark.parametrize('seed', range(3))

@@ -333,3 +333,142 @@ def test_focal_loss_sanity():
     assert values[1].sum() < 1e-3 < values[2].sum()  # confident right << confident wrong
     background = focal(logits, torch.tensor([2, 2, 2]))  # label == num_classes: negative
     assert background[1, 0] > background[1, 1]
+
+
+# --- losses pinned on hand-computed cases (numpy, independent of the implementation) -------
+
+
+def np_sigmoid_focal(logits: np.ndarray, targets: np.ndarray, num_classes: int) -> np.ndarray:
+    """Sigmoid focal loss (alpha 0.25, gamma 2) per location and class; target ``num_classes``
+    is background."""
+    p = 1 / (1 + np.exp(-logits))
+    positive = targets[:, None] == np.arange(num_classes)[None, :]
+    return np.where(positive, -0.25 * (1 - p)**2 * np.log(p), -0.75 * p**2 * np.log(1 - p))
+
+
+def np_iou_diou(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """IoU and DIoU of (N, 6) corner-form boxes (x1, y1, z1, x2, y2, z2), element-wise."""
+    inter = np.prod(
+        np.clip(np.minimum(a[:, 3:], b[:, 3:]) - np.maximum(a[:, :3], b[:, :3]), 0, None), axis=1)
+    union = np.prod(a[:, 3:] - a[:, :3], axis=1) + np.prod(b[:, 3:] - b[:, :3], axis=1) - inter
+    iou = inter / union
+    centre_distance2 = np.sum(((a[:, :3] + a[:, 3:]) / 2 - (b[:, :3] + b[:, 3:]) / 2)**2, axis=1)
+    diagonal2 = np.sum(
+        (np.maximum(a[:, 3:], b[:, 3:]) - np.minimum(a[:, :3], b[:, :3]))**2, axis=1)
+    return iou, iou - centre_distance2 / diagonal2
+
+
+def np_corners(centre_size: np.ndarray) -> np.ndarray:
+    return np.concatenate(
+        [centre_size[:, :3] - centre_size[:, 3:] / 2, centre_size[:, :3] + centre_size[:, 3:] / 2],
+        axis=1)
+
+
+def test_axis_aligned_iou_loss_reductions_match_numpy():
+    """Three box pairs overlapping in all axes, apart, and nested: every reduction, a weight,
+    an average factor and the loss weight against numpy."""
+    pred = np.array([[0.0, 0.0, 0.0, 1.0, 2.0, 1.0], [2.0, 2.0, 0.0, 3.0, 2.5, 0.5],
+                     [0.2, 0.3, 0.1, 0.8, 0.9, 0.7]])
+    target = np.array([[0.5, 0.5, 0.2, 1.5, 1.5, 1.2], [0.0, 0.0, 0.0, 1.0, 1.0, 1.0],
+                       [0.0, 0.0, 0.0, 1.0, 1.0, 1.0]])
+    iou, diou = np_iou_diou(pred, target)
+    assert iou[0] == pytest.approx(0.5 * 1.0 * 0.8 / (2.0 + 1.0 - 0.4))  # by hand
+    weight = np.array([1.0, 0.5, 2.0])
+    as_tensor = torch.tensor
+    for mode, overlap in (('iou', iou), ('diou', diou)):
+        loss = MODELS.build(
+            dict(type='TR3DAxisAlignedIoULoss', mode=mode, reduction='none', loss_weight=2.0))
+        p, t = as_tensor(pred, dtype=torch.float32), as_tensor(target, dtype=torch.float32)
+        np.testing.assert_allclose(loss(p, t).numpy(), 2 * (1 - overlap), rtol=1e-5)
+        np.testing.assert_allclose(
+            loss(p, t, reduction_override='mean').item(), 2 * (1 - overlap).mean(), rtol=1e-5)
+        np.testing.assert_allclose(
+            loss(p, t, reduction_override='sum').item(), 2 * (1 - overlap).sum(), rtol=1e-5)
+        np.testing.assert_allclose(
+            loss(p, t, weight=as_tensor(weight, dtype=torch.float32),
+                 reduction_override='mean').item(),
+            2 * ((1 - overlap) * weight).mean(),
+            rtol=1e-5)
+        np.testing.assert_allclose(
+            loss(
+                p,
+                t,
+                weight=as_tensor(weight, dtype=torch.float32),
+                avg_factor=4.0,
+                reduction_override='mean').item(),
+            2 * ((1 - overlap) * weight).sum() / 4.0,
+            rtol=1e-5)
+
+
+def test_head_loss_matches_a_hand_computed_batch():
+    """Two scenes on two levels through the real head (MinkowskiEngine 1x1x1 convolutions with
+    set weights): the focal loss summed over every location and class and divided by the
+    positives of the whole batch, the DIoU loss averaged over all positives of the batch."""
+    import MinkowskiEngine as ME
+    voxel = 0.5
+    head = MODELS.build(
+        dict(
+            type='TR3DHead',
+            num_classes=2,
+            label2level=(0, 1),
+            in_channels=1,
+            voxel_size=voxel,
+            pts_center_threshold=2))
+    w_reg = np.array([0.1, -0.05, 0.02, 0.2, -0.1, 0.05])
+    b_reg = np.array([0.05, 0.1, -0.1, np.log(0.8), np.log(1.1), 0.0])
+    w_cls, b_cls = np.array([0.7, -0.4]), np.array([-2.0, -1.0])
+    with torch.no_grad():
+        head.conv_reg.kernel.copy_(torch.tensor(w_reg).reshape(head.conv_reg.kernel.shape))
+        head.conv_reg.bias.copy_(torch.tensor(b_reg))
+        head.conv_cls.kernel.copy_(torch.tensor(w_cls).reshape(head.conv_cls.kernel.shape))
+        head.conv_cls.bias.copy_(torch.tensor(b_cls))
+    # voxel coordinates (x only, y = z = 0) per scene and level, and the feature of each
+    levels = [[[0, 1, 4, 5], [0, 1, 2]], [[0, 4], [0, 4, 8]]]  # [level][scene]
+    feature = {0: 1.0, 1: -0.5, 2: 0.25, 4: 2.0, 5: -1.0, 8: 0.5}
+    # ground truth (centre, size, label) per scene; class 0 lives on level 0, class 1 on level 1
+    truth = [[((0.3, 0.0, 0.0), (1.0, 1.0, 1.0), 0)],
+             [((0.9, 0.1, 0.0), (0.6, 0.8, 1.2), 0), ((2.2, 0.0, 0.1), (2.0, 1.0, 1.0), 1)]]
+    # the 2 nearest locations of each box's level, worked out by hand (metres along x)
+    positives = [{(0, 0.0): 0, (0, 0.5): 0}, {(0, 0.5): 0, (0, 1.0): 0, (1, 2.0): 1, (1, 4.0): 1}]
+
+    inputs = []
+    for per_scene in levels:
+        coordinates = [[scene, x, 0, 0] for scene, xs in enumerate(per_scene) for x in xs]
+        features = [[feature[x]] for xs in per_scene for x in xs]
+        inputs.append(
+            ME.SparseTensor(
+                features=torch.tensor(features, dtype=torch.float32),
+                coordinates=torch.tensor(coordinates, dtype=torch.int32)))
+    samples = []
+    for boxes in truth:
+        sample = Det3DDataSample(metainfo=dict(box_type_3d=DepthInstance3DBoxes))
+        sample.gt_instances_3d = InstanceData(
+            bboxes_3d=DepthInstance3DBoxes(
+                torch.tensor([centre + size for centre, size, _ in boxes]),
+                box_dim=6,
+                with_yaw=False,
+                origin=(0.5, 0.5, 0.5)),
+            labels_3d=torch.tensor([label for _, _, label in boxes]))
+        samples.append(sample)
+    losses = head.loss(inputs, samples)
+
+    focal_sum, box_losses = 0.0, []
+    for scene, boxes in enumerate(truth):
+        for level, per_scene in enumerate(levels):
+            for x in per_scene[scene]:
+                f = feature[x]
+                location = np.array([x * voxel, 0.0, 0.0])
+                label = positives[scene].get((level, x * voxel), 2)
+                focal_sum += np_sigmoid_focal((f * w_cls + b_cls)[None], np.array([label]),
+                                              2).sum()
+                if label == 2:
+                    continue
+                reg = f * w_reg + b_reg
+                pred = np.concatenate([location + reg[:3], np.exp(reg[3:])])
+                centre, size, _ = next(box for box in boxes if box[2] == label)
+                _, diou = np_iou_diou(
+                    np_corners(pred[None]), np_corners(np.array([centre + size])))
+                box_losses.append(1 - diou[0])
+    assert len(box_losses) == 6
+    assert losses['cls_loss'].item() == pytest.approx(focal_sum / 6, rel=1e-5)
+    assert losses['bbox_loss'].item() == pytest.approx(np.mean(box_losses), rel=1e-5)

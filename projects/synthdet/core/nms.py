@@ -52,17 +52,28 @@ def axis_aligned_nms3d_cpu(boxes: Tensor, scores: Tensor, iou_thr: float) -> Ten
     return order[torch.as_tensor(keep, dtype=torch.long, device=order.device)]
 
 
+def mmcv_nms3d_arguments(boxes: Tensor, scores: Tensor,
+                         iou_thr: float) -> tuple[Tensor, Tensor, float]:
+    """The arguments :func:`axis_aligned_nms3d` passes to mmcv's ``nms3d_normal``.
+
+    The kernel takes (N, 7) boxes ``(x, y, z, dx, dy, dz, yaw)`` (it ignores the yaw), so (N, 6)
+    boxes get a zero yaw column; boxes and scores become contiguous float32 on their device.
+    """
+    if boxes.shape[1] == 6:
+        boxes = torch.cat((boxes, boxes.new_zeros((len(boxes), 1))), dim=1)
+    return boxes.float().contiguous(), scores.float().contiguous(), float(iou_thr)
+
+
 def axis_aligned_nms3d(boxes: Tensor, scores: Tensor, iou_thr: float) -> Tensor:
     """Axis-aligned 3D NMS on the tensors' own device; returns kept indices (descending score).
 
-    CUDA tensors use mmcv's ``nms3d_normal``; others use :func:`axis_aligned_nms3d_cpu`.
+    CUDA tensors use mmcv's ``nms3d_normal`` (arguments from :func:`mmcv_nms3d_arguments`);
+    others use :func:`axis_aligned_nms3d_cpu`.
     """
     _check_inputs(boxes, scores)
     if not uses_mmcv_kernel(boxes.device):
         return axis_aligned_nms3d_cpu(boxes, scores, iou_thr)
-    if boxes.shape[1] == 6:
-        boxes = torch.cat((boxes, boxes.new_zeros((len(boxes), 1))), dim=1)
-    return nms3d_normal(boxes.float().contiguous(), scores.float().contiguous(), iou_thr)
+    return nms3d_normal(*mmcv_nms3d_arguments(boxes, scores, iou_thr))
 
 
 def multiclass_axis_aligned_nms3d(boxes: Tensor, scores: Tensor, score_thr: float,
