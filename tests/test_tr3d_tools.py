@@ -119,7 +119,7 @@ def test_registry_builds_the_model_of_every_config(path: Path) -> None:
     assert all(tuple(d.metainfo['classes']) == classes for d in train_sets)
     assert all(d.type == 'SynthdetS3DISDataset'
                for d in [*train_sets, cfg.test_dataloader.dataset])
-    assert cfg.val_evaluator.type == 'IndoorMetric'
+    assert cfg.val_evaluator.type == cfg.test_evaluator.type == 'SynthdetIndoorMetric'
     if path.stem in EXPERIMENTS:
         train_areas, test_area, expected_classes = EXPERIMENTS[path.stem]
         assert [d.ann_file
