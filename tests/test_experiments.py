@@ -90,6 +90,7 @@ def experiment(tmp_path_factory: pytest.TempPathFactory) -> dict:
     return dict(root=root, config=config, data=root / 'data', work=work)
 
 
+@pytest.mark.slow
 def test_two_processes_train_on_different_rooms_and_end_with_equal_weights(
         experiment: dict) -> None:
     ranks = [torch.load(experiment['root'] / 'record' / f'rank{r}.pth') for r in (0, 1)]
@@ -109,12 +110,14 @@ def test_two_processes_train_on_different_rooms_and_end_with_equal_weights(
     assert len(changed) == len(first['final'])  # every parameter was trained
 
 
+@pytest.mark.slow
 def test_auto_scale_lr_counts_both_processes(experiment: dict) -> None:
     scalars = next(experiment['work'].glob('*/vis_data/scalars.json')).read_text().splitlines()
     lrs = [json.loads(line)['lr'] for line in scalars if 'lr' in json.loads(line)]
     assert lrs and lrs == pytest.approx([1e-3 * 2 * 1 / 16] * len(lrs))  # x 2 processes / 16
 
 
+@pytest.mark.slow
 def test_best_epoch_is_kept_although_the_test_area_lacks_two_classes(experiment: dict) -> None:
     scalars = next(experiment['work'].glob('*/vis_data/scalars.json')).read_text().splitlines()
     val = [json.loads(line) for line in scalars if 'mAP_0.25' in json.loads(line)]
@@ -144,6 +147,7 @@ def single_test(experiment: dict) -> dict:
     return dict(out=out, stdout=proc.stdout, table=json.loads((out / 'table3.json').read_text()))
 
 
+@pytest.mark.slow
 def test_table3_shows_a_dash_for_classes_without_truth(single_test: dict) -> None:
     table = single_test['table']
     metrics = table['metrics']
@@ -164,6 +168,7 @@ def test_table3_shows_a_dash_for_classes_without_truth(single_test: dict) -> Non
     assert (single_test['out'] / 'table3.txt').read_text().count(' - ') >= 2
 
 
+@pytest.mark.slow
 def test_show_dir_draws_one_picture_per_scan(single_test: dict) -> None:
     pictures = sorted(p.name for p in (single_test['out'] / 'show').glob('*.png'))
     assert pictures == ['Area_2_lab_1.png', 'Area_2_office_1.png']
@@ -171,6 +176,7 @@ def test_show_dir_draws_one_picture_per_scan(single_test: dict) -> None:
         assert (single_test['out'] / 'show' / picture).stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_dist_test_gives_the_metrics_of_the_single_process_test(experiment: dict,
                                                                 single_test: dict) -> None:
     out = experiment['root'] / 'test_dist'

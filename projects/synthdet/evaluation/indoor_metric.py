@@ -9,6 +9,7 @@ does the same (``table3.without_classes``), so the Table 3 document has ``null``
 """
 from mmdet3d.evaluation.metrics import IndoorMetric
 from mmdet3d.registry import METRICS
+from mmengine.logging import MMLogger
 
 from .table3 import without_classes
 
@@ -26,4 +27,8 @@ class SynthdetIndoorMetric(IndoorMetric):
             for eval_ann, _ in results for label in eval_ann['gt_labels_3d']
         }
         absent = [name for label, name in enumerate(classes) if label not in with_truth]
+        if absent:
+            MMLogger.get_current_instance().info(
+                f'classes without ground truth, left out of Table 3 and the means (the NaN '
+                f'rows of the table above): {", ".join(absent)}')
         return without_classes(super().compute_metrics(results), absent, self.iou_thr)
