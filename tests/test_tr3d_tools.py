@@ -38,10 +38,11 @@ EXPERIMENTS = {
     'exp1': ([1, 2, 3, 4, 6], 5, ('table', 'chair', 'sofa', 'bookcase', 'board')),
     'exp2': ([7, 8], 9, SYNTHETIC_CLASSES),
     'exp3': ([1, 2, 3, 4, 6, 7, 8, 9], 5, SYNTHETIC_CLASSES),
+    'exp3_finetune': ([1, 2, 3, 4, 6, 7, 8, 9], 5, SYNTHETIC_CLASSES),
     'exp2_paper': ([1, 2, 3, 7, 8], 9, SYNTHETIC_CLASSES),  # the paper's Table 2 lists these
     'exp2_cpu': ([7, 8], 9, SYNTHETIC_CLASSES),
 }
-FULL_SCALE = ('exp1', 'exp2', 'exp3', 'exp2_paper')  # TR3D's published S3DIS settings
+FULL_SCALE = ('exp1', 'exp2', 'exp3', 'exp2_paper', 'exp3_finetune')  # TR3D's published S3DIS settings
 
 
 def load_tool(name: str) -> ModuleType:
