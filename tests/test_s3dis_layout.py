@@ -11,18 +11,13 @@ from types import ModuleType
 import numpy as np
 import pytest
 
-from projects.synthdet.datasets.s3dis_repairs import KNOWN_STRAY_BYTES, repaired_point_text
-from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
+from projects.synthdet.datasets.s3dis_repairs import repaired_point_text
+from tests.s3dis_fixtures import (HALLWAY_CEILING, S3DIS_DIR, S3DIS_OBJECTS, STRAY_LINE,
+                                  STRAY_OFFSET, STRAY_POINT, write_hallway_6,
+                                  write_synthetic_area)
 
 REPO = Path(__file__).resolve().parents[1]
-# every class name of the real S3DIS, and `stairs`, which a few of its rooms use
-S3DIS_OBJECTS = ('table', 'chair', 'sofa', 'bookcase', 'board', 'beam', 'column', 'window', 'door',
-                 'stairs')
 TABLE1_REAL = ('chair', 'table', 'sofa', 'bookcase', 'board')
-HALLWAY_CEILING = ('Area_5', 'hallway_6', 'Annotations', 'ceiling_1.txt')
-STRAY_OFFSET = KNOWN_STRAY_BYTES[HALLWAY_CEILING]
-STRAY_LINE = 180389
-STRAY_POINT = [1.5, 5.25, 2.75, 210.0, 211.0, 212.0]
 
 
 def load_tool(name: str) -> ModuleType:
@@ -31,27 +26,6 @@ def load_tool(name: str) -> ModuleType:
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
-
-
-def write_hallway_6(data_dir: Path) -> int:
-    """``Area_5/hallway_6`` with a ceiling file whose line 180389 has the stray byte at the byte
-    offset that mmdet3d repairs, in place of the space after its first number; one chair. Returns
-    the number of ceiling points."""
-    ann_dir = data_dir / 'Area_5' / 'hallway_6' / 'Annotations'
-    ann_dir.mkdir(parents=True)
-    # 30- and 31-byte lines so that line 180389 starts 5 bytes before the stray byte
-    short, long = b'1.000 1.000 3.000 200 200 200\n', b'10.000 1.000 3.000 200 200 200\n'
-    num_long = STRAY_OFFSET - 5 - len(short) * (STRAY_LINE - 1)
-    lines = long * num_long + short * (STRAY_LINE - 1 - num_long)
-    stray_line = b'1.500\x105.250 2.750 210 211 212\n'
-    ceiling = lines + stray_line + short * 10
-    assert ceiling[STRAY_OFFSET:STRAY_OFFSET + 1] == b'\x10'
-    assert ceiling[:STRAY_OFFSET].count(b'\n') == STRAY_LINE - 1
-    (ann_dir / 'ceiling_1.txt').write_bytes(ceiling)
-    chair = np.column_stack([np.random.default_rng(0).random((50, 3)), np.full((50, 3), 100)])
-    (ann_dir / 'chair_1.txt').write_text(''.join(f'{x:.3f} {y:.3f} {z:.3f} {r:.0f} {g:.0f} {b:.0f}\n'
-                                                 for x, y, z, r, g, b in chair))
-    return STRAY_LINE + 10
 
 
 @pytest.fixture(scope='module')
