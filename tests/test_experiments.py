@@ -26,7 +26,7 @@ from mmengine.config import Config
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.evaluation.table3 import without_classes
 from tests.s3dis_fixtures import write_synthetic_area
-from tests.test_tr3d_tools import data_options, load_tool
+from tests.test_tr3d_tools import data_options, load_tool, run_tool
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = REPO / 'configs' / 'tr3d' / 'tiny.py'
@@ -130,20 +130,10 @@ def test_best_epoch_is_kept_although_the_test_area_lacks_two_classes(experiment:
 def single_test(experiment: dict) -> dict:
     """tools/test.py in one process on the best checkpoint, with pictures of every scan."""
     out = experiment['root'] / 'test_single'
-    proc = subprocess.run([
-        sys.executable, 'tools/test.py', experiment['config'],
-        experiment['work'] / 'best_mAP_0.25_epoch_1.pth', '--work-dir', out, '--show-dir',
-        out / 'show', '--score-thr', '0.05', '--cfg-options', *data_options(experiment['data'])
-    ],
-                          cwd=REPO,
-                          capture_output=True,
-                          text=True,
-                          timeout=600,
-                          env={
-                              **os.environ, 'OMP_NUM_THREADS':
-                              os.environ.get('OMP_NUM_THREADS', '1')
-                          })
-    assert proc.returncode == 0, proc.stderr[-5000:]
+    proc = run_tool('tools/test.py', experiment['config'],
+                    experiment['work'] / 'best_mAP_0.25_epoch_1.pth', '--work-dir', out,
+                    '--show-dir', out / 'show', '--score-thr', '0.05', '--cfg-options',
+                    *data_options(experiment['data']))
     return dict(out=out, stdout=proc.stdout, table=json.loads((out / 'table3.json').read_text()))
 
 

@@ -2,11 +2,9 @@
 ``Area_5/hallway_6``, converted with tools/create_data.py and counted by tools/dataset_stats.py
 (Table 1 with its S3DIS rows), and create_data's ``--extra-tag``."""
 import hashlib
-import importlib.util
 import pickle
 from collections import Counter
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 import pytest
@@ -15,17 +13,9 @@ from projects.synthdet.datasets.s3dis_repairs import repaired_point_text
 from tests.s3dis_fixtures import (HALLWAY_CEILING, S3DIS_DIR, S3DIS_OBJECTS, STRAY_LINE,
                                   STRAY_OFFSET, STRAY_POINT, write_hallway_6,
                                   write_synthetic_area)
+from tests.test_tr3d_tools import load_tool
 
-REPO = Path(__file__).resolve().parents[1]
 TABLE1_REAL = ('chair', 'table', 'sofa', 'bookcase', 'board')
-
-
-def load_tool(name: str) -> ModuleType:
-    spec = importlib.util.spec_from_file_location(f'layout_tools_{name}',
-                                                  REPO / 'tools' / f'{name}.py')
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.fixture(scope='module')
