@@ -106,7 +106,9 @@ def test_two_processes_train_on_different_rooms_and_end_with_equal_weights(
     for name in first['final']:
         assert torch.equal(first['initial'][name], second['initial'][name]), name
         assert torch.equal(first['final'][name], second['final'][name]), name
-    changed = [n for n in first['final'] if not torch.equal(first['initial'][n], first['final'][n])]
+    changed = [
+        n for n in first['final'] if not torch.equal(first['initial'][n], first['final'][n])
+    ]
     assert len(changed) == len(first['final'])  # every parameter was trained
 
 
@@ -182,12 +184,22 @@ def test_dist_test_gives_the_metrics_of_the_single_process_test(experiment: dict
 def test_without_classes_recomputes_the_means() -> None:
     nan = float('nan')
     metrics = {
-        'table_AP_0.25': 0.5, 'chair_AP_0.25': 1.0, 'yumi_AP_0.25': nan, 'mAP_0.25': nan,
-        'table_rec_0.25': 1.0, 'chair_rec_0.25': 0.5, 'yumi_rec_0.25': nan, 'mAR_0.25': nan
+        'table_AP_0.25': 0.5,
+        'chair_AP_0.25': 1.0,
+        'yumi_AP_0.25': nan,
+        'mAP_0.25': nan,
+        'table_rec_0.25': 1.0,
+        'chair_rec_0.25': 0.5,
+        'yumi_rec_0.25': nan,
+        'mAR_0.25': nan
     }
     assert without_classes(metrics, ['yumi'], [0.25]) == {
-        'table_AP_0.25': 0.5, 'chair_AP_0.25': 1.0, 'mAP_0.25': 0.75,
-        'table_rec_0.25': 1.0, 'chair_rec_0.25': 0.5, 'mAR_0.25': 0.75
+        'table_AP_0.25': 0.5,
+        'chair_AP_0.25': 1.0,
+        'mAP_0.25': 0.75,
+        'table_rec_0.25': 1.0,
+        'chair_rec_0.25': 0.5,
+        'mAR_0.25': 0.75
     }
     assert math.isnan(without_classes(metrics, ['table', 'chair', 'yumi'], [0.25])['mAP_0.25'])
 
@@ -196,7 +208,8 @@ def test_train_options_amp_and_auto_scale_lr(tmp_path: Path) -> None:
     train = load_tool('train')
     args = train.parse_args([str(TINY), '--amp', '--auto-scale-lr'])
     cfg = train.build_config(args)
-    assert cfg.optim_wrapper.type == 'AmpOptimWrapper' and cfg.optim_wrapper.loss_scale == 'dynamic'
+    assert cfg.optim_wrapper.type == 'AmpOptimWrapper'
+    assert cfg.optim_wrapper.loss_scale == 'dynamic'
     assert cfg.auto_scale_lr == dict(enable=True, base_batch_size=16)
     assert Config.fromfile(str(TINY)).auto_scale_lr.enable is False
     bare = tmp_path / 'bare.py'
@@ -204,7 +217,8 @@ def test_train_options_amp_and_auto_scale_lr(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match='base_batch_size'):
         train.build_config(train.parse_args([str(bare), '--auto-scale-lr']))
     if not torch.cuda.is_available():
-        proc = subprocess.run([sys.executable, 'tools/train.py', str(TINY), '--amp'],
+        proc = subprocess.run([sys.executable, 'tools/train.py',
+                               str(TINY), '--amp'],
                               cwd=REPO,
                               capture_output=True,
                               text=True,

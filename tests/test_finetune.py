@@ -30,9 +30,10 @@ NECK_CHANNELS, NUM_CLASSES = 128, 5
 
 def batch_norm(prefix: str, channels: int) -> dict[str, tuple]:
     return {
-        **{f'{prefix}.bn.{name}': (channels, )
-           for name in ('weight', 'bias', 'running_mean', 'running_var')},
-        f'{prefix}.bn.num_batches_tracked': ()
+        **{
+            f'{prefix}.bn.{name}': (channels, )
+            for name in ('weight', 'bias', 'running_mean', 'running_var')
+        }, f'{prefix}.bn.num_batches_tracked': ()
     }
 
 
@@ -51,8 +52,8 @@ def published_tr3d_s3dis_layout() -> dict[str, tuple]:
                 layout[f'{prefix}.downsample.0.kernel'] = (1, inplanes, planes)  # stride 2
                 layout.update(batch_norm(f'{prefix}.downsample.1', planes))
         inplanes = planes
-    for name in ('up_block_1', 'up_block_2', 'lateral_block_0', 'lateral_block_1',
-                 'out_block_0', 'out_block_1'):
+    for name in ('up_block_1', 'up_block_2', 'lateral_block_0', 'lateral_block_1', 'out_block_0',
+                 'out_block_1'):
         layout[f'neck.{name}.0.kernel'] = (27, NECK_CHANNELS, NECK_CHANNELS)
         layout.update(batch_norm(f'neck.{name}.1', NECK_CHANNELS))
     for name, outputs in (('conv_reg', 6), ('conv_cls', NUM_CLASSES)):
@@ -83,14 +84,20 @@ def test_a_checkpoint_of_the_published_layout_loads_strictly(config: str, tmp_pa
     layout = published_tr3d_s3dis_layout()
     generator = torch.Generator().manual_seed(0)
     state = {
-        name: (torch.randint(0, 100, shape, generator=generator) if name.endswith('tracked') else
-               torch.randn(shape, generator=generator))
+        name: (torch.randint(0, 100, shape, generator=generator)
+               if name.endswith('tracked') else torch.randn(shape, generator=generator))
         for name, shape in layout.items()
     }
     path = tmp_path / 'tr3d_1xb16_s3dis-3d-5class.pth'
-    torch.save({'meta': {'dataset_meta': {'classes': ['table', 'chair', 'sofa', 'bookcase',
-                                                      'board']}},
-                'state_dict': state}, path)
+    torch.save(
+        {
+            'meta': {
+                'dataset_meta': {
+                    'classes': ['table', 'chair', 'sofa', 'bookcase', 'board']
+                }
+            },
+            'state_dict': state
+        }, path)
     model = build_model(config)
     assert {k: tuple(v.shape) for k, v in model.state_dict().items()} == layout
     load_checkpoint(model, str(path), map_location='cpu', strict=True)

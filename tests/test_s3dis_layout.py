@@ -11,8 +11,7 @@ import pytest
 
 from projects.synthdet.datasets.s3dis_repairs import repaired_point_text
 from tests.s3dis_fixtures import (HALLWAY_CEILING, S3DIS_DIR, S3DIS_OBJECTS, STRAY_LINE,
-                                  STRAY_OFFSET, STRAY_POINT, write_hallway_6,
-                                  write_synthetic_area)
+                                  STRAY_OFFSET, STRAY_POINT, write_hallway_6, write_synthetic_area)
 from tests.test_tr3d_tools import load_tool
 
 TABLE1_REAL = ('chair', 'table', 'sofa', 'bookcase', 'board')
@@ -46,7 +45,8 @@ def test_create_data_repairs_the_hallway_6_stray_byte(s3dis: dict, tmp_path: Pat
                                                       capsys: pytest.CaptureFixture) -> None:
     out = tmp_path / 'data'
     assert load_tool('create_data').main(
-        ['s3dis', '--root-path', str(s3dis['root']), '--out-dir', str(out)]) == 0
+        ['s3dis', '--root-path', str(s3dis['root']), '--out-dir',
+         str(out)]) == 0
     report = capsys.readouterr().out
     assert f'repaired the known stray byte of {s3dis["ceiling"]}' in report
     assert 'skipped' not in report
@@ -55,8 +55,8 @@ def test_create_data_repairs_the_hallway_6_stray_byte(s3dis: dict, tmp_path: Pat
     # the converter shifts the room's minimum to 0; the repaired line is the ceiling's 180389th
     minimum = np.fromfile(s3dis['ceiling'].with_name('chair_1.txt'), sep=' ').reshape(-1, 6)
     shift = np.minimum(minimum[:, :3].min(axis=0), [1.0, 1.0, 3.0])
-    np.testing.assert_allclose(points[STRAY_LINE - 1, :3], np.array(STRAY_POINT[:3]) - shift,
-                               atol=1e-5)
+    np.testing.assert_allclose(
+        points[STRAY_LINE - 1, :3], np.array(STRAY_POINT[:3]) - shift, atol=1e-5)
     np.testing.assert_array_equal(points[STRAY_LINE - 1, 3:], STRAY_POINT[3:])
     assert hashlib.sha256(s3dis['ceiling'].read_bytes()).hexdigest() == s3dis['ceiling_sha']
 
@@ -82,9 +82,8 @@ def test_table1_prints_the_s3dis_rows(s3dis: dict, tmp_path: Path,
         str(s3dis['root']), '--out-dir',
         str(out), '--extra-tag', 'realtag', '--workers', '2'
     ]) == 0
-    assert sorted(p.name for p in out.glob('*.pkl')) == [
-        f'realtag_infos_Area_{a}.pkl' for a in range(1, 8)
-    ]
+    assert sorted(
+        p.name for p in out.glob('*.pkl')) == [f'realtag_infos_Area_{a}.pkl' for a in range(1, 8)]
     with open(out / 'realtag_infos_Area_5.pkl', 'rb') as f:
         assert len(pickle.load(f)['data_list']) == 2  # office_1 and hallway_6
     capsys.readouterr()
@@ -102,4 +101,6 @@ def test_table1_prints_the_s3dis_rows(s3dis: dict, tmp_path: Path,
     synthetic = [counts[7][c] for c in ('chair', 'table', 'sofa')]
     assert rows['Synthetic (areas 7+)'][:3] == [*map(str, synthetic)]
     assert rows['Synthetic (areas 7+)'][3:5] == ['-', '-']
-    assert rows['Synthetic (areas 7+)'][5:] == [str(counts[7]['yumi']), str(counts[7]['3dprinter'])]
+    assert rows['Synthetic (areas 7+)'][5:] == [
+        str(counts[7]['yumi']), str(counts[7]['3dprinter'])
+    ]

@@ -42,7 +42,8 @@ EXPERIMENTS = {
     'exp2_paper': ([1, 2, 3, 7, 8], 9, SYNTHETIC_CLASSES),  # the paper's Table 2 lists these
     'exp2_cpu': ([7, 8], 9, SYNTHETIC_CLASSES),
 }
-FULL_SCALE = ('exp1', 'exp2', 'exp3', 'exp2_paper', 'exp3_finetune')  # TR3D's published S3DIS settings
+# configs with TR3D's published S3DIS settings
+FULL_SCALE = ('exp1', 'exp2', 'exp3', 'exp2_paper', 'exp3_finetune')
 
 
 def load_tool(name: str) -> ModuleType:

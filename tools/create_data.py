@@ -34,7 +34,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     s3dis.add_argument(
         '--extra-tag',
         default='s3dis',
-        help='info pickles are <extra-tag>_infos_Area_N.pkl (default s3dis, which the configs read)')
+        help='name the info pickles <extra-tag>_infos_Area_N.pkl (the configs read s3dis)')
     return parser.parse_args(argv)
 
 

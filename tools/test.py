@@ -6,8 +6,8 @@ Usage: python tools/test.py CONFIG CHECKPOINT [--work-dir DIR] [--out JSON] [--c
 The numbers are mmdet3d's IndoorMetric (per-class average precision at 3D IoU 0.25 and 0.5 and
 their mean over the evaluated classes). The table has a row per IoU threshold and a column per
 class plus the mean; a class without ground truth in the test set is shown as "-" (null in
-the JSON) and left out of the mean, as in the paper (``projects/synthdet/evaluation/table3.py``). The JSON
-(``"format": "synthdet.table3/1"``) goes to ``<work_dir>/table3.json`` unless --out is given,
+the JSON) and left out of the mean, as in the paper (``projects/synthdet/evaluation/``). The
+JSON (``"format": "synthdet.table3/1"``) goes to ``<work_dir>/table3.json`` unless --out is given,
 the text next to it (``table3.txt``). ``--show-dir`` saves a top-view picture of every test scan
 with its ground truth and the predictions scoring at least ``--score-thr``
 (``projects/synthdet/visualization.py``); the threshold affects the pictures only, as in

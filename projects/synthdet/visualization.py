@@ -17,7 +17,9 @@ from synthdet.room_data import Box, load_scan
 from synthdet.topview import draw_top_view
 
 
-def instance_boxes(boxes, labels: Sequence[int], classes: Sequence[str],
+def instance_boxes(boxes,
+                   labels: Sequence[int],
+                   classes: Sequence[str],
                    scores: Sequence[float] | None = None) -> list[Box]:
     """mmdet3d boxes (gravity centre, size, yaw) with class indices as :class:`Box` records."""
     centers, sizes = boxes.gravity_center.tolist(), boxes.dims.tolist()
@@ -45,7 +47,10 @@ class TopViewHook(Hook):
     def before_test(self, runner) -> None:
         self.out_dir.mkdir(parents=True, exist_ok=True)
 
-    def after_test_iter(self, runner, batch_idx: int, data_batch: dict | None = None,
+    def after_test_iter(self,
+                        runner,
+                        batch_idx: int,
+                        data_batch: dict | None = None,
                         outputs: Sequence[Det3DDataSample] | None = None) -> None:
         classes = runner.test_dataloader.dataset.metainfo['classes']
         for sample in outputs or []:

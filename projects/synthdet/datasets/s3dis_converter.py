@@ -11,7 +11,8 @@ and writes, in ``out_dir``, for every room:
 
 and per area ``s3dis_infos_Area_N.pkl`` (``<info_prefix>_infos_Area_N.pkl``) in the format
 mmdet3d 1.4's ``update_infos_to_v2`` writes for S3DIS. The known stray byte of the real S3DIS
-(``Area_5/hallway_6``) is repaired in memory as mmdet3d's converter does (``s3dis_repairs``). Boxes are the axis-aligned min/max of each detection instance's points.
+(``Area_5/hallway_6``) is repaired in memory as mmdet3d's converter does (``s3dis_repairs``).
+Boxes are the axis-aligned min/max of each detection instance's points.
 Importing this module needs numpy and numba only (no torch, no mmdet3d).
 """
 import os
@@ -79,8 +80,9 @@ class ConversionSummary:
         for name, files in sorted(self.unknown_classes.items()):
             lines.append(f'unknown class {name!r} converted as {FALLBACK_CLASS}: {len(files)} '
                          f'file(s), e.g. {files[0]}')
-        lines += [f'repaired the known stray byte of {path} (as mmdet3d does)'
-                  for path in self.repaired]
+        lines += [
+            f'repaired the known stray byte of {path} (as mmdet3d does)' for path in self.repaired
+        ]
         if self.skipped:
             lines.append(f'skipped {len(self.skipped)} input(s):')
             lines += [

@@ -22,10 +22,7 @@ class SynthdetIndoorMetric(IndoorMetric):
 
     def compute_metrics(self, results: list) -> dict[str, float]:
         classes = self.dataset_meta['classes']
-        with_truth = {
-            int(label)
-            for eval_ann, _ in results for label in eval_ann['gt_labels_3d']
-        }
+        with_truth = {int(label) for eval_ann, _ in results for label in eval_ann['gt_labels_3d']}
         absent = [name for label, name in enumerate(classes) if label not in with_truth]
         if absent:
             MMLogger.get_current_instance().info(

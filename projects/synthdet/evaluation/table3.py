@@ -20,9 +20,8 @@ def without_classes(metrics: dict, classes: Iterable[str],
     drop = set(classes)
     kept = {
         key: value
-        for key, value in metrics.items()
-        if not any(key.startswith(f'{name}_AP_') or key.startswith(f'{name}_rec_')
-                   for name in drop)
+        for key, value in metrics.items() if not any(
+            key.startswith(f'{name}_AP_') or key.startswith(f'{name}_rec_') for name in drop)
     }
     for thr in iou_thresholds:
         for kind, mean in (('AP', 'mAP'), ('rec', 'mAR')):
