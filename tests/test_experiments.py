@@ -26,7 +26,7 @@ from mmengine.config import Config
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.evaluation.table3 import without_classes
 from tests.s3dis_fixtures import write_synthetic_area
-from tests.test_tr3d_tools import data_options, load_tool, run_tool
+from tests.test_tr3d_tools import data_options, load_tool
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = REPO / 'configs' / 'tr3d' / 'tiny.py'
@@ -56,20 +56,22 @@ def free_port() -> int:
         return sock.getsockname()[1]
 
 
-def run_script(*args: str | Path) -> subprocess.CompletedProcess:
-    """Run a tools/*.sh script with the project's interpreter and one OpenMP thread."""
+def run_tool(tool: str, *args: str | Path | int) -> subprocess.CompletedProcess:
+    """Run tools/<tool> (a Python tool, or a shell script with this interpreter as ``PYTHON``
+    and a free port) with one OpenMP thread; fail with its output if it exits non-zero."""
     env = {
         **os.environ, 'OMP_NUM_THREADS': os.environ.get('OMP_NUM_THREADS', '1'),
         'PYTHON': sys.executable,
         'PORT': str(free_port())
     }
-    proc = subprocess.run(['bash', *map(str, args)],
+    program = ['bash'] if tool.endswith('.sh') else [sys.executable]
+    proc = subprocess.run([*program, f'tools/{tool}', *map(str, args)],
                           cwd=REPO,
                           capture_output=True,
                           text=True,
                           timeout=900,
                           env=env)
-    assert proc.returncode == 0, f'{args[0]} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-6000:]}'
+    assert proc.returncode == 0, f'{tool} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-6000:]}'
     return proc
 
 
@@ -85,8 +87,8 @@ def experiment(tmp_path_factory: pytest.TempPathFactory) -> dict:
     config = root / 'tiny_experiment.py'
     config.write_text(EXPERIMENT_CONFIG.format(record_dir=root / 'record'))
     work = root / 'work'
-    run_script('tools/dist_train.sh', config, 2, '--work-dir', work, '--auto-scale-lr',
-               '--cfg-options', *data_options(root / 'data'))
+    run_tool('dist_train.sh', config, 2, '--work-dir', work, '--auto-scale-lr', '--cfg-options',
+             *data_options(root / 'data'))
     return dict(root=root, config=config, data=root / 'data', work=work)
 
 
@@ -132,7 +134,7 @@ def test_best_epoch_is_kept_although_the_test_area_lacks_two_classes(experiment:
 def single_test(experiment: dict) -> dict:
     """tools/test.py in one process on the best checkpoint, with pictures of every scan."""
     out = experiment['root'] / 'test_single'
-    proc = run_tool('tools/test.py', experiment['config'],
+    proc = run_tool('test.py', experiment['config'],
                     experiment['work'] / 'best_mAP_0.25_epoch_1.pth', '--work-dir', out,
                     '--show-dir', out / 'show', '--score-thr', '0.05', '--cfg-options',
                     *data_options(experiment['data']))
@@ -172,9 +174,9 @@ def test_show_dir_draws_one_picture_per_scan(single_test: dict) -> None:
 def test_dist_test_gives_the_metrics_of_the_single_process_test(experiment: dict,
                                                                 single_test: dict) -> None:
     out = experiment['root'] / 'test_dist'
-    run_script('tools/dist_test.sh', experiment['config'],
-               experiment['work'] / 'best_mAP_0.25_epoch_1.pth', 2, '--work-dir', out,
-               '--cfg-options', *data_options(experiment['data']))
+    run_tool('dist_test.sh', experiment['config'],
+             experiment['work'] / 'best_mAP_0.25_epoch_1.pth', 2, '--work-dir', out,
+             '--cfg-options', *data_options(experiment['data']))
     table = json.loads((out / 'table3.json').read_text())
     # json.dumps compares NaN (mmdet3d's own metric) as equal text
     assert json.dumps(table['metrics']) == json.dumps(single_test['table']['metrics'])
