@@ -19,6 +19,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
 
+from mmengine.config import Config  # noqa: E402
 from mmengine.dist import is_main_process  # noqa: E402
 from mmengine.runner import Runner  # noqa: E402
 
@@ -46,7 +47,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parse_runner_args(parser, argv)
 
 
-def add_show_hook(cfg, show_dir: str | None, score_thr: float) -> None:
+def add_show_hook(cfg: Config, show_dir: str | None, score_thr: float) -> None:
     """With ``show_dir``, add the hook that draws every test scan (``TopViewHook``)."""
     if show_dir:
         cfg.custom_hooks = [

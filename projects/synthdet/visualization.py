@@ -10,14 +10,14 @@ from pathlib import Path
 from typing import Sequence
 
 from mmdet3d.registry import HOOKS
-from mmdet3d.structures import Det3DDataSample
+from mmdet3d.structures import BaseInstance3DBoxes, Det3DDataSample
 from mmengine.hooks import Hook
 
 from synthdet.room_data import Box, load_scan
 from synthdet.topview import draw_top_view
 
 
-def instance_boxes(boxes,
+def instance_boxes(boxes: BaseInstance3DBoxes,
                    labels: Sequence[int],
                    classes: Sequence[str],
                    scores: Sequence[float] | None = None) -> list[Box]:
