@@ -113,9 +113,10 @@ def screenshot(document: Path,
             encoding='utf-8')
         command = [freecad, '-u', str(config), str(GUI_SCRIPT)]
         with virtual_display(width + 200, height + 200) as display:
-            env = dict(
-                os.environ, SYNTHDET_SCREENSHOT=str(options), HOME=str(work_dir), DISPLAY=display)
-            env.pop('QT_QPA_PLATFORM', None)
+            # Qt settings of this process are not FreeCAD's: importing OpenCV (as mmcv does)
+            # points QT_QPA_PLATFORM_PLUGIN_PATH at its own Qt, which makes FreeCAD abort.
+            env = {key: value for key, value in os.environ.items() if not key.startswith('QT_')}
+            env.update(SYNTHDET_SCREENSHOT=str(options), HOME=str(work_dir), DISPLAY=display)
             result = run_freecad_process(command, env, work_dir, timeout, result_path)
     if result['status'] != 'ok':
         raise FreecadFailed(f'{document}: {result["error"]}')
