@@ -1,4 +1,4 @@
-"""Experiments 1 and 3 as a user runs them, at the smallest scale (issue 17).
+"""Experiments 1 and 3 as a user runs them, at the smallest scale.
 
 A module fixture writes a training area of four rooms with all five classes of experiments 2
 and 3 and a test area of two rooms without yumi and 3dprinter (as S3DIS area 5 in experiment

@@ -1,4 +1,4 @@
-"""Fine-tuning from TR3D's published S3DIS checkpoint (issue 17, configs/tr3d/exp3_finetune.py).
+"""Fine-tuning from TR3D's published S3DIS checkpoint (configs/tr3d/exp3_finetune.py).
 
 There is no network here to download the real checkpoint, so the test writes one with its
 parameter layout, built from the facts of mmdetection3d's ``projects/TR3D`` (names and shapes,

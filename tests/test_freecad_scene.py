@@ -1,4 +1,4 @@
-"""The FreeCAD document as a user opens it (issue 18), with real freecadcmd and the real GUI.
+"""The FreeCAD document as a user opens it, with real freecadcmd and the real GUI.
 
 One room is built through ``python -m configurator freecad``: objects on the floor and on
 tables, an axis-aligned chair, sofa and YuMi (orientation rules), a yawed chair, a floating

@@ -1,4 +1,4 @@
-"""The real S3DIS layout (issue 17): areas 1-6 in S3DIS naming with the known stray byte of
+"""The real S3DIS layout: areas 1-6 in S3DIS naming with the known stray byte of
 ``Area_5/hallway_6``, converted with tools/create_data.py and counted by tools/dataset_stats.py
 (Table 1 with its S3DIS rows), and create_data's ``--extra-tag``."""
 import hashlib

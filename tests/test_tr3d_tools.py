@@ -1,4 +1,4 @@
-"""TR3D configs and tools through the real registries, Runner and command lines (issue 5).
+"""TR3D configs and tools through the real registries, Runner and command lines.
 
 A module fixture writes two small generated rooms (tests/s3dis_fixtures.py), converts them with
 the real converter and trains the tiny config for one epoch (2 iterations) with tools/train.py;
