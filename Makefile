@@ -14,7 +14,7 @@ test: setup
 	@$(PY) -m pytest $(PYTEST_ARGS); rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests (exit 5)"; fi; exit $$rc
 
-# The whole pipeline on small generated data (tools/demo.py; about 30 min on 2 cores), ending
+# The whole pipeline on small generated data (tools/demo.py; measured times in docs/results.md), ending
 # with work_dirs/demo/REPORT.md. Resumable: rerun to continue. DEMO_ARGS="--size tiny --threads 1"
 # for a quick run. One OpenMP thread per step by default (see EXP2_THREADS below).
 DEMO_ARGS ?= --threads 1

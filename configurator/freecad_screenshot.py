@@ -2,17 +2,19 @@
 
 ``python -m configurator screenshot DOC.FCStd --out DOC.png [--width 1000] [--height 750]``
 
-The real ``freecad`` GUI opens the document on a virtual X display (``xvfb-run``), with a
+The real ``freecad`` GUI opens the document on a virtual X display (``Xvfb``), with a
 fresh user configuration (no Start page), and saves its 3D view: what a user sees when they
 open the file, with the view, colours and visibility the document stores.
 """
 import argparse
+import contextlib
 import json
 import os
-import shutil
+import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import Iterator
 
 from configurator.freecad_cli import FreecadFailed, run_freecad_process
 
@@ -40,6 +42,41 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         '--timeout', type=float, default=300.0, help='seconds to wait for FreeCAD (default 300)')
 
 
+@contextlib.contextmanager
+def virtual_display(width: int, height: int, timeout: float = 30.0) -> Iterator[str]:
+    """A private Xvfb server for the block; yields its ``DISPLAY`` (e.g. ``:7``).
+
+    Xvfb picks a free display number itself (``-displayfd``), so several screenshots can run
+    at once without the race of ``xvfb-run -a``; the server is stopped when the block ends.
+    """
+    read_end, write_end = os.pipe()
+    try:
+        server = subprocess.Popen(
+            ['Xvfb', '-displayfd', str(write_end), '-screen', '0', f'{width}x{height}x24',
+             '-nolisten', 'tcp'],
+            pass_fds=(write_end, ),
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL)
+    except FileNotFoundError:
+        os.close(read_end)
+        os.close(write_end)
+        raise FreecadFailed('Xvfb not found: install it (apt-get install xvfb)') from None
+    os.close(write_end)
+    try:
+        with os.fdopen(read_end, 'rb') as stream:
+            number = stream.readline().strip()  # Xvfb writes the display once it is ready
+        if not number.isdigit():
+            raise FreecadFailed(f'Xvfb did not start (exit code {server.poll()})')
+        yield f':{number.decode()}'
+    finally:
+        server.terminate()
+        try:
+            server.wait(timeout)
+        except subprocess.TimeoutExpired:
+            server.kill()
+            server.wait()
+
+
 def screenshot(document: Path,
                out: Path,
                width: int = 1000,
@@ -58,8 +95,6 @@ def screenshot(document: Path,
         raise ValueError(f'{out}: the picture must end with .png')
     if not (16 <= width <= 8000 and 16 <= height <= 8000):
         raise ValueError(f'--width/--height {width}x{height}: expected 16 to 8000 pixels')
-    if shutil.which('xvfb-run') is None:
-        raise FreecadFailed('xvfb-run not found: install it (apt-get install xvfb xauth)')
     out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix='synthdet-screenshot-') as work:
         work_dir = Path(work)
@@ -76,17 +111,13 @@ def screenshot(document: Path,
                 'result': str(result_path)
             }),
             encoding='utf-8')
-        env = dict(os.environ, SYNTHDET_SCREENSHOT=str(options), HOME=str(work_dir))
-        # opencv (imported with mmcv) points Qt at its own plugins and fonts: FreeCAD's Qt
-        # then aborts, so a process that imported it must not pass them on
-        for variable in ('QT_QPA_PLATFORM', 'QT_QPA_PLATFORM_PLUGIN_PATH', 'QT_QPA_FONTDIR'):
-            env.pop(variable, None)
-        command = [
-            'xvfb-run', '-a', '-s', f'-screen 0 {width + 200}x{height + 200}x24', freecad, '-u',
-            str(config),
-            str(GUI_SCRIPT)
-        ]
-        result = run_freecad_process(command, env, work_dir, timeout, result_path)
+        command = [freecad, '-u', str(config), str(GUI_SCRIPT)]
+        with virtual_display(width + 200, height + 200) as display:
+            # Qt settings of this process are not FreeCAD's: importing OpenCV (as mmcv does)
+            # points QT_QPA_PLATFORM_PLUGIN_PATH at its own Qt, which makes FreeCAD abort.
+            env = {key: value for key, value in os.environ.items() if not key.startswith('QT_')}
+            env.update(SYNTHDET_SCREENSHOT=str(options), HOME=str(work_dir), DISPLAY=display)
+            result = run_freecad_process(command, env, work_dir, timeout, result_path)
     if result['status'] != 'ok':
         raise FreecadFailed(f'{document}: {result["error"]}')
     if not out.is_file():

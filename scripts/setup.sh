@@ -12,8 +12,8 @@ PY=$VENV/bin/python
 STAMPS=$VENV/.synthdet-stamps
 REQ=$ROOT/requirements
 # libopenblas-dev: MinkowskiEngine's build; libusb-1.0-0: open3d's import; freecad: freecadcmd
-# and its GUI; xvfb, xauth: the GUI on a virtual display (screenshots, the GUI tests).
-APT_PACKAGES=(libopenblas-dev libusb-1.0-0 freecad xvfb xauth)
+# and its GUI; xvfb: the GUI on a virtual display (screenshots, the GUI tests).
+APT_PACKAGES=(libopenblas-dev libusb-1.0-0 freecad xvfb)
 PIP_QUIET=(--disable-pip-version-check --progress-bar off -q)
 export MAX_JOBS=${MAX_JOBS:-2} CFLAGS=${CFLAGS:--g0}
 
@@ -43,7 +43,7 @@ step() {
 apt_missing() {
   local missing=()
   local package
-  for package in libopenblas-dev libusb-1.0-0 xvfb xauth; do
+  for package in libopenblas-dev libusb-1.0-0 xvfb; do
     dpkg -s "$package" >/dev/null 2>&1 || missing+=("$package")
   done
   command -v freecadcmd >/dev/null 2>&1 || missing+=(freecad)

@@ -191,7 +191,8 @@ def max_rows(num_bytes: int, columns: int = NUM_COLUMNS) -> int:
 def read_point_file(path: str | Path,
                     skip_bad_lines: bool = False,
                     out: np.ndarray | None = None,
-                    columns: int = NUM_COLUMNS) -> tuple[np.ndarray, list[BadLine]]:
+                    columns: int = NUM_COLUMNS,
+                    data: bytes | None = None) -> tuple[np.ndarray, list[BadLine]]:
     """Read an ``x y z r g b`` text file into a float64 (N, 6) array (``columns=3``: ``x y z``
     lines into (N, 3)).
 
@@ -201,12 +202,14 @@ def read_point_file(path: str | Path,
     without any point is an error in both modes, reported as line 1.
 
     With ``out`` (C-contiguous float64, at least ``max_rows(file size)`` x ``columns``), the
-    points are written to its first rows and the returned array is a view of them.
+    points are written to its first rows and the returned array is a view of them. ``data``
+    parses these bytes (e.g. a repaired copy of the file) instead of reading ``path``, which
+    still names the file in errors.
     """
     if columns not in COLUMN_CHOICES:
         raise ValueError(f'columns must be one of {COLUMN_CHOICES}, got {columns}')
     path = Path(path)
-    data = path.read_bytes()
+    data = path.read_bytes() if data is None else data
     if out is None:
         out = np.empty((max_rows(len(data), columns), columns))  # untouched pages cost nothing
     elif len(out) < max_rows(len(data), columns) or out.shape[1] != columns:

@@ -11,7 +11,17 @@ from typing import Sequence
 
 import numpy as np
 
+from projects.synthdet.datasets.s3dis_repairs import KNOWN_STRAY_BYTES
+
 S3DIS_DIR = 'Stanford3dDataset_v1.2_Aligned_Version'
+# objects of the real S3DIS's classes, and `stairs`, which a few of its rooms use
+S3DIS_OBJECTS = ('table', 'chair', 'sofa', 'bookcase', 'board', 'beam', 'column', 'window', 'door',
+                 'stairs')
+# the known defect of the real S3DIS: a stray byte in this file (see s3dis_repairs.py)
+HALLWAY_CEILING = ('Area_5', 'hallway_6', 'Annotations', 'ceiling_1.txt')
+STRAY_OFFSET = KNOWN_STRAY_BYTES[HALLWAY_CEILING]
+STRAY_LINE = 180389
+STRAY_POINT = [1.5, 5.25, 2.75, 210.0, 211.0, 212.0]
 ROOM_TYPES = ('office', 'lab', 'storage', 'conferenceRoom')
 
 # Parts of each object as (size_x, size_y, size_z, z_bottom) boxes centred on the footprint.
@@ -174,3 +184,23 @@ def write_synthetic_area(
         _write_points(area_dir / room_name / f'{room_name}.txt', np.concatenate(room_chunks))
         truth[room_name] = boxes
     return truth
+
+
+def write_hallway_6(data_dir: Path) -> int:
+    """``Area_5/hallway_6`` with a ceiling file whose line 180389 has the stray byte at the byte
+    offset that mmdet3d repairs, in place of the space after its first number; one chair. Returns
+    the number of ceiling points."""
+    ann_dir = data_dir / 'Area_5' / 'hallway_6' / 'Annotations'
+    ann_dir.mkdir(parents=True)
+    # 30- and 31-byte lines so that line 180389 starts 5 bytes before the stray byte
+    short, long = b'1.000 1.000 3.000 200 200 200\n', b'10.000 1.000 3.000 200 200 200\n'
+    num_long = STRAY_OFFSET - 5 - len(short) * (STRAY_LINE - 1)
+    lines = long * num_long + short * (STRAY_LINE - 1 - num_long)
+    stray_line = b'1.500\x105.250 2.750 210 211 212\n'
+    ceiling = lines + stray_line + short * 10
+    assert ceiling[STRAY_OFFSET:STRAY_OFFSET + 1] == b'\x10'
+    assert ceiling[:STRAY_OFFSET].count(b'\n') == STRAY_LINE - 1
+    (ann_dir / 'ceiling_1.txt').write_bytes(ceiling)
+    chair = np.column_stack([np.random.default_rng(0).random((50, 3)), np.full((50, 3), 100)])
+    _write_points(ann_dir / 'chair_1.txt', chair)
+    return STRAY_LINE + 10

@@ -14,6 +14,7 @@ from generator.assets import (ASSET_CLASSES, AssetLibrary, build_library, defaul
                               load_library)
 from generator.assets import chair, printer3d, sofa, table, yumi
 from generator.assets.library import instance_from_params, procedural_params
+from tests.tool_process import run_tool
 
 REPO = Path(__file__).resolve().parents[1]
 MODULES = {'table': table, 'chair': chair, 'sofa': sofa, 'yumi': yumi, '3dprinter': printer3d}
@@ -312,16 +313,8 @@ def test_default_library_is_built_once_and_cached(tmp_path, library):
 
 
 def test_cli_builds_files_and_previews(tmp_path, library):
-    result = subprocess.run([
-        sys.executable, '-m', 'generator.assets', '--out',
-        str(tmp_path / 'lib'), '--instances', '6', '--classes', 'chair', '3dprinter', '--preview',
-        str(tmp_path / 'png')
-    ],
-                            cwd=REPO,
-                            capture_output=True,
-                            text=True,
-                            timeout=300)
-    assert result.returncode == 0, result.stderr
+    result = run_tool('-m', 'generator.assets', '--out', tmp_path / 'lib', '--instances', '6',
+                      '--classes', 'chair', '3dprinter', '--preview', tmp_path / 'png', timeout=300)
     assert sorted(p.name
                   for p in (tmp_path / 'lib').iterdir()) == ['3dprinter.blend', 'chair.blend']
     assert 'chair.blend: 6 instances' in result.stdout

@@ -25,6 +25,7 @@ EXPECTED = {
     'exp2': ([7, 8], 9, 'data/s3dis/', 100000, TRAIN_STEPS),
     'exp2_paper': ([1, 2, 3, 7, 8], 9, 'data/s3dis/', 100000, TRAIN_STEPS),
     'exp3': ([1, 2, 3, 4, 6, 7, 8, 9], 5, 'data/s3dis/', 100000, TRAIN_STEPS),
+    'exp3_finetune': ([1, 2, 3, 4, 6, 7, 8, 9], 5, 'data/s3dis/', 100000, TRAIN_STEPS),
     'exp2_cpu': ([7, 8], 9, 'data/s3dis/', 40000, TRAIN_STEPS),
     'tiny': ([1], 1, 'data/s3dis_tiny/', 10000, [s for s in TRAIN_STEPS if s not in AUGMENTATION]),
 }

@@ -20,6 +20,7 @@ from synthdet.room_data import (Box, Scan, boxes_from_info, boxes_from_meta,
                                 boxes_from_predictions, load_scan)
 from synthdet.room_data import write_labelled_ply as write_ply
 from synthdet.topview import class_colours, draw_top_view
+from tests.tool_process import run_tool
 from tools.demo import SIZES
 
 REPO = Path(__file__).resolve().parents[1]
@@ -385,18 +386,8 @@ def test_top_view_draws_class_colours_and_boxes(tmp_path):
 
 def test_visualize_cli_writes_png_and_ply_and_names_bad_files(tmp_path):
     room = write_room(tmp_path)
-    proc = subprocess.run([
-        sys.executable, 'tools/visualize.py',
-        str(room), '--gt',
-        str(room.parent / 'meta.json'), '--out',
-        str(tmp_path / 'v.png'), '--ply',
-        str(tmp_path / 'v.ply')
-    ],
-                          cwd=REPO,
-                          capture_output=True,
-                          text=True,
-                          timeout=120)
-    assert proc.returncode == 0, proc.stderr
+    proc = run_tool('tools/visualize.py', room, '--gt', room.parent / 'meta.json', '--out',
+                    tmp_path / 'v.png', '--ply', tmp_path / 'v.ply', timeout=120)
     assert '700 points, 1 ground-truth' in proc.stdout
     with Image.open(tmp_path / 'v.png') as image:
         assert image.size[0] > 300

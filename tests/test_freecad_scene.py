@@ -1,4 +1,4 @@
-"""The FreeCAD document as a user opens it (issue 18), with real freecadcmd and the real GUI.
+"""The FreeCAD document as a user opens it, with real freecadcmd and the real GUI.
 
 One room is built through ``python -m configurator freecad``: objects on the floor and on
 tables, an axis-aligned chair, sofa and YuMi (orientation rules), a yawed chair, a floating
@@ -288,6 +288,17 @@ def test_the_gui_opens_the_document_visible_coloured_and_fitted(scene, tmp_path)
     drawn, coloured = _pixel_shares(picture)
     assert drawn > 0.15  # the room fills a good part of the view
     assert coloured > 0.005  # and the class-coloured objects are drawn
+
+
+def test_the_screenshot_ignores_the_qt_settings_of_the_calling_process(scene, tmp_path,
+                                                                      monkeypatch):
+    """OpenCV (imported by mmcv) points Qt at its own plugins; FreeCAD must not load them."""
+    import cv2
+    plugins = Path(cv2.__file__).parent / 'qt' / 'plugins'
+    monkeypatch.setenv('QT_QPA_PLATFORM_PLUGIN_PATH', str(plugins))
+    picture = tmp_path / 'room.png'
+    assert configurator_main(['screenshot', str(scene['document']), '--out', str(picture)]) == 0
+    assert _pixel_shares(picture)[0] > 0.15
 
 
 # ------------------------------------------------- the placement rules alone (standard library)

@@ -1,6 +1,6 @@
 """TR3D really learns: three tiny generated rooms, converted with the real converter, trained with
 tools/train.py (the Runner) on configs/tr3d/tiny.py and tested on themselves with tools/test.py,
-reach mAP@0.25 >= 0.9 with mmdet3d's IndoorMetric (issue 5)."""
+reach mAP@0.25 >= 0.9 with mmdet3d's IndoorMetric."""
 import json
 from pathlib import Path
 

@@ -32,6 +32,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         choices=('raise', 'skip'),
         default='raise',
         help='stop at the first bad input, or skip bad lines/files and report them')
+    s3dis.add_argument(
+        '--extra-tag',
+        default='s3dis',
+        help='name the info pickles <extra-tag>_infos_Area_N.pkl (the configs read s3dis)')
     return parser.parse_args(argv)
 
 
@@ -45,7 +49,8 @@ def main(argv: list[str] | None = None) -> int:
                 args.out_dir,
                 areas=args.areas,
                 workers=args.workers,
-                on_error=args.on_error)
+                on_error=args.on_error,
+                info_prefix=args.extra_tag)
     except (PointFileError, S3DISLayoutError, OutputOverflowError) as error:
         print(f'create_data: error: {error}', file=sys.stderr)
         return 2

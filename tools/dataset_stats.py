@@ -23,9 +23,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('data_root', help='folder holding s3dis_infos_Area_N.pkl')
     parser.add_argument('--areas', type=int, nargs='+', help='areas (default: every pickle found)')
     parser.add_argument('--out', help='write the table to this JSON file and a .txt next to it')
+    parser.add_argument(
+        '--extra-tag', default='s3dis', help='the pickles are <extra-tag>_infos_Area_N.pkl')
     args = parser.parse_args(argv)
     try:
-        counts = count_instances(args.data_root, args.areas)
+        counts = count_instances(args.data_root, args.areas, args.extra_tag)
     except (FileNotFoundError, InfoFileError) as error:
         print(f'dataset_stats: error: {error}', file=sys.stderr)
         return 2

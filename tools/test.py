@@ -1,15 +1,18 @@
 """Evaluate a checkpoint with mmengine's Runner and print the paper's Table 3.
 
 Usage: python tools/test.py CONFIG CHECKPOINT [--work-dir DIR] [--out JSON] [--cfg-options k=v ...]
-                            [--launcher {none,pytorch,slurm,mpi}]
+                            [--show-dir DIR [--score-thr T]] [--launcher {none,pytorch,slurm,mpi}]
 
 The numbers are mmdet3d's IndoorMetric (per-class average precision at 3D IoU 0.25 and 0.5 and
 their mean over the evaluated classes). The table has a row per IoU threshold and a column per
-class plus the mean; a class the test set neither contains nor predicts is shown as "-" (null
-in the JSON), as in the paper (``projects/synthdet/evaluation/table3.py``). The JSON
-(``"format": "synthdet.table3/1"``) goes to ``<work_dir>/table3.json`` unless --out is given,
-the text next to it (``table3.txt``). The checkpoint is loaded weights-only
-(``projects/synthdet/checkpoint.py``): one that holds anything else is refused (exit 2).
+class plus the mean; a class without ground truth in the test set is shown as "-" (null in
+the JSON) and left out of the mean, as in the paper (``projects/synthdet/evaluation/``). The
+JSON (``"format": "synthdet.table3/1"``) goes to ``<work_dir>/table3.json`` unless --out is given,
+the text next to it (``table3.txt``). ``--show-dir`` saves a top-view picture of every test scan
+with its ground truth and the predictions scoring at least ``--score-thr``
+(``projects/synthdet/visualization.py``); the threshold affects the pictures only, as in
+mmdet3d's test tool. The checkpoint is loaded weights-only (``projects/synthdet/checkpoint.py``):
+one that holds anything else is refused (exit 2).
 """
 import argparse
 import sys
@@ -17,6 +20,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
 
+from mmengine.config import Config  # noqa: E402
 from mmengine.dist import is_main_process  # noqa: E402
 from mmengine.model import is_model_wrapper  # noqa: E402
 from mmengine.runner import Runner  # noqa: E402
@@ -26,6 +30,7 @@ from projects.synthdet.bootstrap import (  # noqa: E402
 from projects.synthdet.checkpoint import CheckpointError, load_model_weights  # noqa: E402
 from projects.synthdet.evaluation.table3 import format_table3, table3  # noqa: E402
 from projects.synthdet.evaluation.table_files import write_table  # noqa: E402
+from projects.synthdet.visualization import TopViewHook  # noqa: E402
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -34,8 +39,24 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('config', help='config file, e.g. configs/tr3d/exp2.py')
     parser.add_argument('checkpoint', help='checkpoint file')
     parser.add_argument('--out', help='Table 3 JSON path (default <work_dir>/table3.json)')
+    parser.add_argument(
+        '--show-dir', help='save a top-view picture of every test scan (truth and predictions)')
+    parser.add_argument(
+        '--score-thr',
+        type=float,
+        default=0.1,
+        help='lowest score of the predictions drawn with --show-dir (default 0.1)')
     add_runner_arguments(parser, 'logs and table3.json (default work_dirs/<config>)')
     return parse_runner_args(parser, argv)
+
+
+def add_show_hook(cfg: Config, show_dir: str | None, score_thr: float) -> None:
+    """With ``show_dir``, add the hook that draws every test scan (``TopViewHook``)."""
+    if show_dir:
+        cfg.custom_hooks = [
+            *cfg.get('custom_hooks', []),
+            dict(type=TopViewHook.__name__, out_dir=show_dir, score_thr=score_thr)
+        ]
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -43,6 +64,7 @@ def main(argv: list[str] | None = None) -> dict:
     args = parse_args(argv)
     cfg = runner_config(args)
     cfg.load_from = None  # the weights come from the weights-only load below
+    add_show_hook(cfg, args.show_dir, args.score_thr)
     runner = Runner.from_cfg(cfg)
     load_model_weights(runner.model.module if is_model_wrapper(runner.model) else runner.model,
                        args.checkpoint)

@@ -1,7 +1,12 @@
 """Train a synthdet TR3D model with mmengine's Runner.
 
 Usage: python tools/train.py CONFIG [--work-dir DIR] [--resume [CKPT]] [--trust-checkpoint]
-                             [--cfg-options k=v ...] [--launcher {none,pytorch,slurm,mpi}]
+                             [--cfg-options k=v ...] [--amp] [--auto-scale-lr]
+                             [--launcher {none,pytorch,slurm,mpi}]
+
+``--amp`` trains with mixed precision (mmengine's AmpOptimWrapper, GPUs only) and
+``--auto-scale-lr`` scales the learning rate by the total batch size (processes x batch per
+process) over the config's ``auto_scale_lr.base_batch_size``, as mmdet3d's train tool does.
 
 Checkpoints are loaded weights-only (projects/synthdet/checkpoint.py); ``--trust-checkpoint``
 unpickles the one resumed checkpoint fully, and only one inside the work directory. At the end
@@ -42,13 +47,37 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         action='store_true',
         help='unpickle the resumed checkpoint fully (runs code in it): only for a checkpoint of '
         'your own inside the work dir that the default weights-only load refuses')
+    parser.add_argument(
+        '--amp', action='store_true', help='mixed-precision training (needs a GPU)')
+    parser.add_argument(
+        '--auto-scale-lr',
+        action='store_true',
+        help='scale the learning rate by the total batch size / auto_scale_lr.base_batch_size')
     add_runner_arguments(parser, 'logs and checkpoints (default work_dirs/<config>)')
     return parse_runner_args(parser, argv)
+
+
+def apply_precision_and_lr_options(cfg: Config, amp: bool, auto_scale_lr: bool) -> None:
+    """``--amp``: mmengine's AmpOptimWrapper with a dynamic loss scale; ``--auto-scale-lr``:
+    enable the config's ``auto_scale_lr``. Raises ``ValueError`` where they cannot apply."""
+    if amp:
+        if cfg.optim_wrapper.type != 'AmpOptimWrapper':
+            if cfg.optim_wrapper.type != 'OptimWrapper':
+                raise ValueError(f'--amp needs optim_wrapper.type OptimWrapper, got '
+                                 f'{cfg.optim_wrapper.type}')
+            cfg.optim_wrapper.type = 'AmpOptimWrapper'
+            cfg.optim_wrapper.loss_scale = 'dynamic'
+    if auto_scale_lr:
+        if 'base_batch_size' not in cfg.get('auto_scale_lr', {}):
+            raise ValueError(f'{cfg.filename}: --auto-scale-lr needs '
+                             'auto_scale_lr = dict(enable=False, base_batch_size=N)')
+        cfg.auto_scale_lr.enable = True
 
 
 def build_config(args: argparse.Namespace) -> Config:
     """Load the config and apply the command-line overrides and the resume choice."""
     cfg = runner_config(args)
+    apply_precision_and_lr_options(cfg, args.amp, args.auto_scale_lr)
     if args.resume == 'auto':
         cfg.resume, cfg.load_from = True, None
     elif args.resume:
@@ -74,18 +103,25 @@ def publish_final_checkpoint(work_dir: str | Path) -> Path | None:
 def main(argv: list[str] | None = None) -> int:
     """Build the Runner from the config, train, and publish the final inference checkpoint.
 
-    Returns 0, or 2 with a one-line message for a checkpoint the weights-only load refuses.
+    Returns 0, or 2 with a one-line message for a bad option or a checkpoint the weights-only
+    load refuses.
     """
+    args = parse_args(argv)
+    if args.amp and not torch.cuda.is_available():
+        print('train: error: --amp needs a CUDA GPU (mmengine\'s AmpOptimWrapper); none found',
+              file=sys.stderr)
+        return 2
     try:
-        cfg = build_config(parse_args(argv))
+        cfg = build_config(args)
+    except (CheckpointError, ValueError) as error:
+        print(f'train: error: {error}', file=sys.stderr)
+        return 2
+    try:
         with torch.serialization.safe_globals(TRAINING_CHECKPOINT_TYPES):
             Runner.from_cfg(cfg).train()
-    except CheckpointError as error:
-        print(f'train.py: error: {error}', file=sys.stderr)
-        return 2
     except pickle.UnpicklingError as error:  # raised by mmengine's weights-only resume
         hint = 'if it is your own, resume it with --trust-checkpoint'
-        print(f'train.py: error: {refused(cfg.load_from or cfg.work_dir, error, hint)}',
+        print(f'train: error: {refused(cfg.load_from or cfg.work_dir, error, hint)}',
               file=sys.stderr)
         return 2
     if is_main_process():

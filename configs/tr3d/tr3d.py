@@ -13,7 +13,10 @@
 # Experiments (data, classes, label2level) are in exp1.py, exp2.py, exp3.py.
 _base_ = ['mmdet3d::_base_/default_runtime.py']
 custom_imports = dict(
-    imports=['projects.synthdet.datasets.synthdet_s3dis', 'projects.synthdet.models'],
+    imports=[
+        'projects.synthdet.datasets.synthdet_s3dis', 'projects.synthdet.models',
+        'projects.synthdet.evaluation.indoor_metric'
+    ],
     allow_failed_imports=False)
 
 voxel_size = 0.01
@@ -47,6 +50,10 @@ optim_wrapper = dict(
     clip_grad=dict(max_norm=10, norm_type=2))
 param_scheduler = dict(
     type='MultiStepLR', begin=0, end=12, by_epoch=True, milestones=[8, 11], gamma=0.1)
+
+# TR3D's S3DIS batch: 16 rooms on one GPU. `tools/train.py --auto-scale-lr` scales the learning
+# rate by (processes x train_dataloader.batch_size) / 16.
+auto_scale_lr = dict(enable=False, base_batch_size=16)
 
 train_cfg = dict(type='EpochBasedTrainLoop', max_epochs=5, val_interval=1)
 val_cfg = dict(type='ValLoop')

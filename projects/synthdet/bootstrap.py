@@ -11,6 +11,8 @@ from pathlib import Path
 
 from mmengine.config import Config, DictAction
 
+from projects.synthdet.distributed import prepare_distributed
+
 
 def add_cfg_options(parser: argparse.ArgumentParser) -> None:
     """Add ``--cfg-options key=value ...``."""
@@ -52,9 +54,11 @@ def load_config(path: str | Path, cfg_options: dict | None = None) -> Config:
 
 def runner_config(args: argparse.Namespace) -> Config:
     """The config for mmengine's Runner: ``load_config`` plus the launcher and the work dir
-    (``--work-dir``, else the config's ``work_dir``, else ``work_dirs/<config name>``)."""
+    (``--work-dir``, else the config's ``work_dir``, else ``work_dirs/<config name>``); on a
+    machine without CUDA a ``pytorch`` launcher uses gloo (``distributed.prepare_distributed``)."""
     cfg = load_config(args.config, args.cfg_options)
     cfg.launcher = args.launcher
+    prepare_distributed(cfg)
     if args.work_dir:
         cfg.work_dir = args.work_dir
     elif cfg.get('work_dir') is None:

@@ -9,11 +9,13 @@ and writes, in ``out_dir``, for every room:
 - ``instance_mask/Area_N_<room>.bin``: int64, annotation files numbered 1..K in natural file
   order (structural ones included; 0 means unannotated), like mmdet3d's collect step;
 
-and per area ``s3dis_infos_Area_N.pkl`` in the format mmdet3d 1.4's ``update_infos_to_v2``
-writes for S3DIS. Boxes are the axis-aligned min/max of each detection instance's points.
-An annotation file's class is its name minus the ``_<index>.txt`` suffix (matched without
-regard to case). The pickles do not depend on the number of workers; worker processes end with
-their parent, and leftover ``.partial`` files of the converted areas are removed at the start.
+and per area ``s3dis_infos_Area_N.pkl`` (``<info_prefix>_infos_Area_N.pkl``) in the format
+mmdet3d 1.4's ``update_infos_to_v2`` writes for S3DIS. The known stray byte of the real S3DIS
+(``Area_5/hallway_6``) is repaired in memory as mmdet3d's converter does (``s3dis_repairs``).
+Boxes are the axis-aligned min/max of each detection instance's points. An annotation file's
+class is its name minus the ``_<index>.txt`` suffix (matched without regard to case). The
+pickles do not depend on the number of workers; worker processes end with their parent, and
+leftover ``.partial`` files of the converted areas are removed at the start.
 Importing this module needs numpy and numba only (no torch, no mmdet3d).
 """
 import os
@@ -33,6 +35,8 @@ from synthdet.classes import DETECTION_CLASSES, FALLBACK_CLASS, SEMANTIC_CLASSES
 from synthdet.point_text import PointFileError, compile_parser, max_rows, read_point_file
 from synthdet.processes import die_with_parent
 from synthdet.room_data import annotation_class, annotation_files, natural_key
+
+from .s3dis_repairs import repaired_point_text
 
 S3DIS_DIR = 'Stanford3dDataset_v1.2_Aligned_Version'
 OUTPUT_DIRS = ('points', 'instance_mask', 'semantic_mask')
@@ -70,6 +74,7 @@ class ConversionSummary:
     instances_per_class: Counter = field(default_factory=Counter)
     skipped: list[SkippedInput] = field(default_factory=list)
     unknown_classes: dict[str, list[str]] = field(default_factory=dict)
+    repaired: list[str] = field(default_factory=list)
 
     def report(self) -> str:
         """Human-readable multi-line summary."""
@@ -83,6 +88,9 @@ class ConversionSummary:
         for name, files in sorted(self.unknown_classes.items()):
             lines.append(f'unknown class {name!r} converted as {FALLBACK_CLASS}: {len(files)} '
                          f'file(s), e.g. {files[0]}')
+        lines += [
+            f'repaired the known stray byte of {path} (as mmdet3d does)' for path in self.repaired
+        ]
         if self.skipped:
             lines.append(f'skipped {len(self.skipped)} input(s):')
             lines += [
@@ -99,6 +107,7 @@ class RoomResult:
     instances: list[dict]
     skipped: list[SkippedInput]
     unknown: dict[str, list[str]]
+    repaired: list[str] = field(default_factory=list)
 
 
 def find_areas(root_path: str | Path) -> list[int]:
@@ -146,6 +155,7 @@ class _RoomPoints:
     counts: list[int]  # its number of points
     skipped: list[SkippedInput]
     unknown: dict[str, list[str]]
+    repaired: list[str] = field(default_factory=list)
 
 
 def _read_room(room_dir: Path, skip: bool) -> _RoomPoints:
@@ -168,8 +178,12 @@ def _read_room(room_dir: Path, skip: bool) -> _RoomPoints:
             room.unknown.setdefault(class_name, []).append(str(path))
             class_name = FALLBACK_CLASS
         offset = sum(room.counts)
+        repaired = repaired_point_text(path)
+        if repaired is not None:
+            room.repaired.append(str(path))
         try:
-            points, bad_lines = read_point_file(path, skip_bad_lines=skip, out=buffer[offset:])
+            points, bad_lines = read_point_file(
+                path, skip_bad_lines=skip, out=buffer[offset:], data=repaired)
         except PointFileError as error:
             if not skip:
                 raise
@@ -218,7 +232,7 @@ def convert_room(room_dir: Path, name: str, out_dir: Path, skip: bool) -> RoomRe
         return RoomResult(name, 0, [], room.skipped, room.unknown)
     for array, path in zip((points, instance, semantic), _partial_paths(out_dir, name)):
         array.tofile(path)
-    return RoomResult(name, len(points), instances, room.skipped, room.unknown)
+    return RoomResult(name, len(points), instances, room.skipped, room.unknown, room.repaired)
 
 
 def _check_float32(points: np.ndarray, instances: list[dict], room: _RoomPoints) -> None:
@@ -276,8 +290,14 @@ def _run(tasks: list, pool: ProcessPoolExecutor | None) -> Iterator[RoomResult]:
     return pool.map(_convert_room_task, tasks)
 
 
-def _convert_area(area: int, rooms: list[str], data_dir: Path, out_dir: Path, skip: bool,
-                  pool: ProcessPoolExecutor | None, progress: tqdm) -> list[RoomResult]:
+def _convert_area(area: int,
+                  rooms: list[str],
+                  data_dir: Path,
+                  out_dir: Path,
+                  skip: bool,
+                  pool: ProcessPoolExecutor | None,
+                  progress: tqdm,
+                  info_prefix: str = 's3dis') -> list[RoomResult]:
     names = [f'Area_{area}_{room}' for room in rooms]
     tasks = [(data_dir / f'Area_{area}' / room, name, out_dir, skip)
              for room, name in zip(rooms, names)]
@@ -299,16 +319,16 @@ def _convert_area(area: int, rooms: list[str], data_dir: Path, out_dir: Path, sk
     _write_pickle_atomic({
         'metainfo': info_metainfo(),
         'data_list': data_list
-    }, out_dir / f's3dis_infos_Area_{area}.pkl')
+    }, out_dir / f'{info_prefix}_infos_Area_{area}.pkl')
     return results
 
 
-def _remove_partials_of_areas(out_dir: Path, areas: Iterable[int]) -> None:
+def _remove_partials_of_areas(out_dir: Path, areas: Iterable[int], info_prefix: str) -> None:
     for area in areas:
         for sub in OUTPUT_DIRS:
             for partial in (out_dir / sub).glob(f'Area_{area}_*.bin{PARTIAL_SUFFIX}'):
                 partial.unlink(missing_ok=True)
-        (out_dir / f's3dis_infos_Area_{area}.pkl{PARTIAL_SUFFIX}').unlink(missing_ok=True)
+        (out_dir / f'{info_prefix}_infos_Area_{area}.pkl{PARTIAL_SUFFIX}').unlink(missing_ok=True)
 
 
 def _remove_partials(out_dir: Path, names: Iterable[str]) -> None:
@@ -321,7 +341,8 @@ def convert_s3dis(root_path: str | Path,
                   out_dir: str | Path,
                   areas: Sequence[int] | None = None,
                   workers: int = 1,
-                  on_error: str = 'raise') -> ConversionSummary:
+                  on_error: str = 'raise',
+                  info_prefix: str = 's3dis') -> ConversionSummary:
     """Convert S3DIS-format areas under ``root_path`` to .bin files and info pickles in ``out_dir``.
 
     Args:
@@ -332,6 +353,8 @@ def convert_s3dis(root_path: str | Path,
         on_error: ``'raise'`` stops at the first bad input with an error naming file and line;
             ``'skip'`` leaves out bad lines, empty files and unreadable rooms and lists them in
             the summary. Either way an area's outputs appear only once the area is complete.
+        info_prefix: the info pickles are ``<info_prefix>_infos_Area_N.pkl`` (mmdet3d's
+            ``--extra-tag``).
 
     Annotation files of unknown classes are converted as clutter, with one
     :class:`UnknownClassWarning` for the whole run.
@@ -353,7 +376,7 @@ def convert_s3dis(root_path: str | Path,
         (out_dir / sub).mkdir(parents=True, exist_ok=True)
     summary = ConversionSummary()
     compile_parser()  # once here rather than in every worker
-    _remove_partials_of_areas(out_dir, areas)  # leftovers of a killed run
+    _remove_partials_of_areas(out_dir, areas, info_prefix)  # leftovers of a killed run
     pool = ProcessPoolExecutor(
         workers, initializer=die_with_parent, initargs=(os.getpid(), )) if workers > 1 else None
     try:
@@ -362,13 +385,14 @@ def convert_s3dis(root_path: str | Path,
                 unit='room') as progress:
             for area in areas:
                 results = _convert_area(area, rooms[area], data_dir, out_dir, on_error == 'skip',
-                                        pool, progress)
+                                        pool, progress, info_prefix)
                 summary.rooms_per_area[area] = sum(r.num_points > 0 for r in results)
                 for result in results:
                     summary.num_points += result.num_points
                     summary.instances_per_class.update(DETECTION_CLASSES[inst['bbox_label_3d']]
                                                        for inst in result.instances)
                     summary.skipped += result.skipped
+                    summary.repaired += result.repaired
                     for name, files in result.unknown.items():
                         summary.unknown_classes.setdefault(name, []).extend(files)
     finally:

@@ -35,31 +35,33 @@ def load_info_pickle(path: str | Path) -> dict:
     return infos
 
 
-def info_path(data_root: str | Path, area: int) -> Path:
-    return Path(data_root) / f's3dis_infos_Area_{area}.pkl'
+def info_path(data_root: str | Path, area: int, prefix: str = 's3dis') -> Path:
+    return Path(data_root) / f'{prefix}_infos_Area_{area}.pkl'
 
 
-def find_info_areas(data_root: str | Path) -> list[int]:
-    """Areas N with an ``s3dis_infos_Area_N.pkl`` in data_root, sorted."""
+def find_info_areas(data_root: str | Path, prefix: str = 's3dis') -> list[int]:
+    """Areas N with a ``<prefix>_infos_Area_N.pkl`` in data_root, sorted."""
     names = (
-        p.name[len('s3dis_infos_Area_'):-len('.pkl')]
-        for p in Path(data_root).glob('s3dis_infos_Area_*.pkl'))
+        p.name[len(f'{prefix}_infos_Area_'):-len('.pkl')]
+        for p in Path(data_root).glob(f'{prefix}_infos_Area_*.pkl'))
     return sorted(int(n) for n in names if n.isdigit())
 
 
 def count_instances(data_root: str | Path,
-                    areas: Sequence[int] | None = None) -> dict[int, Counter]:
-    """Count detection instances per class name in each area's info pickle.
+                    areas: Sequence[int] | None = None,
+                    prefix: str = 's3dis') -> dict[int, Counter]:
+    """Count detection instances per class name in each area's info pickle
+    (``<prefix>_infos_Area_N.pkl``, the ``--extra-tag`` of ``tools/create_data.py``).
 
     Label ids are resolved through the pickle's own ``metainfo['categories']``; instances
     labelled -1 (ignored classes) are not counted.
     """
-    areas = find_info_areas(data_root) if areas is None else list(areas)
+    areas = find_info_areas(data_root, prefix) if areas is None else list(areas)
     if not areas:
-        raise FileNotFoundError(f'{data_root}: no s3dis_infos_Area_N.pkl found')
+        raise FileNotFoundError(f'{data_root}: no {prefix}_infos_Area_N.pkl found')
     counts = {}
     for area in areas:
-        path = info_path(data_root, area)
+        path = info_path(data_root, area, prefix)
         if not path.is_file():
             raise FileNotFoundError(f'{path}: info pickle not found (run tools/create_data.py)')
         infos = load_info_pickle(path)
