@@ -13,6 +13,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import zipfile
 from pathlib import Path
 from typing import Iterator
 
@@ -91,6 +92,10 @@ def screenshot(document: Path,
     document, out = Path(document).resolve(), Path(out).resolve()
     if not document.is_file():
         raise ValueError(f'{document}: document not found')
+    if not zipfile.is_zipfile(document) or 'Document.xml' not in zipfile.ZipFile(
+            document).namelist():
+        raise ValueError(f'{document}: not a FreeCAD document (an .FCStd is a zip holding '
+                         'Document.xml)')
     if out.suffix.lower() != '.png':
         raise ValueError(f'{out}: the picture must end with .png')
     if not (16 <= width <= 8000 and 16 <= height <= 8000):
@@ -130,7 +135,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = screenshot(args.document, args.out, args.width, args.height, args.freecad,
                             args.timeout)
-    except (ValueError, FreecadFailed) as error:
+    except ValueError as error:  # bad arguments: exit 2 (README, "Safety")
+        print(f'error: {error}', file=sys.stderr)
+        return 2
+    except (FreecadFailed, OSError) as error:
         print(f'error: {error}', file=sys.stderr)
         return 1
     print(f'wrote {args.out}: {result["visible"]} of {result["objects"]} objects visible')

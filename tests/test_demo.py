@@ -404,4 +404,4 @@ def test_visualize_cli_writes_png_and_ply_and_names_bad_files(tmp_path):
                           capture_output=True,
                           text=True,
                           timeout=120)
-    assert proc.returncode == 1 and 'bad.pred.json: detections[0]: missing key' in proc.stderr
+    assert proc.returncode == 2 and 'bad.pred.json: detections[0]: missing key' in proc.stderr

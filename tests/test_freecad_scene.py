@@ -345,11 +345,12 @@ def test_a_chair_under_a_table_faces_it_and_its_backrest_clears_the_top(scene):
         in scene['warnings']
 
 
-def test_the_screenshot_command_reports_a_file_freecad_cannot_open(tmp_path, capsys):
+def test_the_screenshot_command_refuses_a_file_that_is_no_document(tmp_path, capsys):
     bad = tmp_path / 'broken.FCStd'
     bad.write_text('not a FreeCAD document', encoding='utf-8')
     picture = tmp_path / 'broken.png'
-    assert configurator_main(['screenshot', str(bad), '--out', str(picture)]) == 1
+    assert configurator_main(['screenshot', str(bad), '--out', str(picture)]) == 2
     error = capsys.readouterr().err
-    assert error.startswith(f'error: {bad}: FreeCAD cannot open it: ') and error.count('\n') == 1
+    assert error.startswith(f'error: {bad}: not a FreeCAD document') and error.count('\n') == 1
     assert not picture.exists()
+

@@ -56,7 +56,10 @@ def main(argv: list[str] | None = None) -> int:
         draw_top_view(args.out, scan, gt, pred, corners, args.colour_by, args.title)
         if args.ply:
             write_labelled_ply(args.ply, scan)
-    except (OSError, ValueError, KeyError) as error:
+    except (ValueError, KeyError) as error:  # a bad input file: exit 2 (README, "Safety")
+        print(f'visualize: error: {error}', file=sys.stderr)
+        return 2
+    except OSError as error:  # e.g. an unwritable output: exit 1
         print(f'visualize: error: {error}', file=sys.stderr)
         return 1
     print(f'wrote {args.out} ({len(scan.points)} points, {len(gt)} ground-truth and '
