@@ -40,12 +40,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help='skip detections scoring below this (default 0.3)')
     parser.add_argument(
         '--wall-thickness', type=float, default=0.1, help='wall thickness in metres (default 0.1)')
+    add_program_options(parser, 'freecadcmd', 'FreeCAD command-line executable', timeout=900.0)
+
+
+def add_program_options(parser: argparse.ArgumentParser, program: str, what: str,
+                        timeout: float) -> None:
+    """``--<program>`` (default: ``$SYNTHDET_<PROGRAM>``, else ``program``) and ``--timeout``."""
     parser.add_argument(
-        '--freecadcmd',
-        default=os.environ.get('SYNTHDET_FREECADCMD', 'freecadcmd'),
-        help='FreeCAD command-line executable (default: freecadcmd)')
+        f'--{program}',
+        default=os.environ.get(f'SYNTHDET_{program.upper()}', program),
+        help=f'{what} (default: {program})')
     parser.add_argument(
-        '--timeout', type=float, default=900.0, help='seconds to wait for FreeCAD (default 900)')
+        '--timeout',
+        type=float,
+        default=timeout,
+        help=f'seconds to wait for FreeCAD (default {timeout:.0f})')
 
 
 def _check_scan(scan: Path) -> None:

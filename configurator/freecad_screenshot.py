@@ -17,7 +17,7 @@ import zipfile
 from pathlib import Path
 from typing import Iterator
 
-from configurator.freecad_cli import FreecadFailed, run_freecad_process
+from configurator.freecad_cli import FreecadFailed, add_program_options, run_freecad_process
 
 GUI_SCRIPT = Path(__file__).resolve().parent / 'freecad' / 'screenshot_gui.py'
 # A user configuration that opens no Start page (its web view cannot start as root).
@@ -35,12 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--out', required=True, help='PNG to write')
     parser.add_argument('--width', type=int, default=1000, help='pixels (default 1000)')
     parser.add_argument('--height', type=int, default=750, help='pixels (default 750)')
-    parser.add_argument(
-        '--freecad',
-        default=os.environ.get('SYNTHDET_FREECAD', 'freecad'),
-        help='FreeCAD GUI executable (default: freecad)')
-    parser.add_argument(
-        '--timeout', type=float, default=300.0, help='seconds to wait for FreeCAD (default 300)')
+    add_program_options(parser, 'freecad', 'FreeCAD GUI executable', timeout=300.0)
 
 
 @contextlib.contextmanager
