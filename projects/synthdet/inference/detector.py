@@ -1,0 +1,58 @@
+"""A model as a detector function of :mod:`projects.synthdet.inference.windows`.
+
+Each call runs the config's test pipeline (``PointSample`` with the training number of points,
+colour normalisation) through mmdet3d's ``inference_detector`` on the given points, shifted so
+that their minimum is at the origin like the converted training data, and shifts the boxes back.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+from mmdet3d.apis import inference_detector
+from mmengine.runner import set_random_seed
+
+from projects.synthdet.inference.windows import Detections, WindowSpec, detect_in_windows
+
+
+class ModelDetector:
+    """``detector(points) -> Detections`` for an initialised mmdet3d model.
+
+    Every call reseeds the point sampling with ``seed``, so a scan (or a window) gives the same
+    detections whatever was detected before it. Boxes scoring below ``score_thr`` are dropped.
+    """
+
+    def __init__(self, model: torch.nn.Module, score_thr: float, seed: int = 0):
+        self.model = model
+        self.score_thr = score_thr
+        self.seed = seed
+
+    @property
+    def classes(self) -> list[str]:
+        return list(self.model.dataset_meta['classes'])
+
+    @property
+    def iou_thr(self) -> float:
+        """The NMS threshold of the model's head, used to merge windows alike."""
+        return float(self.model.cfg.model.test_cfg.iou_thr)
+
+    def __call__(self, points: np.ndarray) -> Detections:
+        shift = points[:, :3].min(axis=0)
+        shifted = points.astype(np.float32)
+        shifted[:, :3] = points[:, :3] - shift
+        set_random_seed(self.seed)
+        result, _ = inference_detector(self.model, shifted)
+        pred = result.pred_instances_3d
+        keep = pred.scores_3d >= self.score_thr
+        boxes = pred.bboxes_3d[keep]
+        centres = boxes.gravity_center.cpu().numpy().astype(np.float64) + shift
+        dims = boxes.dims.cpu().numpy().astype(np.float64)
+        yaws = boxes.yaw.cpu().numpy().astype(np.float64)[:, None]
+        scores = pred.scores_3d[keep].cpu().numpy().astype(np.float64)
+        labels = pred.labels_3d[keep].cpu().numpy().astype(np.int64)
+        order = np.argsort(-scores, kind='stable')
+        return Detections(np.hstack([centres, dims, yaws])[order], scores[order], labels[order])
+
+    def detect(self, points: np.ndarray, spec: WindowSpec, progress: bool = True) -> Detections:
+        """Detect in ``points`` by windows of ``spec`` (one window for a room-sized scan)."""
+        detections, _ = detect_in_windows(points, self, spec, self.iou_thr, progress)
+        return detections
