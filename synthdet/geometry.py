@@ -142,3 +142,71 @@ def grid_cells(polygon: np.ndarray) -> list[np.ndarray]:
             if points_in_polygon(np.array([[(x0 + x1) / 2, (y0 + y1) / 2]]), polygon)[0]:
                 cells.append(np.array([[x0, y0], [x0, y1], [x1, y1], [x1, y0]]))
     return cells
+
+
+def rotation_z(yaw: float) -> np.ndarray:
+    """The 3x3 matrix turning vectors counter-clockwise about z by ``yaw`` radians."""
+    import numpy as np
+    rotation = np.eye(3)
+    rotation[:2, :2] = rotation2d(yaw)
+    return rotation
+
+
+def rotation_between(a: Sequence[float], b: Sequence[float]) -> np.ndarray:
+    """The 3x3 rotation turning the direction ``a`` onto ``b`` by the smallest angle (about
+    their common normal; a half turn about a perpendicular axis when they are opposite)."""
+    import numpy as np
+    a = np.asarray(a, dtype=np.float64) / np.linalg.norm(a)
+    b = np.asarray(b, dtype=np.float64) / np.linalg.norm(b)
+    axis = np.cross(a, b)
+    sine, cosine = float(np.linalg.norm(axis)), float(a @ b)
+    if sine < 1e-12:
+        if cosine > 0:
+            return np.eye(3)
+        helper = np.eye(3)[int(np.argmin(np.abs(a)))]
+        axis = np.cross(a, helper) / np.linalg.norm(np.cross(a, helper))
+        return 2.0 * np.outer(axis, axis) - np.eye(3)  # half turn about axis
+    axis /= sine
+    cross = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + sine * cross + (1 - cosine) * cross @ cross
+
+
+def projection_sharpness(values: np.ndarray, weights: np.ndarray | None, cell: float) -> float:
+    """Sum of squared ``weights`` (default 1) per ``cell``-wide bin of 1D ``values``: large
+    when the values pile up on a few levels (planes seen edge-on). Bins are counted over
+    their range when it is small, else by sorting, so far stray values cost no memory."""
+    import numpy as np
+    bins = np.floor(values / cell).astype(np.int64)
+    low, high = (int(bins.min()), int(bins.max())) if len(bins) else (0, 0)
+    if high - low <= 4 * len(bins) + 1024:
+        counts = np.bincount(bins - low, weights)
+    else:
+        _, inverse = np.unique(bins, return_inverse=True)
+        counts = np.bincount(inverse.ravel(), weights)
+    return float(np.square(counts).sum())
+
+
+def dominant_direction(xy: np.ndarray, cell: float = 0.02) -> float:
+    """Direction in [0, pi/2) of the dominant (Manhattan) walls of 2D wall points.
+
+    The points are pooled into occupied ``cell`` squares (a hash of the cells, so memory
+    follows the points, not their bounding box); for each candidate angle the cells are
+    projected onto the two rotated axes and the angle with the sharpest projections wins: a
+    1 degree sweep, then a 0.05 degree refinement.
+    """
+    import numpy as np
+    xy = np.asarray(xy, dtype=np.float64)
+    cells, counts = np.unique(np.floor(xy / cell).astype(np.int64), axis=0, return_counts=True)
+    centres = (cells - cells[len(cells) // 2]) * cell
+    weights = counts.astype(np.float64)
+
+    def sharpness(theta: float) -> float:
+        c, s = np.cos(theta), np.sin(theta)
+        return projection_sharpness(centres @ [c, s], weights, cell) + \
+            projection_sharpness(centres @ [-s, c], weights, cell)
+
+    coarse = np.radians(np.arange(0.0, 90.0, 1.0))
+    best = coarse[int(np.argmax([sharpness(t) for t in coarse]))]
+    fine = best + np.radians(np.arange(-1.0, 1.0001, 0.05))
+    best = fine[int(np.argmax([sharpness(t) for t in fine]))]
+    return float(best % (np.pi / 2))

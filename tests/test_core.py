@@ -335,19 +335,20 @@ def test_bad_binary_and_other_files(tmp_path):
     path.write_bytes(b'not a ply file')
     with pytest.raises(ScanFormatError, match='bad.ply: not a readable PLY'):
         read_scan(path)
-    path = tmp_path / 'scan.las'
+    path = tmp_path / 'scan.obj'
     path.write_bytes(b'\0')
-    with pytest.raises(ScanFormatError, match="unknown scan type '.las'"):
+    with pytest.raises(ScanFormatError, match="unknown scan type '.obj'"):
         read_scan(path)
     with pytest.raises(FileNotFoundError, match='missing.txt'):
         read_scan(tmp_path / 'missing.txt')
 
 
 def test_a_new_format_is_one_table_entry(tmp_path, monkeypatch):
-    monkeypatch.setitem(scan_io.READERS, '.xyz',
-                        lambda path: np.loadtxt(path, ndmin=2, delimiter=',', usecols=range(6)))
-    path = tmp_path / 'scan.xyz'
-    path.write_text('1,2,3,10,20,30\n')
+    monkeypatch.setitem(
+        scan_io.READERS, '.tsv', lambda path, chunk_points, columns, notes: iter(
+            [np.loadtxt(path, ndmin=2, delimiter='\t', usecols=range(6))]))
+    path = tmp_path / 'scan.tsv'
+    path.write_text('1\t2\t3\t10\t20\t30\n')
     np.testing.assert_array_equal(read_scan(path), [[1, 2, 3, 10, 20, 30]])
 
 
