@@ -147,6 +147,24 @@ def corners_for_scan(scan_path: str | os.PathLike, params: CornerParams | None =
     return outline_to_dict(outline, str(scan_path))
 
 
+def corners_for_prepared(prepared, scan: str, params: CornerParams | None = None) -> dict:
+    """The ``synthdet.corners/1`` dictionary of a ``synthdet.prepare.PreparedScan``: the outline
+    is found in the prepared frame (levelled, walls along the axes) and written in the scan's
+    own coordinates; the levels are the heights of the floor and ceiling at the outline's
+    centre."""
+    outline = detect_corners(prepared.points, params)
+    centre = outline.corners.mean(axis=0)
+    levels = prepared.points_to_scan(
+        np.array([[*centre, outline.floor_z], [*centre, outline.ceiling_z]]))
+    in_scan = RoomOutline(
+        corners=_canonical_order(prepared.points_to_scan(outline.corners)),
+        floor_z=float(levels[0, 2]),
+        ceiling_z=float(levels[1, 2]),
+        wall_angle=float((outline.wall_angle + prepared.yaw) % (math.pi / 2)),
+        quality=outline.quality)
+    return outline_to_dict(in_scan, scan)
+
+
 def outline_to_dict(outline: RoomOutline, scan: str) -> dict:
     """The ``synthdet.corners/1`` dictionary of an outline found in the scan ``scan``."""
     return {

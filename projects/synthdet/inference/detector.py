@@ -12,6 +12,8 @@ from mmdet3d.apis import inference_detector
 from mmengine.runner import set_random_seed
 
 from projects.synthdet.inference.windows import Detections, WindowSpec, detect_in_windows
+from synthdet.contracts import PREDICTIONS_FORMAT
+from synthdet.prepare import PreparedScan
 
 
 class ModelDetector:
@@ -56,3 +58,34 @@ class ModelDetector:
         """Detect in ``points`` by windows of ``spec`` (one window for a room-sized scan)."""
         detections, _ = detect_in_windows(points, self, spec, self.iou_thr, progress)
         return detections
+
+    def predictions(self,
+                    prepared: PreparedScan,
+                    spec: WindowSpec,
+                    model_name: str,
+                    progress: bool = True) -> dict:
+        """The ``synthdet.predictions/1`` document of a prepared scan, detected by windows."""
+        return {
+            'format': PREDICTIONS_FORMAT,
+            'scan': prepared.source,
+            'model': model_name,
+            'classes': self.classes,
+            'detections': self.detect_scan(prepared, spec, progress),
+        }
+
+    def detect_scan(self, prepared: PreparedScan, spec: WindowSpec,
+                    progress: bool = True) -> list[dict]:
+        """Detect in a prepared scan by windows; the ``synthdet.predictions/1`` detections in
+        the scan's own coordinates (centres moved back exactly, yaws turned by the scan's)."""
+        found = self.detect(prepared.points, spec, progress)
+        centres, sizes, yaws = prepared.boxes_to_scan(found.boxes[:, :3], found.boxes[:, 3:6],
+                                                      found.boxes[:, 6])
+        classes = self.classes
+        return [{
+            'class': classes[label],
+            'score': round(float(score), 6),
+            'center': [round(float(v), 6) for v in centre],
+            'size': [round(float(v), 6) for v in size],
+            'yaw': round(float(yaw), 6),
+        } for label, score, centre, size, yaw in zip(found.labels, found.scores, centres, sizes,
+                                                     yaws)]
