@@ -27,6 +27,8 @@ from scipy import ndimage
 from synthdet.contracts import CORNERS_FORMAT
 from synthdet.geometry import (distance_to_polygon, first_self_crossing, points_in_polygon,
                                rotation2d, signed_area)
+from synthdet.prepare import PreparedScan, prepare_scan
+from synthdet.scan_io import load_scan
 
 
 class CornerDetectionError(ValueError):
@@ -140,29 +142,44 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
         quality=quality)
 
 
-def corners_for_scan(scan_path: str | os.PathLike, params: CornerParams | None = None) -> dict:
-    """Read a scan file and return its ``synthdet.corners/1`` dictionary."""
-    from synthdet.scan_io import read_scan
-    outline = detect_corners(read_scan(scan_path), params)
+SCAN_VOXEL = 0.02  # metres: scans are read keeping one point per voxel of this size
+
+
+def corners_for_scan(scan_path: str | os.PathLike,
+                     params: CornerParams | None = None,
+                     *,
+                     voxel: float | None = SCAN_VOXEL,
+                     columns: str | None = None) -> dict:
+    """Read and prepare a scan file and return its ``synthdet.corners/1`` dictionary, in the
+    scan's own coordinates."""
+    outline, _ = scan_outline(scan_path, params, voxel=voxel, columns=columns)
     return outline_to_dict(outline, str(scan_path))
 
 
-def corners_for_prepared(prepared, scan: str, params: CornerParams | None = None) -> dict:
-    """The ``synthdet.corners/1`` dictionary of a ``synthdet.prepare.PreparedScan``: the outline
-    is found in the prepared frame (levelled, walls along the axes) and written in the scan's
-    own coordinates; the levels are the heights of the floor and ceiling at the outline's
-    centre."""
-    outline = detect_corners(prepared.points, params)
+def scan_outline(scan_path: str | os.PathLike,
+                 params: CornerParams | None = None,
+                 *,
+                 voxel: float | None = SCAN_VOXEL,
+                 columns: str | None = None) -> tuple[RoomOutline, PreparedScan]:
+    """Stream a scan (``synthdet.scan_io.load_scan``), prepare it (``synthdet.prepare``: no
+    outliers, z up, floor level, walls along the axes), find its outline there and return
+    the outline in the scan's own coordinates with the prepared scan."""
+    prepared = prepare_scan(load_scan(scan_path, voxel=voxel, columns=columns))
+    return outline_in_scan(detect_corners(prepared.points, params), prepared), prepared
+
+
+def outline_in_scan(outline: RoomOutline, prepared: PreparedScan) -> RoomOutline:
+    """An outline found in the prepared frame, in the scan's coordinates: corners on the
+    floor, floor and ceiling heights at the room's centre (exact for a level scan)."""
+    corners = _canonical_order(prepared.points_to_scan(outline.corners))
     centre = outline.corners.mean(axis=0)
     levels = prepared.points_to_scan(
-        np.array([[*centre, outline.floor_z], [*centre, outline.ceiling_z]]))
-    in_scan = RoomOutline(
-        corners=_canonical_order(prepared.points_to_scan(outline.corners)),
-        floor_z=float(levels[0, 2]),
-        ceiling_z=float(levels[1, 2]),
-        wall_angle=float((outline.wall_angle + prepared.yaw) % (math.pi / 2)),
-        quality=outline.quality)
-    return outline_to_dict(in_scan, scan)
+        np.array([[centre[0], centre[1], outline.floor_z],
+                  [centre[0], centre[1], outline.ceiling_z]]))
+    angle = (outline.wall_angle + prepared.yaw) % (math.pi / 2)
+    return RoomOutline(corners=corners, floor_z=float(levels[0, 2]),
+                       ceiling_z=float(levels[1, 2]), wall_angle=float(angle),
+                       quality=dict(outline.quality))
 
 
 def outline_to_dict(outline: RoomOutline, scan: str) -> dict:

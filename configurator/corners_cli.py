@@ -1,20 +1,31 @@
 """Find a scan's room corners and floor/ceiling levels and write them as synthdet.corners/1 JSON.
 
 Usage: ``python -m configurator corners SCAN --out corners.json [--preview corners.png]``.
+The scan (any format of ``synthdet.scan_io``) is streamed, voxel-filtered and prepared
+(``synthdet.prepare``); the corners are written in the scan's own coordinates.
 """
 from __future__ import annotations
 import argparse
 import sys
 
-from configurator.corners import (CornerDetectionError, CornerParams, detect_corners,
-                                  outline_to_dict)
+from configurator.corners import (SCAN_VOXEL, CornerDetectionError, CornerParams,
+                                  outline_to_dict, scan_outline)
 from synthdet.contracts import write_corners
-from synthdet.scan_io import read_scan
+from synthdet.scan_io import SCAN_SUFFIXES
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare the ``corners`` sub-command's arguments."""
-    parser.add_argument('scan', help='room scan: S3DIS .txt, .bin (float32 N x 6) or .ply')
+    parser.add_argument('scan', help=f'room scan: {", ".join(SCAN_SUFFIXES)} (docs/scans.md)')
+    parser.add_argument(
+        '--columns',
+        help='what the values of a text scan\'s lines are, e.g. x,y,z,r,g,b or x,y,z,i '
+        '(_ skips one; default: from their count)')
+    parser.add_argument(
+        '--voxel',
+        type=_positive_metres,
+        default=SCAN_VOXEL,
+        help='keep one point per voxel of this size (m) while reading (default: %(default)s)')
     parser.add_argument('--out', required=True, help='output synthdet.corners/1 JSON file')
     parser.add_argument('--preview', help='optional PNG: the points from above with the outline')
     parser.add_argument(
@@ -35,12 +46,15 @@ def _positive_metres(text: str) -> float:
 def run(args: argparse.Namespace) -> int:
     """Detect the corners of ``args.scan``; returns 0, or 2 with a message on bad input."""
     try:
-        points = read_scan(args.scan)
-        outline = detect_corners(points, CornerParams(min_edge=args.min_edge))
+        outline, prepared = scan_outline(
+            args.scan, CornerParams(min_edge=args.min_edge), voxel=args.voxel,
+            columns=args.columns)
     except (OSError, ValueError) as error:  # ScanFormatError and CornerDetectionError too
         kind = 'no room found' if isinstance(error, CornerDetectionError) else 'bad scan'
         print(f'corners: {kind}: {error}', file=sys.stderr)
         return 2
+    for line in prepared.report:
+        print(f'corners: {line}', file=sys.stderr if line.startswith('warning') else sys.stdout)
     result = outline_to_dict(outline, args.scan)
     write_corners(args.out, result)
     print(f'corners: {len(outline.corners)} corners, floor z={outline.floor_z:.3f} m, '
@@ -50,6 +64,8 @@ def run(args: argparse.Namespace) -> int:
     if args.preview:
         from synthdet.room_data import Scan
         from synthdet.topview import draw_top_view
+        points = prepared.points.copy()
+        points[:, :3] = prepared.points_to_scan(points[:, :3])
         draw_top_view(
             args.preview,
             Scan(points, None, args.scan),

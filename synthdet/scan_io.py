@@ -32,7 +32,7 @@ from typing import Callable, Iterable, Iterator, Sequence
 import numpy as np
 
 from synthdet.ply import read_ply_vertices, write_ply
-from synthdet.point_text import PointFileError, format_lines, read_point_file
+from synthdet.point_text import PointFileError, format_lines, read_point_blocks
 
 CHUNK_POINTS = 1_000_000  # default points per chunk: about 50 MB of float64 rows
 MAX_HEIGHT = 200.0  # metres; a taller scan (robust extent) is taken to be in other units
@@ -232,15 +232,15 @@ def _read_txt(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
         yield from _read_text_columns(path, chunk_points, columns, notes)
         return
     count = _s3dis_columns(path)
-    try:
-        points, _ = read_point_file(path, columns=count)
-    except PointFileError as error:
-        raise ScanFormatError(str(error)) from None
     if count == 3:
         notes.append(_no_colour_note(path, False))
-        points = np.hstack([points, np.zeros((len(points), 3))])
-    for start in range(0, len(points), chunk_points):
-        yield points[start:start + chunk_points]
+    try:  # ~48 bytes a line: blocks of about chunk_points lines, split to at most that many
+        for block in read_point_blocks(path, 48 * chunk_points, columns=count):
+            for start in range(0, len(block), chunk_points):
+                part = block[start:start + chunk_points]
+                yield part if count == 6 else np.hstack([part, np.zeros((len(part), 3))])
+    except PointFileError as error:
+        raise ScanFormatError(str(error)) from None
 
 
 def _s3dis_columns(path: Path) -> int:

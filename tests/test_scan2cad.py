@@ -20,6 +20,7 @@ from mmdet3d.apis import inference_detector, init_model
 from mmengine.runner import set_random_seed
 
 from configurator.__main__ import main as configurator_main
+from configurator.corners import SCAN_VOXEL
 from configurator.freecad_cli import build_document
 from projects.synthdet.bootstrap import load_config
 from projects.synthdet.core.box_ops import pairwise_bev_iou
@@ -89,7 +90,7 @@ def test_room_sized_scan_is_one_window_as_before(tiny, tmp_path):
     scan = tiny['rooms'][0]
     document = _predict(tiny, scan, tmp_path)
     assert document['detections'], 'the tiny model found nothing to compare'
-    prepared = prepare_scan(load_scan(scan))
+    prepared = prepare_scan(load_scan(scan, voxel=SCAN_VOXEL))
     cfg = load_config(TINY)
     spec = window_spec_from_config(cfg)
     model = init_model(cfg, str(tiny['checkpoint']), device='cpu')
