@@ -50,8 +50,7 @@ PEAK_WRAPPER = ('import resource, subprocess, sys\n'
 
 def parse_args() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        '--checkpoint', type=Path, required=True, help='trained model (make demo)')
+    parser.add_argument('--checkpoint', type=Path, required=True, help='trained model (make demo)')
     parser.add_argument(
         '--config', type=Path, help='its config (default: the .py beside the work dir)')
     parser.add_argument('--points', type=int, default=30_000_000, help='points of the hall')
@@ -74,8 +73,7 @@ def default_config(checkpoint: Path) -> Path:
 
 def run(*command: str) -> subprocess.CompletedProcess:
     """Run a command from the repository root; stop with its output when it fails."""
-    done = subprocess.run([str(c) for c in command], cwd=REPO_ROOT, capture_output=True,
-                          text=True)
+    done = subprocess.run([str(c) for c in command], cwd=REPO_ROOT, capture_output=True, text=True)
     if done.returncode:
         raise SystemExit(f'{" ".join(map(str, command))} failed:\n{done.stderr[-3000:]}')
     return done
@@ -85,9 +83,8 @@ def generate(out: Path, area: int, count: int, points: int, seed: int,
              config: Path | None) -> list[Path]:
     """Generate rooms (or a hall) with PLY labels; returns the room folders."""
     extra = ['--config', str(config)] if config else []
-    run(sys.executable, '-m', 'generator', '--out', out, '--areas', str(area),
-        '--rooms-per-area', str(count), '--points', str(points), '--seed', str(seed), '--ply',
-        '--quiet', *extra)
+    run(sys.executable, '-m', 'generator', '--out', out, '--areas', str(area), '--rooms-per-area',
+        str(count), '--points', str(points), '--seed', str(seed), '--ply', '--quiet', *extra)
     return sorted(p for p in (out / f'Area_{area}').iterdir() if p.is_dir())
 
 
@@ -198,8 +195,8 @@ def main() -> None:
             str(args.score_thr), '--seed', str(args.seed))
         room_found = room_total = 0
         for room in rooms:
-            detections = read_predictions(
-                str(predictions / f'{room.name}.pred.json'))['detections']
+            detections = read_predictions(str(predictions /
+                                              f'{room.name}.pred.json'))['detections']
             found, total = recall(truth_boxes(room, classes), detections, args.score_thr)
             room_found, room_total = room_found + found, room_total + total
     finally:

@@ -585,8 +585,8 @@ def generate_hall_layout(rng: np.random.Generator, catalog: Catalog,
         np.array([[x0, y0], [x0, y1], [x1, y1], [x1, y0]]) for x0, x1 in zip(xs[:-1], xs[1:])
         for y0, y1 in zip(ys[:-1], ys[1:])
     ]
-    layout = RoomLayout('hall', polygon, height, bays=bays,
-                        partitions=_hall_partitions(xs, ys, rng, hall_cfg))
+    layout = RoomLayout(
+        'hall', polygon, height, bays=bays, partitions=_hall_partitions(xs, ys, rng, hall_cfg))
     top_limit = min(height - 0.05, float(config['scanner']['sensor_height']) * height - 0.1)
     placer = _Placer(polygon, top_limit, float(layout_cfg['clearance']))
     _place_openings(rng, placer, hall_cfg, layout)

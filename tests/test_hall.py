@@ -17,7 +17,7 @@ from mmengine.config import Config
 
 from generator.__main__ import main as generate
 from generator.config import DEFAULTS, ConfigError, load_config
-from generator.layout import boxes_intersect, sample_room
+from generator.layout import AssetSpec, PlacedObject, boxes_intersect, sample_room
 from projects.synthdet.inference.windows import (Detections, WindowSpec, detect_in_windows,
                                                  merge_window_detections, plan_windows,
                                                  window_spec_from_config,
@@ -95,27 +95,28 @@ def test_generated_hall_follows_the_rules(hall):
         offsets = on_wall - start
         assert np.abs(offsets @ np.array([-direction[1], direction[0]])).max() < 2e-3
         u = offsets @ direction
-        assert not np.any((u > partition['passage'][0] + 2e-3) &
-                          (u < partition['passage'][1] - 2e-3))
+        assert not np.any((u > partition['passage'][0] + 2e-3)
+                          & (u < partition['passage'][1] - 2e-3))
     objects = [o for o in meta['objects'] if o['class'] in GENERATED_CLASSES]
     assert len(objects) >= 10
     for obj in objects:  # each object inside one bay, its points inside its box
-        corners = box_corners_xy(np.array(obj['box']['center']), obj['box']['size'],
-                                 obj['box']['yaw'])
-        assert any(np.all((corners >= bay.min(axis=0) - 1e-6) & (corners <= bay.max(axis=0) + 1e-6))
-                   for bay in bays), obj['instance']
+        corners = box_corners_xy(
+            np.array(obj['box']['center']), obj['box']['size'], obj['box']['yaw'])
+        assert any(
+            np.all((corners >= bay.min(axis=0) - 1e-6) & (corners <= bay.max(axis=0) + 1e-6))
+            for bay in bays), obj['instance']
         own = points[instances == obj['instance']]
-        local = (own[:, :2] - obj['box']['center'][:2]) @ np.array(
-            [[math.cos(obj['box']['yaw']), -math.sin(obj['box']['yaw'])],
-             [math.sin(obj['box']['yaw']), math.cos(obj['box']['yaw'])]])
+        local = (own[:, :2] - obj['box']['center'][:2]) @ np.array([[
+            math.cos(obj['box']['yaw']), -math.sin(obj['box']['yaw'])
+        ], [math.sin(obj['box']['yaw']), math.cos(obj['box']['yaw'])]])
         assert np.all(np.abs(local) <= np.array(obj['box']['size'][:2]) / 2 + 2e-3)
 
 
 def test_hall_objects_do_not_intersect(hall):
-    from generator.layout import AssetSpec, PlacedObject
     placed = [
         PlacedObject(o['instance'], AssetSpec(o['class'], '', '', {}, tuple(o['box']['size'])),
-                     np.array(o['box']['center']), o['box']['yaw']) for o in hall['meta']['objects']
+                     np.array(o['box']['center']), o['box']['yaw'])
+        for o in hall['meta']['objects']
     ]
     on = {o['instance']: o['on'] for o in hall['meta']['objects']}
     for i, a in enumerate(placed):
@@ -145,12 +146,10 @@ def test_windows_overlap_by_the_largest_object_and_cores_tile_the_plane(hall):
         assert np.all((window.core_low - window.low)[inner_low] >= SPEC.overlap / 2 - 1e-9)
         assert np.all((window.high - window.core_high)[inner_high] >= SPEC.overlap / 2 - 1e-9)
     sample = xy[::97]
-    in_core = np.stack([
-        np.all((sample >= w.core_low) & (sample < w.core_high), axis=1) for w in windows
-    ])
+    in_core = np.stack(
+        [np.all((sample >= w.core_low) & (sample < w.core_high), axis=1) for w in windows])
     assert np.all(in_core.sum(axis=0) == 1)  # every point is central to exactly one window
-    in_window = np.stack(
-        [np.all((sample >= w.low) & (sample <= w.high), axis=1) for w in windows])
+    in_window = np.stack([np.all((sample >= w.low) & (sample <= w.high), axis=1) for w in windows])
     assert np.all(in_window[in_core])  # ... and lies inside it
 
 

@@ -5,13 +5,10 @@ tiny config for one epoch (2 iterations) with tools/train.py, as tests/test_tr3d
 Such a model is weak, so the tests keep every detection scoring at least 0.01 (TR3D's own
 threshold) and compare outputs, never their quality. FreeCAD is the real ``freecadcmd``.
 """
-import importlib.util
 import json
 import os
 import subprocess
-import sys
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 import pytest
@@ -31,6 +28,7 @@ from synthdet.contracts import read_corners, read_predictions
 from synthdet.prepare import prepare_scan
 from synthdet.scan_io import load_scan, read_scan, write_scan
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
+from tests.test_tr3d_tools import data_options, load_tool, run_tool
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = REPO / 'configs' / 'tr3d' / 'tiny.py'
@@ -38,50 +36,26 @@ SCORE = '0.01'
 OFFSET = np.array([500000.0, 5400000.0, 300.0])
 
 
-def load_tool(name: str) -> ModuleType:
-    """Import tools/<name>.py (the tools folder is scripts, not a package)."""
-    spec = importlib.util.spec_from_file_location(f'synthdet_tools_{name}',
-                                                  REPO / 'tools' / f'{name}.py')
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture(scope='module')
 def tiny(tmp_path_factory: pytest.TempPathFactory) -> dict:
     """Two converted 6 m x 5 m rooms and a checkpoint trained for one epoch by tools/train.py."""
     root = tmp_path_factory.mktemp('scan2cad')
     write_synthetic_area(
-        root / 'raw', area=1, n_rooms=2, seed=11, points_per_object=300,
-        room_size=(6.0, 5.0, 3.0))
+        root / 'raw', area=1, n_rooms=2, seed=11, points_per_object=300, room_size=(6.0, 5.0, 3.0))
     convert_s3dis(root / 'raw', root / 'data', areas=[1])
-    data = root / 'data'
-    options = [
-        f'train_dataloader.dataset.dataset.datasets.0.data_root={data}/',
-        f'val_dataloader.dataset.data_root={data}/', f'test_dataloader.dataset.data_root={data}/'
-    ]
-    env = {**os.environ, 'OMP_NUM_THREADS': os.environ.get('OMP_NUM_THREADS', '1')}
-    proc = subprocess.run([
-        sys.executable, 'tools/train.py',
-        str(TINY), '--work-dir',
-        str(root / 'work'), '--cfg-options', *options, 'train_cfg.max_epochs=1',
-        'train_cfg.val_interval=1'
-    ],
-                          cwd=REPO,
-                          capture_output=True,
-                          text=True,
-                          timeout=900,
-                          env=env)
-    assert proc.returncode == 0, proc.stderr[-3000:]
+    run_tool('tools/train.py', TINY, '--work-dir', root / 'work', '--cfg-options',
+             *data_options(root / 'data'), 'train_cfg.max_epochs=1', 'train_cfg.val_interval=1')
     rooms = sorted((root / 'raw' / S3DIS_DIR / 'Area_1').glob('*/*.txt'))
     return {'root': root, 'checkpoint': root / 'work' / 'epoch_1.pth', 'rooms': rooms}
 
 
 def _predict(tiny: dict, scan: Path, out: Path) -> dict:
-    [written] = load_tool('predict').main(
-        [str(TINY), str(tiny['checkpoint']),
-         str(scan), '--out',
-         str(out), '--score-thr', SCORE, '--device', 'cpu'])
+    [written] = load_tool('predict').main([
+        str(TINY),
+        str(tiny['checkpoint']),
+        str(scan), '--out',
+        str(out), '--score-thr', SCORE, '--device', 'cpu'
+    ])
     return read_predictions(str(written))
 
 
@@ -116,8 +90,7 @@ def test_room_sized_scan_is_one_window_as_before(tiny, tmp_path):
     assert np.allclose([d['center'] for d in found], centres, atol=2e-6)
     assert np.allclose([d['size'] for d in found], sizes, atol=2e-6)
     assert np.allclose([d['yaw'] for d in found], yaws, atol=2e-6)
-    assert np.allclose([d['score'] for d in found],
-                       pred.scores_3d[keep].numpy()[order], atol=2e-6)
+    assert np.allclose([d['score'] for d in found], pred.scores_3d[keep].numpy()[order], atol=2e-6)
 
 
 def test_shifted_copy_gives_boxes_shifted_by_exactly_the_offset(tiny, tmp_path):

@@ -4,9 +4,10 @@ Usage: python tools/predict.py CONFIG CHECKPOINT POINTS... --out DIR [--score-th
                                [--device cpu|cuda:0] [--seed 0] [--voxel 0.02]
                                [--columns x,y,z,r,g,b] [--cfg-options k=v ...]
 
-POINTS are scans in any format of ``synthdet.scan_io`` (read with ``load_scan`` into a local
-float64 frame, one point per ``--voxel`` as ``python -m configurator corners``) and prepared with ``synthdet.prepare.prepare_scan`` (outliers, up axis, floor
-levelling, walls along the axes), each step reported. A scan larger than the config's
+POINTS are scans in any format of ``synthdet.scan_io``, read with ``load_scan`` into a local
+float64 frame (one point per ``--voxel``, as ``python -m configurator corners``) and prepared
+with ``synthdet.prepare.prepare_scan`` (outliers, up axis, floor levelling, walls along the
+axes), each step reported. A scan larger than the config's
 ``inference_window`` is detected window by window, each window sampled by the config's test
 pipeline like a training room, and the windows' boxes are merged with the project's 3D NMS
 (``projects/synthdet/inference/windows.py``); a room-sized scan is one window. The boxes are
@@ -21,11 +22,9 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
 
-import torch  # noqa: E402
 from mmdet3d.apis import init_model  # noqa: E402
 
-from configurator.corners import SCAN_VOXEL  # noqa: E402
-from projects.synthdet.bootstrap import add_cfg_options, load_config  # noqa: E402
+from projects.synthdet.bootstrap import add_detection_arguments, load_config  # noqa: E402
 from projects.synthdet.inference.detector import ModelDetector  # noqa: E402
 from projects.synthdet.inference.windows import window_spec_from_config  # noqa: E402
 from synthdet.contracts import write_predictions  # noqa: E402
@@ -41,20 +40,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         'points', nargs='+', help='scans: .e57, .las/.laz, .ply, .pcd, .xyz/.pts/.csv, .txt, .bin')
     parser.add_argument('--out', required=True, help='output directory for <scan>.pred.json')
-    parser.add_argument(
-        '--score-thr',
-        type=float,
-        default=0.3,
-        help='keep detections with at least this score (default 0.3)')
-    parser.add_argument('--device', default='cuda:0' if torch.cuda.is_available() else 'cpu')
-    parser.add_argument('--seed', type=int, default=0, help='seed of the point sampling')
-    parser.add_argument(
-        '--voxel',
-        type=float,
-        default=SCAN_VOXEL,
-        help='keep one point per voxel of this size (m) while reading (default: %(default)s)')
-    parser.add_argument('--columns', help='text scans: the columns, e.g. x,y,z,r,g,b or x,y,z,i')
-    add_cfg_options(parser)
+    add_detection_arguments(parser)
     return parser.parse_args(argv)
 
 

@@ -22,13 +22,15 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
 
-import torch  # noqa: E402
 from mmdet3d.apis import init_model  # noqa: E402
 
-from configurator.corners import (SCAN_VOXEL, CornerDetectionError, detect_corners,  # noqa: E402
-                                  outline_in_scan, outline_to_dict)
+from configurator.corners import (
+    CornerDetectionError,
+    detect_corners,  # noqa: E402
+    outline_in_scan,
+    outline_to_dict)
 from configurator.freecad_cli import FreecadFailed, build_document  # noqa: E402
-from projects.synthdet.bootstrap import add_cfg_options, load_config  # noqa: E402
+from projects.synthdet.bootstrap import add_detection_arguments, load_config  # noqa: E402
 from projects.synthdet.inference.detector import ModelDetector  # noqa: E402
 from projects.synthdet.inference.windows import window_spec_from_config  # noqa: E402
 from synthdet.contracts import write_corners, write_predictions  # noqa: E402
@@ -43,20 +45,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('--config', required=True, help='model config, e.g. configs/tr3d/exp2.py')
     parser.add_argument('--checkpoint', required=True, help='checkpoint file')
     parser.add_argument('--out', required=True, help='FreeCAD document to write (.FCStd)')
-    parser.add_argument('--score-thr', type=float, default=0.3, help='default 0.3')
-    parser.add_argument('--device', default='cuda:0' if torch.cuda.is_available() else 'cpu')
-    parser.add_argument('--seed', type=int, default=0, help='seed of the point sampling')
-    parser.add_argument(
-        '--voxel',
-        type=float,
-        default=SCAN_VOXEL,
-        help='keep one point per voxel of this size (m) while reading (default: %(default)s, '
-        'as python -m configurator corners)')
-    parser.add_argument('--columns', help='text scans: the columns, e.g. x,y,z,r,g,b or x,y,z,i')
     parser.add_argument('--library', help='folder of <class>.step files replacing built-ins')
     parser.add_argument('--wall-thickness', type=float, default=0.1, help='metres (default 0.1)')
     parser.add_argument('--freecadcmd', default='freecadcmd', help='FreeCAD command line')
-    add_cfg_options(parser)
+    add_detection_arguments(parser)
     return parser.parse_args(argv)
 
 
@@ -83,7 +75,8 @@ def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
     predictions = detector.predictions(prepared, spec, Path(args.config).stem)
     write_predictions(predictions_path, predictions)
     report(f'detect: {len(predictions["detections"])} objects -> {predictions_path}')
-    corners = outline_to_dict(outline_in_scan(detect_corners(prepared.points), prepared), str(scan))
+    corners = outline_to_dict(
+        outline_in_scan(detect_corners(prepared.points), prepared), str(scan))
     write_corners(corners_path, corners)
     report(f'corners: {len(corners["corners"])} corners -> {corners_path}')
     result = build_document(

@@ -73,7 +73,9 @@ class ModelDetector:
             'detections': self.detect_scan(prepared, spec, progress),
         }
 
-    def detect_scan(self, prepared: PreparedScan, spec: WindowSpec,
+    def detect_scan(self,
+                    prepared: PreparedScan,
+                    spec: WindowSpec,
                     progress: bool = True) -> list[dict]:
         """Detect in a prepared scan by windows; the ``synthdet.predictions/1`` detections in
         the scan's own coordinates (centres moved back exactly, yaws turned by the scan's)."""

@@ -133,8 +133,7 @@ def plan_windows(xy_low: np.ndarray, xy_high: np.ndarray, spec: WindowSpec) -> l
     along_x = _axis_windows(float(xy_low[0]), float(xy_high[0]), spec)
     along_y = _axis_windows(float(xy_low[1]), float(xy_high[1]), spec)
     return [
-        Window(
-            np.array([x0, y0]), np.array([x1, y1]), np.array([cx0, cy0]), np.array([cx1, cy1]))
+        Window(np.array([x0, y0]), np.array([x1, y1]), np.array([cx0, cy0]), np.array([cx1, cy1]))
         for y0, y1, cy0, cy1 in along_y for x0, x1, cx0, cx1 in along_x
     ]
 
