@@ -24,11 +24,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's 
 
 from mmdet3d.apis import init_model  # noqa: E402
 
-from configurator.corners import (
-    CornerDetectionError,
-    detect_corners,  # noqa: E402
-    outline_in_scan,
-    outline_to_dict)
+from configurator.corners import CornerDetectionError, detect_corners  # noqa: E402
+from configurator.corners import outline_in_scan, outline_to_dict  # noqa: E402
 from configurator.freecad_cli import FreecadFailed, build_document  # noqa: E402
 from projects.synthdet.bootstrap import add_detection_arguments, load_config  # noqa: E402
 from projects.synthdet.inference.detector import ModelDetector  # noqa: E402
