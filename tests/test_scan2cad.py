@@ -49,12 +49,12 @@ def tiny(tmp_path_factory: pytest.TempPathFactory) -> dict:
     return {'root': root, 'checkpoint': root / 'work' / 'epoch_1.pth', 'rooms': rooms}
 
 
-def _predict(tiny: dict, scan: Path, out: Path, score_thr: str = SCORE) -> dict:
+def _predict(tiny: dict, scan: Path, out: Path, *options: str) -> dict:
     [written] = load_tool('predict').main([
         str(TINY),
         str(tiny['checkpoint']),
         str(scan), '--out',
-        str(out), '--score-thr', score_thr, '--device', 'cpu'
+        str(out), '--score-thr', SCORE, '--device', 'cpu', *options
     ])
     return read_predictions(str(written))
 
@@ -64,7 +64,7 @@ def test_room_sized_scan_is_one_window_as_before(tiny, tmp_path):
     scan = tiny['rooms'][0]
     document = _predict(tiny, scan, tmp_path)
     assert document['detections'], 'the tiny model found nothing to compare'
-    prepared = prepare_scan(load_scan(scan, voxel=SCAN_VOXEL))
+    prepared = prepare_scan(load_scan(scan))
     cfg = load_config(TINY)
     spec = window_spec_from_config(cfg)
     model = init_model(cfg, str(tiny['checkpoint']), device='cpu')
@@ -117,7 +117,10 @@ def test_shifted_copy_gives_boxes_shifted_by_exactly_the_offset(tiny, tmp_path):
 def test_scan2cad_equals_the_stages_one_by_one(tiny, tmp_path):
     scan = tiny['rooms'][0]
     # the untrained model scores hundreds of boxes near 0.01: keep its best 20 for FreeCAD
-    scores = [d['score'] for d in _predict(tiny, scan, tmp_path / 'scores')['detections']]
+    voxel = ('--voxel', str(SCAN_VOXEL))  # scan2cad's default, as the corners
+    scores = [
+        d['score'] for d in _predict(tiny, scan, tmp_path / 'scores', *voxel)['detections']
+    ]
     threshold = str(sorted(scores, reverse=True)[19])
     out = tmp_path / 'one' / 'room.FCStd'
     out.parent.mkdir()
@@ -130,7 +133,7 @@ def test_scan2cad_equals_the_stages_one_by_one(tiny, tmp_path):
     assert out.is_file()
     stages = tmp_path / 'stages'
     predictions = stages / f'{scan.stem}.pred.json'
-    assert _predict(tiny, scan, stages, threshold) == read_predictions(
+    assert _predict(tiny, scan, stages, *voxel, '--score-thr', threshold) == read_predictions(
         str(out.with_suffix('.pred.json')))
     assert len(read_predictions(str(predictions))['detections']) >= 10
     corners = stages / 'corners.json'

@@ -1,11 +1,12 @@
 """Detect objects in scans and write one ``<scan>.pred.json`` per scan.
 
 Usage: python tools/predict.py CONFIG CHECKPOINT POINTS... --out DIR [--score-thr 0.3]
-                               [--device cpu|cuda:0] [--seed 0] [--voxel 0.02]
+                               [--device cpu|cuda:0] [--seed 0] [--voxel M]
                                [--columns x,y,z,r,g,b] [--cfg-options k=v ...]
 
 POINTS are scans in any format of ``synthdet.scan_io``, read with ``load_scan`` into a local
-float64 frame (one point per ``--voxel``, as ``python -m configurator corners``) and prepared
+float64 frame (every point, or one per ``--voxel`` as ``python -m configurator corners``; the
+voxels are those of the scan's coordinates) and prepared
 with ``synthdet.prepare.prepare_scan`` (outliers, up axis, floor levelling, walls along the
 axes), each step reported. A scan larger than the config's
 ``inference_window`` is detected window by window, each window sampled by the config's test
@@ -40,7 +41,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         'points', nargs='+', help='scans: .e57, .las/.laz, .ply, .pcd, .xyz/.pts/.csv, .txt, .bin')
     parser.add_argument('--out', required=True, help='output directory for <scan>.pred.json')
-    add_detection_arguments(parser)
+    add_detection_arguments(parser, voxel=None)
     return parser.parse_args(argv)
 
 

@@ -1,13 +1,14 @@
 """One command from a scan to a FreeCAD document: read, prepare, detect, trace corners, build.
 
 Usage: python tools/scan2cad.py SCAN --config CFG --checkpoint CKPT --out hall.FCStd
-                                [--score-thr 0.3] [--device cpu] [--seed 0] [--voxel M]
+                                [--score-thr 0.3] [--device cpu] [--seed 0] [--voxel 0.02]
                                 [--columns x,y,z,r,g,b] [--library DIR] [--wall-thickness 0.1]
 
 The stages are the ones a user runs one by one, on the same prepared scan:
-1. ``synthdet.scan_io.load_scan`` and ``synthdet.prepare.prepare_scan`` (each step reported);
-2. detection by windows sized from the training rooms (``ModelDetector.detect_scan``, as
-   ``tools/predict.py``) -> ``<out stem>.pred.json`` beside the document;
+1. ``synthdet.scan_io.load_scan`` (one point per ``--voxel``, 2 cm by default as the corners:
+   a hall's memory stays bounded) and ``synthdet.prepare.prepare_scan`` (each step reported);
+2. detection by windows sized from the training rooms (``ModelDetector.predictions``, as
+   ``tools/predict.py --voxel`` with the same voxel) -> ``<out stem>.pred.json`` beside it;
 3. the room corners on the prepared points, written in the scan's coordinates
    (``configurator.corners.outline_in_scan``, as ``python -m configurator corners``)
    -> ``<out stem>.corners.json``;
@@ -24,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's 
 
 from mmdet3d.apis import init_model  # noqa: E402
 
-from configurator.corners import CornerDetectionError, detect_corners  # noqa: E402
+from configurator.corners import SCAN_VOXEL, CornerDetectionError, detect_corners  # noqa: E402
 from configurator.corners import outline_in_scan, outline_to_dict  # noqa: E402
 from configurator.freecad_cli import FreecadFailed, build_document  # noqa: E402
 from projects.synthdet.bootstrap import add_detection_arguments, load_config  # noqa: E402
@@ -45,7 +46,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('--library', help='folder of <class>.step files replacing built-ins')
     parser.add_argument('--wall-thickness', type=float, default=0.1, help='metres (default 0.1)')
     parser.add_argument('--freecadcmd', default='freecadcmd', help='FreeCAD command line')
-    add_detection_arguments(parser)
+    add_detection_arguments(parser, voxel=SCAN_VOXEL)
     return parser.parse_args(argv)
 
 

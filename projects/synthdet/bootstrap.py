@@ -26,12 +26,11 @@ def add_cfg_options(parser: argparse.ArgumentParser) -> None:
         'test_dataloader.dataset.ann_file=s3dis_infos_Area_9.pkl')
 
 
-def add_detection_arguments(parser: argparse.ArgumentParser) -> None:
+def add_detection_arguments(parser: argparse.ArgumentParser, voxel: float | None) -> None:
     """Add the options of detecting in scans (``predict.py``, ``scan2cad.py``): ``--score-thr``,
-    ``--device``, ``--seed`` and the reading options ``--voxel`` (default: as the corners) and
-    ``--columns``."""
+    ``--device``, ``--seed`` and the reading options ``--voxel`` (default ``voxel``; None keeps
+    every point) and ``--columns``."""
     import torch
-    from configurator.corners import SCAN_VOXEL
     parser.add_argument(
         '--score-thr',
         type=float,
@@ -42,9 +41,8 @@ def add_detection_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         '--voxel',
         type=float,
-        default=SCAN_VOXEL,
-        help='keep one point per voxel of this size (m) while reading, as python -m '
-        'configurator corners (default: %(default)s)')
+        default=voxel,
+        help='keep one point per voxel of this size (m) while reading (default: %(default)s)')
     parser.add_argument('--columns', help='text scans: the columns, e.g. x,y,z,r,g,b or x,y,z,i')
     add_cfg_options(parser)
 
