@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/bench_hall.py --checkpoint work_dirs/demo/train/epoch_N.pth
         [--config work_dirs/demo/exp2_cpu_demo.py] [--points 30000000] [--hall-size 40 25]
-        [--rooms 5] [--room-points 1000000] [--score-thr 0.3] [--seed 0] [--keep DIR]
+        [--rooms 15] [--room-points 1000000] [--score-thr 0.3] [--seed 0] [--keep DIR]
 
 1. ``python -m generator`` makes one hall (``hall`` section of the generator config, fixed
    size ``--hall-size``) of ``--points`` points and ``--rooms`` rooms of the default
@@ -55,7 +55,7 @@ def parse_args() -> argparse.Namespace:
         '--config', type=Path, help='its config (default: the .py beside the work dir)')
     parser.add_argument('--points', type=int, default=30_000_000, help='points of the hall')
     parser.add_argument('--hall-size', type=float, nargs=2, default=[40.0, 25.0])
-    parser.add_argument('--rooms', type=int, default=5, help='room-sized scans for the baseline')
+    parser.add_argument('--rooms', type=int, default=15, help='room-sized scans for the baseline')
     parser.add_argument('--room-points', type=int, default=1_000_000)
     parser.add_argument('--score-thr', type=float, default=0.3)
     parser.add_argument('--seed', type=int, default=0)
