@@ -13,7 +13,7 @@ each in its own process so that the peak resident memory (``ru_maxrss``) is its 
 - imports only: the interpreter and libraries both sides load, for reference.
 
 It prints both peaks and times, the kept voxels and the bound ``docs/scans.md`` states
-(56 bytes per kept voxel plus the chunk buffers), and ends with one line comparing the two.
+(64 bytes per kept voxel plus the chunk buffers), and ends with one line comparing the two.
 """
 import argparse
 import os
@@ -37,8 +37,10 @@ ROOM_POINTS = 1_000_000
 def hall_chunks(total: int):
     """Rooms of ``ROOM_POINTS`` points (8 different ones, repeated) on a grid of 12 m cells:
     about ``total`` points over a hall-sized area, one room at a time."""
-    rooms = [make_room('rect', n_points=ROOM_POINTS, seed=seed, rotate=False).points
-             for seed in range(8)]
+    rooms = [
+        make_room('rect', n_points=ROOM_POINTS, seed=seed, rotate=False).points
+        for seed in range(8)
+    ]
     count = max(1, round(total * len(rooms) / sum(len(room) for room in rooms)))
     columns = int(np.ceil(np.sqrt(count)))
     for index in range(count):
@@ -47,10 +49,13 @@ def hall_chunks(total: int):
         yield points
 
 
-def measure(mode: str, scan: str, voxel: float, chunk: int) -> None:
-    """Child process: run one side and print its figures (seconds, points, kept)."""
+def measure(mode: str, scan: str, voxel: float, chunk: int, points: int) -> None:
+    """Child process: write the scan, or run one side and print its figures (seconds, points,
+    kept)."""
     start = time.perf_counter()
-    if mode == 'streamed':
+    if mode == 'write':
+        points = kept = write_las_chunks(scan, hall_chunks(points))
+    elif mode == 'streamed':
         loaded = load_scan(scan, voxel=voxel, chunk_points=chunk)
         points, kept = loaded.points_read, len(loaded.points)
     elif mode == 'read-all':
@@ -60,13 +65,18 @@ def measure(mode: str, scan: str, voxel: float, chunk: int) -> None:
     print(f'{time.perf_counter() - start:.3f} {points} {kept}')
 
 
-def run_child(mode: str, scan: str, voxel: float, chunk: int) -> tuple[float, int, int, float]:
-    """Run ``measure`` in a fresh process; returns seconds, points, kept and peak GB."""
-    process = subprocess.Popen(
-        [sys.executable, __file__, '--measure', mode, '--scan', scan, '--voxel', str(voxel),
-         '--chunk', str(chunk)],
-        stdout=subprocess.PIPE,
-        text=True)
+def run_child(mode: str, args: argparse.Namespace, scan: str) -> tuple[float, int, int, float]:
+    """Run ``measure`` in a fresh process; returns seconds, points, kept and peak GB. The
+    parent stays small (no scan in memory), so the child's peak, which counts the moment
+    between fork and exec, is its own."""
+    process = subprocess.Popen([
+        sys.executable, __file__, '--measure', mode, '--scan', scan, '--voxel',
+        str(args.voxel), '--chunk',
+        str(args.chunk), '--points',
+        str(args.points)
+    ],
+                               stdout=subprocess.PIPE,
+                               text=True)
     output = process.stdout.read()
     _, status, usage = os.wait4(process.pid, 0)
     process.returncode = os.waitstatus_to_exitcode(status)
@@ -82,31 +92,31 @@ def main() -> None:
     parser.add_argument('--voxel', type=float, default=0.05)
     parser.add_argument('--chunk', type=int, default=1_000_000)
     parser.add_argument('--scan', help='an existing scan instead of the generated LAZ')
-    parser.add_argument('--measure', choices=('streamed', 'read-all', 'imports'), help=argparse.SUPPRESS)
+    parser.add_argument(
+        '--measure', choices=('write', 'streamed', 'read-all', 'imports'), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.measure:
-        measure(args.measure, args.scan, args.voxel, args.chunk)
+        measure(args.measure, args.scan, args.voxel, args.chunk, args.points)
         return
     with tempfile.TemporaryDirectory() as folder:
         scan = args.scan
         if scan is None:
             scan = str(Path(folder) / 'hall.laz')
-            start = time.perf_counter()
-            written = write_las_chunks(scan, hall_chunks(args.points))
+            seconds, written, _, _ = run_child('write', args, scan)
             print(f'wrote {written:,} points to a LAZ of {os.path.getsize(scan) / 1e6:.0f} MB '
-                  f'in {time.perf_counter() - start:.0f} s')
-        streamed = run_child('streamed', scan, args.voxel, args.chunk)
-        whole = run_child('read-all', scan, args.voxel, args.chunk)
-        imports = run_child('imports', scan, args.voxel, args.chunk)
+                  f'in {seconds:.0f} s')
+        streamed = run_child('streamed', args, scan)
+        whole = run_child('read-all', args, scan)
+        imports = run_child('imports', args, scan)
     points = streamed[1]
-    bound = 56 * streamed[2] / 1024**3
+    bound = 64 * streamed[2] / 1024**3
     print(f'{"method":<44}{"seconds":>9}{"peak GB":>9}')
     print(f'{"streamed load_scan, " + f"{args.voxel * 100:g} cm voxels":<44}'
           f'{streamed[0]:>9.1f}{streamed[3]:>9.2f}')
     print(f'{"read-all read_scan (float64 N x 6)":<44}{whole[0]:>9.1f}{whole[3]:>9.2f}')
     print(f'{"imports only (Python, numpy, numba, laspy)":<44}{imports[0]:>9.1f}'
           f'{imports[3]:>9.2f}')
-    print(f'{points:,} points, {streamed[2]:,} kept voxels: 56 B each = {bound:.2f} GB, '
+    print(f'{points:,} points, {streamed[2]:,} kept voxels: 64 B each = {bound:.2f} GB, '
           f'chunks of {args.chunk:,} points')
     print(f'scan_io {points / 1e6:.0f}M-point LAZ: streamed load_scan peak {streamed[3]:.2f} GB '
           f'in {streamed[0]:.0f} s vs read-all {whole[3]:.2f} GB in {whole[0]:.0f} s: '

@@ -177,9 +177,12 @@ def outline_in_scan(outline: RoomOutline, prepared: PreparedScan) -> RoomOutline
         np.array([[centre[0], centre[1], outline.floor_z],
                   [centre[0], centre[1], outline.ceiling_z]]))
     angle = (outline.wall_angle + prepared.yaw) % (math.pi / 2)
-    return RoomOutline(corners=corners, floor_z=float(levels[0, 2]),
-                       ceiling_z=float(levels[1, 2]), wall_angle=float(angle),
-                       quality=dict(outline.quality))
+    return RoomOutline(
+        corners=corners,
+        floor_z=float(levels[0, 2]),
+        ceiling_z=float(levels[1, 2]),
+        wall_angle=float(angle),
+        quality=dict(outline.quality))
 
 
 def outline_to_dict(outline: RoomOutline, scan: str) -> dict:

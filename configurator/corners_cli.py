@@ -8,8 +8,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from configurator.corners import (SCAN_VOXEL, CornerDetectionError, CornerParams,
-                                  outline_to_dict, scan_outline)
+from configurator.corners import (SCAN_VOXEL, CornerDetectionError, CornerParams, outline_to_dict,
+                                  scan_outline)
 from synthdet.contracts import write_corners
 from synthdet.scan_io import SCAN_SUFFIXES
 
@@ -47,7 +47,9 @@ def run(args: argparse.Namespace) -> int:
     """Detect the corners of ``args.scan``; returns 0, or 2 with a message on bad input."""
     try:
         outline, prepared = scan_outline(
-            args.scan, CornerParams(min_edge=args.min_edge), voxel=args.voxel,
+            args.scan,
+            CornerParams(min_edge=args.min_edge),
+            voxel=args.voxel,
             columns=args.columns)
     except (OSError, ValueError) as error:  # ScanFormatError and CornerDetectionError too
         kind = 'no room found' if isinstance(error, CornerDetectionError) else 'bad scan'

@@ -223,7 +223,8 @@ def read_point_file(path: str | Path,
     return out[:rows], bad_lines
 
 
-def read_point_blocks(path: str | Path, block_bytes: int,
+def read_point_blocks(path: str | Path,
+                      block_bytes: int,
                       columns: int = NUM_COLUMNS) -> Iterator[np.ndarray]:
     """Read a point text file as float64 arrays of the lines in blocks of about
     ``block_bytes`` (cut at line ends), so memory stays a few blocks whatever the file's size.

@@ -75,8 +75,7 @@ class PreparedScan:
         directions = np.column_stack([np.cos(yaws), np.sin(yaws), np.zeros(len(yaws))])
         turned = directions @ rotation.T
         new_yaws = np.arctan2(turned[:, 1], turned[:, 0])
-        return (self.points_to_scan(centers), np.asarray(sizes, dtype=np.float64).copy(),
-                new_yaws)
+        return (self.points_to_scan(centers), np.asarray(sizes, dtype=np.float64).copy(), new_yaws)
 
 
 def prepare_scan(loaded: LoadedScan,
@@ -96,17 +95,23 @@ def prepare_scan(loaded: LoadedScan,
     keep = np.ones(len(xyz), dtype=bool)
     if remove_outliers:
         keep = ~sparse_points(xyz)
-        report.append(f'outliers: removed {int((~keep).sum()):,} points in sparse isolated '
-                      f'{OUTLIER_CELL * 100:g} cm cells')
+        dropped = int((~keep).sum())
+        if dropped > len(xyz) / 2:  # not outliers: the whole scan is sparse
+            keep[:] = True
+            report.append(f'outliers: the scan is too sparse for the density test ({dropped:,} '
+                          f'of {len(xyz):,} points in sparse cells); all kept')
+        else:
+            report.append(f'outliers: removed {dropped:,} points in sparse isolated '
+                          f'{OUTLIER_CELL * 100:g} cm cells')
     points = loaded.points[keep]
     xyz = points[:, :3]
     sample = xyz[::max(1, len(xyz) // FIT_POINTS)]
 
     up_axis = detect_up_axis(sample)
     rotation = _up_rotation(up_axis)
-    report.append(f'up axis: {up_axis}' + ('' if up_axis == '+z' else
-                                            ' (turned to z; results use the scan\'s axes '
-                                            'turned the same way)'))
+    report.append(f'up axis: {up_axis}' +
+                  ('' if up_axis == '+z' else ' (turned to z; results use the scan\'s axes '
+                   'turned the same way)'))
     floor = 0.0
     if level:
         rotation, floor, line = _levelled(sample @ rotation.T, rotation)
@@ -140,18 +145,24 @@ def prepare_scan(loaded: LoadedScan,
     density = floor_density(prepared[:, :3])
     prepared, line = _resampled(prepared, density, target_density, seed)
     report.append(line)
-    return PreparedScan(points=prepared, to_scan=to_scan, yaw=yaw, report=report,
-                        up_axis=up_axis, source=loaded.source, density=density)
+    return PreparedScan(
+        points=prepared,
+        to_scan=to_scan,
+        yaw=yaw,
+        report=report,
+        up_axis=up_axis,
+        source=loaded.source,
+        density=density)
 
 
 # --------------------------------------------------------------------------- outliers
 
 
 def _packed_cells(xyz: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
-    """Cell keys of the points packed into one int64 (21 bits an axis around the median
-    point's cell) and whether each point's cell fits that range (+-2^20 cells)."""
+    """Cell keys of the points packed into one int64 (21 bits an axis around the points'
+    median cell) and whether each point's cell fits that range (+-2^20 cells)."""
     keys = np.floor(xyz / cell).astype(np.int64)
-    keys -= keys[len(keys) // 2]
+    keys -= np.median(keys[::max(1, len(keys) // 100_000)], axis=0).astype(np.int64)
     fits = (np.abs(keys) < 2**20 - 2).all(axis=1)
     keys += 2**20
     return (keys[:, 0] << 42) | (keys[:, 1] << 21) | keys[:, 2], fits
@@ -235,8 +246,9 @@ def _levelled(xyz: np.ndarray, rotation: np.ndarray) -> tuple[np.ndarray, float,
     for step, span in ((math.radians(1.0), MAX_TILT), (math.radians(0.1), math.radians(1.0))):
         offsets = np.arange(-span, span + step / 2, step)
         candidates = [best + (a, b) for a in offsets for b in offsets]
-        scores = [projection_sharpness(search @ _tilted_up(c), None, LEVEL_CELL)
-                  for c in candidates]
+        scores = [
+            projection_sharpness(search @ _tilted_up(c), None, LEVEL_CELL) for c in candidates
+        ]
         best = candidates[int(np.argmax(scores))]
     up = _tilted_up(best)
     for _ in range(2):  # total least squares on the floor slab
@@ -268,8 +280,8 @@ def _floor_level(heights: np.ndarray) -> float:
     hist = np.convolve(np.histogram(heights, edges)[0], [1, 2, 1], mode='same')
     centres = (edges[:-1] + edges[1:]) / 2
     lower = centres < (low + high) / 2
-    strong = np.flatnonzero(lower & (hist >= 0.25 * hist[lower].max()) &
-                            (hist >= np.roll(hist, 1)) & (hist >= np.roll(hist, -1)))
+    strong = np.flatnonzero(lower & (hist >= 0.25 * hist[lower].max()) & (hist >= np.roll(hist, 1))
+                            & (hist >= np.roll(hist, -1)))
     peak = centres[strong[0]] if len(strong) else low
     near = heights[np.abs(heights - peak) < 2 * LEVEL_CELL]
     return float(np.median(near)) if len(near) else float(peak)

@@ -57,7 +57,8 @@ def natural_key(name: str) -> list:
 
 
 def load_scan(path: str | os.PathLike) -> Scan:
-    """Read a scan (S3DIS room ``.txt``, ``.bin`` or ``.ply``) with per-point classes if known.
+    """Read a scan (S3DIS room ``.txt`` or any ``synthdet.scan_io`` format) with per-point
+    classes if known.
 
     An S3DIS room whose ``Annotations/`` folder sits next to it is read from its annotation
     files (the room is their concatenation), which gives every point its class. A converted

@@ -72,8 +72,8 @@ class _Scale:
                 self.low, self.high = -2048.0, 2047.0
             else:
                 self.low = 0.0
-                self.high = next(top for top in (1.0, 255.0, 4095.0, 65535.0, math.inf)
-                                 if high <= top)
+                self.high = next(
+                    top for top in (1.0, 255.0, 4095.0, 65535.0, math.inf) if high <= top)
                 if math.isinf(self.high):
                     self.high = high
         if self.high is None or self.high <= self.low:
@@ -95,8 +95,8 @@ def parse_columns(text: str | Sequence[str]) -> tuple[str, ...]:
 
     Names are ``x y z`` (needed), ``r g b`` (all three or none) and ``i`` (intensity).
     """
-    names = tuple(name.strip().lower() for name in
-                  (text.split(',') if isinstance(text, str) else text))
+    names = tuple(name.strip().lower()
+                  for name in (text.split(',') if isinstance(text, str) else text))
     unknown = [name for name in names if name not in COLUMN_NAMES + ('_', )]
     if unknown:
         raise ValueError(f'unknown column {unknown[0]!r} in {",".join(names)!r}: expected '
@@ -122,8 +122,10 @@ _NUMBER = re.compile(rb'^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$')
 
 
 def _split(line: bytes, delimiter: str) -> list[bytes]:
-    return [token.strip() for token in line.split(_SPLIT[delimiter]) if token.strip() or
-            delimiter != ' ']
+    return [
+        token.strip() for token in line.split(_SPLIT[delimiter])
+        if token.strip() or delimiter != ' '
+    ]
 
 
 def _text_layout(path: Path, columns: tuple[str, ...] | None) -> tuple[str, int, int]:
@@ -179,9 +181,8 @@ def _text_blocks(path: Path, skip: int, chunk_lines: int) -> Iterator[tuple[int,
             number += len(block)
 
 
-def _parse_text_blocks(path: Path, blocks: Iterable[tuple[int, list[bytes]]],
-                       names: Sequence[str], delimiter: str,
-                       notes: list[str]) -> Iterator[np.ndarray]:
+def _parse_text_blocks(path: Path, blocks: Iterable[tuple[int, list[bytes]]], names: Sequence[str],
+                       delimiter: str, notes: list[str]) -> Iterator[np.ndarray]:
     """Parse blocks of text lines holding the columns ``names`` into ``(n, 6)`` chunks."""
     index = {name: i for i, name in enumerate(names) if name != '_'}
     has_colour, has_intensity = 'r' in index, 'i' in index
@@ -266,7 +267,15 @@ def _read_bin(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
         return
     rows = np.memmap(path, dtype=np.float32, mode='r').reshape(-1, 6)
     for start in range(0, len(rows), chunk_points):
-        yield rows[start:start + chunk_points].astype(np.float64)
+        chunk = rows[start:start + chunk_points].astype(np.float64)
+        if start == 0:
+            largest = float(np.abs(chunk[:, :3]).max())
+            step = float(np.spacing(np.float32(largest)))
+            if step > 0.001:
+                notes.append(f'{path}: warning: float32 coordinates as large as {largest:,.0f} '
+                             f'are only exact to {step * 1000:,.0f} mm; write the scan as LAS, '
+                             f'PLY or PCD to keep georeferenced coordinates')
+        yield chunk
 
 
 PLY_COLOUR_NAMES = (
@@ -360,8 +369,8 @@ def _read_e57(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
             yield from _e57_scan_chunks(path, e57, index, fields, has_colour, chunk_points)
         if missing:
             note = _no_colour_note(path, True)
-            notes.append(note if missing == scan_count else
-                         f'{note} ({missing} of {scan_count} scans)')
+            notes.append(note if missing ==
+                         scan_count else f'{note} ({missing} of {scan_count} scans)')
     finally:
         e57.close()
 
@@ -378,8 +387,8 @@ def _e57_scan_chunks(path: Path, e57, index: int, fields: set[str], has_colour: 
                               f'nor spherical coordinates')
     invalid = 'cartesianInvalidState' if coordinates is cartesian else 'sphericalInvalidState'
     colour_names = ['colorRed', 'colorGreen', 'colorBlue']
-    wanted = coordinates + (colour_names if has_colour else
-                            ['intensity'] if 'intensity' in fields else [])
+    wanted = coordinates + (
+        colour_names if has_colour else ['intensity'] if 'intensity' in fields else [])
     wanted += [invalid] if invalid in fields else []
     capacity = max(1, min(chunk_points, header.point_count))
     buffers_by_name, buffers = e57.make_buffers(wanted, capacity)
@@ -445,13 +454,24 @@ def _matrix_quaternion(rotation: np.ndarray) -> np.ndarray:
 def _spherical_to_cartesian(rae: np.ndarray) -> np.ndarray:
     """E57 spherical ``range, azimuth, elevation`` (metres, radians) to ``x y z``."""
     horizontal = rae[:, 0] * np.cos(rae[:, 2])
-    return np.column_stack([horizontal * np.cos(rae[:, 1]), horizontal * np.sin(rae[:, 1]),
-                            rae[:, 0] * np.sin(rae[:, 2])])
+    return np.column_stack([
+        horizontal * np.cos(rae[:, 1]), horizontal * np.sin(rae[:, 1]),
+        rae[:, 0] * np.sin(rae[:, 2])
+    ])
 
 
-_PCD_TYPES = {('F', 4): '<f4', ('F', 8): '<f8', ('U', 1): 'u1', ('U', 2): '<u2',
-              ('U', 4): '<u4', ('I', 1): 'i1', ('I', 2): '<i2', ('I', 4): '<i4',
-              ('U', 8): '<u8', ('I', 8): '<i8'}
+_PCD_TYPES = {
+    ('F', 4): '<f4',
+    ('F', 8): '<f8',
+    ('U', 1): 'u1',
+    ('U', 2): '<u2',
+    ('U', 4): '<u4',
+    ('I', 1): 'i1',
+    ('I', 2): '<i2',
+    ('I', 4): '<i4',
+    ('U', 8): '<u8',
+    ('I', 8): '<i8'
+}
 
 
 @dataclass
@@ -496,8 +516,7 @@ def _pcd_header(path: Path) -> _PcdHeader:
     width = int(entries.get('WIDTH', ['0'])[0])
     height = int(entries.get('HEIGHT', ['1'])[0])
     points = int(entries.get('POINTS', [str(width * height)])[0])
-    return _PcdHeader(fields, np.dtype(layout), points, entries['DATA'][0].lower(), offset,
-                      lines)
+    return _PcdHeader(fields, np.dtype(layout), points, entries['DATA'][0].lower(), offset, lines)
 
 
 def _pcd_colours(packed: np.ndarray) -> np.ndarray:
@@ -520,8 +539,8 @@ def _read_pcd(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
                                   f'{header.points} points ({expected} bytes)')
         if header.points == 0:
             return
-        table = np.memmap(path, dtype=header.dtype, mode='r', offset=header.offset,
-                          shape=(header.points, ))
+        table = np.memmap(
+            path, dtype=header.dtype, mode='r', offset=header.offset, shape=(header.points, ))
     elif header.data == 'ascii':
         table = None
     else:
@@ -553,9 +572,11 @@ def _pcd_ascii_rows(path: Path, first_line: int, block: list[bytes],
     floats = np.dtype([(name, '<f8' if header.dtype[name].kind == 'f' else '<i8')
                        for name in header.fields if header.dtype[name].shape == ()])
     try:
-        rows = np.loadtxt(io.BytesIO(b''.join(block)), dtype=floats, ndmin=1,
-                          usecols=[i for i, name in enumerate(header.fields)
-                                   if header.dtype[name].shape == ()])
+        rows = np.loadtxt(
+            io.BytesIO(b''.join(block)),
+            dtype=floats,
+            ndmin=1,
+            usecols=[i for i, name in enumerate(header.fields) if header.dtype[name].shape == ()])
     except ValueError as error:
         raise ScanFormatError(f'{path}:{first_line + _bad_line(block, len(header.fields), " ")}'
                               f': {_short(error)}') from None
@@ -659,8 +680,7 @@ class _VoxelFilter:
         before, one per voxel: its first point."""
         keys = (np.floor(xyz / self.voxel) - self.origin_key).astype(np.int64)
         packable = (np.abs(keys) < 2**20).all(axis=1)
-        packed = ((keys[:, 0] + 2**20) << 42) | ((keys[:, 1] + 2**20) << 21) | (keys[:, 2] +
-                                                                                 2**20)
+        packed = ((keys[:, 0] + 2**20) << 42) | ((keys[:, 1] + 2**20) << 21) | (keys[:, 2] + 2**20)
         packed = np.where(packable, packed, -1)
         _, first = np.unique(packed, return_index=True)
         first = first[packed[first] >= 0]
@@ -692,7 +712,7 @@ def load_scan(path: str | os.PathLike,
 
     The origin is the median of the first chunk's first 1,000 points, floored to whole metres
     and kept in float64, so the local coordinates are small and the scan's own exact. With a
-    voxel, memory is bounded by the kept voxels (56 bytes each) plus one chunk, whatever the
+    voxel, memory is bounded by the kept voxels (64 bytes each) plus one chunk, whatever the
     file's size; without, every point is kept. Raises ``ScanFormatError`` as
     :func:`read_scan_chunks`, and when the scan's extent says its units are not metres.
     """
@@ -713,16 +733,20 @@ def load_scan(path: str | os.PathLike,
         local = chunk.copy() if chunk.base is not None else chunk
         local[:, :3] -= origin
         kept.append(local)
-    points = kept[0] if len(kept) == 1 else np.concatenate(kept)
-    del kept
+    points = np.empty((sum(len(part) for part in kept), 6))
+    start = 0
+    while kept:  # join the kept chunks, freeing each once copied: no second full copy
+        part = kept.pop(0)
+        points[start:start + len(part)] = part
+        start += len(part)
     check_units(points, path)
     report = notes + [
         f'read {total:,} points from {path}' +
         (f', kept {len(points):,} (one per {voxel * 100:g} cm voxel)' if voxel else '') +
         f'; local origin {origin[0]:.0f}, {origin[1]:.0f}, {origin[2]:.0f}'
     ]
-    return LoadedScan(points=points, origin=origin, source=str(path), report=report,
-                      points_read=total)
+    return LoadedScan(
+        points=points, origin=origin, source=str(path), report=report, points_read=total)
 
 
 def check_units(points: np.ndarray, path: str | os.PathLike) -> None:
@@ -761,15 +785,16 @@ def _write_ply(path: Path, points: np.ndarray) -> None:
 def _write_xyz(path: Path, points: np.ndarray) -> None:
     """``x y z r g b`` lines, millimetre-exact at any coordinate (6 decimals, float64)."""
     with open(path, 'w') as stream:
-        np.savetxt(stream, np.column_stack([points[:, :3], _colours_0_255(points)]),
-                   fmt=['%.6f'] * 3 + ['%d'] * 3)
+        np.savetxt(
+            stream,
+            np.column_stack([points[:, :3], _colours_0_255(points)]),
+            fmt=['%.6f'] * 3 + ['%d'] * 3)
 
 
 def _write_pcd(path: Path, points: np.ndarray) -> None:
     """A binary PCD with float64 ``x y z`` and packed ``rgb`` (uint32)."""
     colours = _colours_0_255(points).astype(np.uint32)
-    table = np.empty(len(points), dtype=[('x', '<f8'), ('y', '<f8'), ('z', '<f8'),
-                                         ('rgb', '<u4')])
+    table = np.empty(len(points), dtype=[('x', '<f8'), ('y', '<f8'), ('z', '<f8'), ('rgb', '<u4')])
     for i, name in enumerate('xyz'):
         table[name] = points[:, i]
     table['rgb'] = (colours[:, 0] << 16) | (colours[:, 1] << 8) | colours[:, 2]
@@ -805,8 +830,8 @@ def write_las_chunks(path: str | os.PathLike,
                 header.scales = np.array([0.001, 0.001, 0.001])
                 header.offsets = np.floor(chunk[:, :3].min(axis=0)) if offset is None else \
                     np.asarray(offset, dtype=np.float64)
-                writer = laspy.open(path, mode='w', header=header,
-                                    do_compress=path.suffix.lower() == '.laz')
+                writer = laspy.open(
+                    path, mode='w', header=header, do_compress=path.suffix.lower() == '.laz')
             record = laspy.ScaleAwarePointRecord.zeros(len(chunk), header=writer.header)
             record.x, record.y, record.z = chunk[:, 0], chunk[:, 1], chunk[:, 2]
             colours = _colours_0_255(chunk).astype(np.uint16) * 257
@@ -825,8 +850,8 @@ def _write_e57(path: Path, points: np.ndarray) -> None:
     write_e57_scans(path, [(points, np.eye(3), np.zeros(3))])
 
 
-def write_e57_scans(path: str | os.PathLike,
-                    scans: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> None:
+def write_e57_scans(path: str | os.PathLike, scans: Sequence[tuple[np.ndarray, np.ndarray,
+                                                                   np.ndarray]]) -> None:
     """Write ``(points, rotation, translation)`` scans into one E57 file.
 
     Each scan's ``(n, 6)`` points are in its own frame; its pose (3x3 rotation, translation)
@@ -844,12 +869,17 @@ def write_e57_scans(path: str | os.PathLike,
             local = points[:, :3] - shift
             colours = _colours_0_255(points).astype(np.uint8)
             data = {
-                'cartesianX': local[:, 0], 'cartesianY': local[:, 1],
-                'cartesianZ': local[:, 2], 'colorRed': colours[:, 0],
-                'colorGreen': colours[:, 1], 'colorBlue': colours[:, 2],
+                'cartesianX': local[:, 0],
+                'cartesianY': local[:, 1],
+                'cartesianZ': local[:, 2],
+                'colorRed': colours[:, 0],
+                'colorGreen': colours[:, 1],
+                'colorBlue': colours[:, 2],
             }
-            e57.write_scan_raw(data, rotation=_matrix_quaternion(rotation),
-                               translation=rotation @ shift + np.asarray(translation, float))
+            e57.write_scan_raw(
+                data,
+                rotation=_matrix_quaternion(rotation),
+                translation=rotation @ shift + np.asarray(translation, float))
     finally:
         e57.close()
 

@@ -83,7 +83,8 @@ def test_boxes_go_back_to_the_scan_frame_with_their_yaw(room):
         footprint = box_corners_xy(centers[k], sizes[k], yaws[k])
         expected = prepared.points_to_scan(np.column_stack([footprint, np.full(4, centers[k, 2])]))
         np.testing.assert_allclose(
-            box_corners_xy(scan_centers[k], scan_sizes[k], scan_yaws[k]), expected[:, :2],
+            box_corners_xy(scan_centers[k], scan_sizes[k], scan_yaws[k]),
+            expected[:, :2],
             atol=1e-4)  # up to the levelled tilt of a few thousandths of a degree
     assert scan_centers[0][0] > 499000 and scan_centers[0][1] > 5399000
 
@@ -102,6 +103,24 @@ def test_a_stray_point_5_km_away_changes_nothing(room):
     assert stray_peak < 1.02 * plain_peak  # no grid over the 5 km bounding box
     assert plain.report[0].startswith('outliers: removed') and \
         with_stray.report[0] != plain.report[0]  # one more point removed
+
+
+def test_corners_of_a_scan_with_a_stray_point_5_km_away_are_unchanged(tmp_path, room):
+    write_scan(tmp_path / 'room.pcd', room.points)
+    write_scan(tmp_path / 'stray.pcd', np.vstack([room.points, [[3000.0, -4000.0, 0, 0, 0, 0]]]))
+    plain, stray = (corners_for_scan(tmp_path / f'{name}.pcd') for name in ('room', 'stray'))
+    assert stray['corners'] == plain['corners'] and stray['floor_z'] == plain['floor_z']
+
+
+def test_a_sparse_scan_is_prepared_without_losing_its_points():
+    points = np.column_stack(
+        [np.random.default_rng(5).uniform(0, 10, (1000, 3)),
+         np.zeros((1000, 3))])
+    prepared = prepare_scan(loaded(points))
+    assert len(prepared.points) == 1000 and 'too sparse for the density test' in \
+        prepared.report[0]
+    back = prepared.points_to_scan(prepared.points[:, :3])
+    np.testing.assert_allclose(np.sort(back, axis=0), np.sort(points[:, :3], axis=0), atol=1e-9)
 
 
 def test_outliers_in_sparse_isolated_cells_are_removed(room):
@@ -140,13 +159,15 @@ def test_density_resampling_and_warning(room):
 
 
 def test_geometry_helpers():
-    for a, b in (([0, 0, 1], [0, 0, 1]), ([0, 1, 0], [0, 0, 1]), ([0, 0, -1], [0, 0, 1]),
-                 ([1, 2, 3], [-3, 0.5, 2])):
+    for a, b in (([0, 0, 1], [0, 0, 1]), ([0, 1, 0], [0, 0, 1]), ([0, 0,
+                                                                   -1], [0, 0,
+                                                                         1]), ([1, 2,
+                                                                                3], [-3, 0.5, 2])):
         rotation = rotation_between(a, b)
         np.testing.assert_allclose(rotation @ rotation.T, np.eye(3), atol=1e-12)
         assert np.linalg.det(rotation) == pytest.approx(1.0)
-        np.testing.assert_allclose(rotation @ a / np.linalg.norm(a), np.asarray(b) /
-                                   np.linalg.norm(b), atol=1e-12)
+        np.testing.assert_allclose(
+            rotation @ a / np.linalg.norm(a), np.asarray(b) / np.linalg.norm(b), atol=1e-12)
     walls = make_room('rect', n_points=60_000, seed=2, rotate=False).points
     walls = walls[(walls[:, 2] > walls[:, 2].min() + 0.5)][:, :2] @ \
         rotation_z(math.radians(30))[:2, :2].T

@@ -33,8 +33,7 @@ def matched(found: np.ndarray, expected: np.ndarray) -> float:
 
 
 @pytest.mark.parametrize('suffix', FORMATS)
-def test_every_format_reads_back_the_same_points_whole_and_in_chunks(tmp_path, geo_points,
-                                                                     suffix):
+def test_every_format_reads_back_the_same_points_whole_and_in_chunks(tmp_path, geo_points, suffix):
     path = tmp_path / f'room{suffix}'
     write_scan(path, geo_points)
     points = read_scan(path)
@@ -48,10 +47,17 @@ def test_every_format_reads_back_the_same_points_whole_and_in_chunks(tmp_path, g
     assert notes == []  # colours present: nothing to say
 
 
-def test_float32_bin_keeps_a_local_room_to_the_micrometre(tmp_path, room):
+def test_float32_bin_keeps_a_local_room_and_warns_for_georeferenced_ones(
+        tmp_path, room, geo_points):
     path = tmp_path / 'room.bin'
     write_scan(path, room.points)
-    assert np.abs(read_scan(path)[:, :3] - room.points[:, :3]).max() < 1e-5
+    notes = []
+    points = np.concatenate(list(read_scan_chunks(path, notes=notes)))
+    assert np.abs(points[:, :3] - room.points[:, :3]).max() < 1e-5 and notes == []
+    write_scan(path, geo_points)
+    list(read_scan_chunks(path, notes=notes))
+    assert len(notes) == 1 and 'only exact to 500 mm' in notes[0]
+    assert notes[0].startswith(f'{path}: warning: float32 coordinates as large as 5,400,')
 
 
 def test_every_format_gives_the_same_corners_and_a_shifted_copy_shifted_corners(
@@ -78,8 +84,8 @@ def test_e57_reads_every_scan_moved_by_its_pose(tmp_path, room):
     points[:, :3] += GEO
     half = len(points) // 2
     scans = []
-    for part, yaw, station in ((points[:half], 0.7, GEO + (3, 1, 1.5)),
-                               (points[half:], -2.1, GEO + (-2, 4, 1.2))):
+    for part, yaw, station in ((points[:half], 0.7, GEO + (3, 1, 1.5)), (points[half:], -2.1,
+                                                                         GEO + (-2, 4, 1.2))):
         c, s = math.cos(yaw), math.sin(yaw)
         rotation = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
         own = part.copy()
@@ -95,15 +101,21 @@ def test_e57_without_colours_gets_intensity_as_grey(tmp_path):
     import pye57
     xyz = np.random.default_rng(0).uniform(0, 5, (100, 3))
     e57 = pye57.E57(str(tmp_path / 'grey.e57'), mode='w')
-    e57.write_scan_raw({'cartesianX': xyz[:, 0], 'cartesianY': xyz[:, 1],
-                        'cartesianZ': xyz[:, 2], 'intensity': np.linspace(0, 1, 100)})
+    e57.write_scan_raw({
+        'cartesianX': xyz[:, 0],
+        'cartesianY': xyz[:, 1],
+        'cartesianZ': xyz[:, 2],
+        'intensity': np.linspace(0, 1, 100)
+    })
     e57.close()
     notes = []
     points = np.concatenate(list(read_scan_chunks(tmp_path / 'grey.e57', notes=notes)))
     np.testing.assert_allclose(points[:, 3], np.linspace(0, 255, 100), atol=1e-4)
     np.testing.assert_array_equal(points[:, 3], points[:, 5])
-    assert notes == [f'{tmp_path / "grey.e57"}: no colours: the model gets the intensity as '
-                     f'grey instead']
+    assert notes == [
+        f'{tmp_path / "grey.e57"}: no colours: the model gets the intensity as '
+        f'grey instead'
+    ]
 
 
 def test_las_16_bit_colours_and_intensity_without_colours(tmp_path):
@@ -120,8 +132,8 @@ def test_las_16_bit_colours_and_intensity_without_colours(tmp_path):
             las.red = las.green = las.blue = np.full(50, 65535, dtype=np.uint16)
         las.write(tmp_path / f'f{point_format}.las')
         notes = []
-        points = np.concatenate(list(read_scan_chunks(tmp_path / f'f{point_format}.las',
-                                                      notes=notes)))
+        points = np.concatenate(
+            list(read_scan_chunks(tmp_path / f'f{point_format}.las', notes=notes)))
         assert np.abs(points[:, :3] - xyz).max() <= 0.0005 + 1e-9
         np.testing.assert_array_equal(points[:, 3:], 255.0)  # 65535 colour, 4095 intensity
         assert bool(notes) == (point_format == 0)
@@ -135,13 +147,12 @@ def test_las_16_bit_colours_and_intensity_without_colours(tmp_path):
         ('semicolon.csv', '1;2;3\n4;5;6\n', None, [[1, 2, 3, 0, 0, 0], [4, 5, 6, 0, 0, 0]]),
         ('scan.pts', '2\n1 2 3 -2048 10 20 30\n4 5 6 2047 40 50 60\n', None,
          [[1, 2, 3, 10, 20, 30], [4, 5, 6, 40, 50, 60]]),  # x y z intensity r g b
-        ('grey.xyz', '1 2 3 0\n4 5 6 255\n', 'x,y,z,i',
-         [[1, 2, 3, 0, 0, 0], [4, 5, 6, 255, 255, 255]]),
+        ('grey.xyz', '1 2 3 0\n4 5 6 255\n', 'x,y,z,i', [[1, 2, 3, 0, 0, 0],
+                                                         [4, 5, 6, 255, 255, 255]]),
         ('skip.xyz', '9 1 2 3 10 20 30\n', '_,x,y,z,r,g,b', [[1, 2, 3, 10, 20, 30]]),
         ('tabs.txt', '1\t2\t3\t0.5\n', 'x,y,z,i', [[1, 2, 3, 127.5, 127.5, 127.5]]),
     ])
-def test_text_scans_detect_delimiter_header_and_columns(tmp_path, name, text, columns,
-                                                        expected):
+def test_text_scans_detect_delimiter_header_and_columns(tmp_path, name, text, columns, expected):
     path = tmp_path / name
     path.write_text(text)
     np.testing.assert_allclose(read_scan(path, columns=columns), expected)
@@ -153,8 +164,8 @@ def test_pcd_ascii_and_binary_with_packed_colours_and_intensity(tmp_path):
     packed = np.array([(10 << 16) | (20 << 8) | 30, (255 << 16)], dtype=np.uint32)
     as_float = packed.view(np.float32)
     (tmp_path / 'a.pcd').write_text(header + f'1 2 3 {as_float[0]!r}\n4 5 6 {as_float[1]!r}\n')
-    np.testing.assert_array_equal(read_scan(tmp_path / 'a.pcd'),
-                                  [[1, 2, 3, 10, 20, 30], [4, 5, 6, 255, 0, 0]])
+    np.testing.assert_array_equal(
+        read_scan(tmp_path / 'a.pcd'), [[1, 2, 3, 10, 20, 30], [4, 5, 6, 255, 0, 0]])
     table = np.array([(1, 2, 3, 0.0), (4, 5, 6, 1.0)],
                      dtype=[('x', '<f4'), ('y', '<f4'), ('z', '<f4'), ('intensity', '<f4')])
     binary = header.replace('rgb', 'intensity').replace('DATA ascii', 'DATA binary')
@@ -191,8 +202,10 @@ def test_clear_one_line_errors_name_the_file(tmp_path, room):
     millimetres = room.points.copy()
     millimetres[:, :3] *= 1000.0
     write_scan(tmp_path / 'mm.laz', millimetres)
-    with pytest.raises(ScanFormatError, match=r'mm\.laz: the scan is [\d,]+ m tall .* the units '
-                       r'look wrong \(millimetres or centimetres\?\); synthdet expects metres'):
+    with pytest.raises(
+            ScanFormatError,
+            match=r'mm\.laz: the scan is [\d,]+ m tall .* the units '
+            r'look wrong \(millimetres or centimetres\?\); synthdet expects metres'):
         load_scan(tmp_path / 'mm.laz', voxel=0.05)
 
 
@@ -212,7 +225,8 @@ def test_load_scan_voxel_filter_is_chunk_size_independent_and_local(tmp_path, ge
     np.testing.assert_array_equal(whole.points, chunked.points)
     np.testing.assert_array_equal(whole.origin, chunked.origin)
     assert whole.points_read == len(geo_points) and len(whole.points) < len(geo_points) / 2
-    assert np.all(whole.origin == np.floor(whole.origin)) and np.abs(whole.points[:, :3]).max() < 50
+    assert np.all(whole.origin == np.floor(whole.origin)) and np.abs(
+        whole.points[:, :3]).max() < 50
     scan_xyz = whole.points[:, :3] + whole.origin
     voxels = np.floor(scan_xyz / 0.05).astype(np.int64)
     assert len(np.unique(voxels, axis=0)) == len(voxels)  # one point per voxel
@@ -229,10 +243,25 @@ def test_a_point_kilometres_away_is_kept_exactly_by_the_voxel_filter(tmp_path, r
 
 
 def test_write_las_chunks_streams_a_large_scan(tmp_path, room):
-    count = write_las_chunks(tmp_path / 'big.laz',
-                             (room.points[i:i + 10_000] + np.r_[GEO, 0, 0, 0]
-                              for i in range(0, len(room.points), 10_000)))
+    count = write_las_chunks(tmp_path / 'big.laz', (room.points[i:i + 10_000] + np.r_[GEO, 0, 0, 0]
+                                                    for i in range(0, len(room.points), 10_000)))
     assert count == len(room.points)
     points = read_scan(tmp_path / 'big.laz')
     assert np.abs(points[:, :3] - room.points[:, :3] - GEO).max() <= 0.0005 + 1e-9
     assert set(scan_io.WRITERS) >= {'.las', '.laz', '.e57', '.pcd', '.xyz'}
+
+
+def test_corners_command_reads_any_format_and_writes_the_scan_frame(tmp_path, room, geo_points,
+                                                                    capsys):
+    from configurator.__main__ import main
+    from synthdet.contracts import read_corners
+    write_scan(tmp_path / 'geo.laz', geo_points)
+    assert main(['corners', str(tmp_path / 'geo.laz'), '--out', str(tmp_path / 'c.json')]) == 0
+    output = capsys.readouterr().out
+    assert 'corners: levelling:' in output and 'corners: yaw:' in output
+    corners = np.array(read_corners(tmp_path / 'c.json')['corners'])
+    assert np.abs(corners - GEO[:2]).max() < 30 and len(corners) == len(room.polygon)
+    (tmp_path / 'bad.xyz').write_text('1 2\n')
+    assert main(['corners', str(tmp_path / 'bad.xyz'), '--out', str(tmp_path / 'd.json')]) == 2
+    assert 'corners: bad scan: ' in capsys.readouterr().err
+    assert not (tmp_path / 'd.json').exists()

@@ -6,8 +6,9 @@ export it as PLY.
         [--ply factory_1.ply] [--colour-by class|rgb|height] [--min-score 0.3]
 
 SCAN is an S3DIS room ``.txt`` (classes from its ``Annotations/``), a converted
-``points/<room>.bin`` (classes from ``semantic_mask/``), or any ``.txt``/``.bin``/``.ply``
-(then coloured by RGB or height). ``--gt`` takes a generator ``meta.json`` or an info pickle
+``points/<room>.bin`` (classes from ``semantic_mask/``), or any scan ``synthdet.scan_io`` reads
+(``.e57``, ``.las``/``.laz``, ``.ply``, ``.pcd``, ``.xyz``/``.pts``/``.csv``, ``.txt``, ``.bin``;
+then coloured by RGB or height). ``--gt`` takes a generator ``meta.json`` or an info pickle
 (``s3dis_infos_Area_N.pkl``, matched by the scan's file name).
 """
 from __future__ import annotations
@@ -25,7 +26,7 @@ from synthdet.topview import draw_top_view  # noqa: E402
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=' '.join(__doc__.split('\n\n')[0].split()))
-    parser.add_argument('scan', help='S3DIS room .txt, .bin or .ply')
+    parser.add_argument('scan', help='S3DIS room .txt, a points/*.bin or any scan (docs/scans.md)')
     parser.add_argument('--gt', help='ground truth: generator meta.json or info .pkl')
     parser.add_argument('--pred', help='predictions JSON (synthdet.predictions/1)')
     parser.add_argument('--corners', help='corners JSON (synthdet.corners/1)')
