@@ -66,6 +66,19 @@ DEFAULTS: dict[str, Any] = {
     },
 }
 
+# A factory hall instead of rooms, used when a configuration file has a ``hall`` section (any
+# subset of these keys). Rooms' configurations, and hence their meta.json, do not carry it.
+HALL_DEFAULTS: dict[str, Any] = {
+    'width': [20.0, 60.0],  # x extent, metres
+    'depth': [15.0, 30.0],  # y extent, metres
+    'height': [3.0, 4.0],  # as the rooms, so a model trained on rooms sees the same structure
+    'bay': [7.0, 10.0],  # side of a bay; each bay is furnished like a room and scanned by a cross
+    'partitions': 0.3,  # probability that the boundary between two bays is a partition wall
+    'passage': 2.0,  # width of the passage left open in each partition, metres
+    'doors': [2, 4],  # inclusive range of doors in the outer walls
+    'windows': [0, 6],  # inclusive range of windows in the outer walls
+}
+
 _SUM_GROUPS = (('probabilities', ('table', 'sofa')), ('probabilities', ('yumi', '3dprinter')))
 
 
@@ -95,7 +108,13 @@ def load_config(path: str | Path | None = None) -> dict[str, Any]:
             user = {}
         if not isinstance(user, dict):
             raise ConfigError(f'{path}: top level must be a mapping, got {type(user).__name__}')
+        hall = user.pop('hall', None)
         _merge(config, user, DEFAULTS, source, '')
+        if hall is not None:
+            if not isinstance(hall, dict):
+                raise ConfigError(f'{source}: "hall" must be a mapping')
+            config['hall'] = copy.deepcopy(HALL_DEFAULTS)
+            _merge(config['hall'], hall, HALL_DEFAULTS, source, 'hall.')
     validate_config(config, source)
     return config
 
@@ -210,8 +229,31 @@ def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
     for key in ('range_noise', 'angular_jitter'):
         if _number(config, 'scanner', key, source) < 0:
             raise ConfigError(f'{source}: "scanner.{key}" must not be negative')
+    if 'hall' in config:
+        _validate_hall(config, source)
     for key in ('path_steps', 'batch_rays', 'max_object_rays'):
         value = scanner[key]
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ConfigError(f'{source}: "scanner.{key}" must be a positive integer, '
                               f'got {value!r}')
+
+
+def _validate_hall(config: dict[str, Any], source: str) -> None:
+    for key in ('width', 'depth', 'height', 'bay'):
+        _range(config, 'hall', key, source)
+    for key in ('doors', 'windows'):
+        _range(config, 'hall', key, source, integer=True)
+    hall = config['hall']
+    if hall['bay'][0] < 4.0:
+        raise ConfigError(f'{source}: "hall.bay" must be at least 4 m')
+    if hall['width'][0] < hall['bay'][0] or hall['depth'][0] < hall['bay'][0]:
+        raise ConfigError(f'{source}: "hall.width" and "hall.depth" must be at least "hall.bay"')
+    if hall['height'][0] < 2.2:
+        raise ConfigError(f'{source}: "hall.height" must be at least 2.2 m')
+    partitions = _number(config, 'hall', 'partitions', source)
+    if not 0.0 <= partitions <= 1.0:
+        raise ConfigError(f'{source}: "hall.partitions" = {partitions} is outside [0, 1]')
+    passage = _number(config, 'hall', 'passage', source)
+    if not 0.8 <= passage < hall['bay'][0] - 1.0:
+        raise ConfigError(f'{source}: "hall.passage" = {passage} must be at least 0.8 m and '
+                          f'leave 1 m of wall in the smallest bay')

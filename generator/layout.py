@@ -110,14 +110,30 @@ class Opening:
 
 
 @dataclass
+class Partition:
+    """An inner wall of a hall from ``start`` to ``end`` (xy), open between ``u0`` and ``u1``."""
+
+    start: np.ndarray  # (2,)
+    end: np.ndarray  # (2,)
+    u0: float  # the passage, in metres along the wall from ``start``
+    u1: float
+
+
+@dataclass
 class RoomLayout:
-    """A room: clockwise floor polygon, height, openings and objects."""
+    """A room or a hall: clockwise floor polygon, height, openings and objects.
+
+    A hall (``shape == 'hall'``) is also cut into ``bays`` (clockwise rectangles, each furnished
+    like a room and scanned by its own cross) and may have inner ``partitions``.
+    """
 
     shape: str
     polygon: np.ndarray  # (N, 2), clockwise seen from above
     height: float
     objects: list[PlacedObject] = field(default_factory=list)
     openings: list[Opening] = field(default_factory=list)
+    bays: list[np.ndarray] = field(default_factory=list)
+    partitions: list[Partition] = field(default_factory=list)
 
     def counts(self) -> dict[str, int]:
         result = {cls: 0 for cls in GENERATED_CLASSES}
@@ -250,6 +266,12 @@ class _Placer:
         self.objects: list[PlacedObject] = []
         self.blockers: list[PlacedObject] = []  # keep-out volumes (door swings), not written
         self.counters: dict[str, int] = {}
+
+    def within(self, region: np.ndarray) -> '_Placer':
+        """A placer for the part ``region`` of this one's polygon, sharing its objects."""
+        part = _Placer(region, self.top_limit, self.clearance)
+        part.objects, part.blockers, part.counters = self.objects, self.blockers, self.counters
+        return part
 
     def is_free(self, candidate: PlacedObject, ignore: str | None = None) -> bool:
         if candidate.center[2] + candidate.size[2] / 2 > self.top_limit:
@@ -431,18 +453,11 @@ def _place_clutter(rng, placer: _Placer, layout_cfg) -> None:
         placer.place_first_free(spec, propose, 20)
 
 
-def generate_layout(rng: np.random.Generator, catalog: Catalog,
-                    config: Mapping[str, Any]) -> RoomLayout:
-    """Sample one room and its objects following the placement rules (see module docstring)."""
-    room_cfg, probs, layout_cfg = config['room'], config['probabilities'], config['layout']
-    shape, polygon, height = sample_room(rng, room_cfg)
-    layout = RoomLayout(shape, polygon, height)
-    # objects stay below the sensor (and the ceiling), so the sensor path never runs through one
-    top_limit = min(height - 0.05, float(config['scanner']['sensor_height']) * height - 0.1)
-    placer = _Placer(polygon, top_limit, float(layout_cfg['clearance']))
-    _place_openings(rng, placer, room_cfg, layout)
-
+def _furnish(rng: np.random.Generator, placer: '_Placer', catalog: Catalog,
+             probs: Mapping[str, float], layout_cfg: Mapping[str, Any]) -> None:
+    """Place wall items, chairs and clutter in ``placer.polygon`` (a room, or a bay of a hall)."""
     # tables and sofas share the wall slots: the longest walls, at most 4
+    polygon = placer.polygon
     lengths = np.linalg.norm(np.roll(polygon, -1, axis=0) - polygon, axis=1)
     tie_break = rng.random(len(lengths))
     walls = [int(i) for i in np.lexsort((tie_break, -np.round(lengths, 3)))
@@ -506,6 +521,77 @@ def generate_layout(rng: np.random.Generator, catalog: Catalog,
             placer.place_first_free(spec, propose, 8)
 
     _place_clutter(rng, placer, layout_cfg)
+
+
+def generate_layout(rng: np.random.Generator, catalog: Catalog,
+                    config: Mapping[str, Any]) -> RoomLayout:
+    """Sample one room (or a hall, when ``config`` has a ``hall`` section) and its objects
+    following the placement rules (see module docstring)."""
+    if 'hall' in config:
+        return generate_hall_layout(rng, catalog, config)
+    room_cfg, probs, layout_cfg = config['room'], config['probabilities'], config['layout']
+    shape, polygon, height = sample_room(rng, room_cfg)
+    layout = RoomLayout(shape, polygon, height)
+    # objects stay below the sensor (and the ceiling), so the sensor path never runs through one
+    top_limit = min(height - 0.05, float(config['scanner']['sensor_height']) * height - 0.1)
+    placer = _Placer(polygon, top_limit, float(layout_cfg['clearance']))
+    _place_openings(rng, placer, room_cfg, layout)
+
+    _furnish(rng, placer, catalog, probs, layout_cfg)
+    layout.objects = placer.objects
+    return layout
+
+
+def _bay_edges(length: float, bay_range: Sequence[float], rng: np.random.Generator) -> np.ndarray:
+    """Bay boundaries along one side of a hall: equal bays, their side in ``bay_range`` when a
+    whole number of such bays fits (the count is drawn among those), else as close as fits."""
+    fewest = max(1, math.ceil(length / bay_range[1] - EPS))
+    most = max(fewest, math.floor(length / bay_range[0] + EPS))
+    count = int(rng.integers(fewest, most + 1))
+    return np.round(np.linspace(0.0, length, count + 1), 3)
+
+
+def _hall_partitions(xs: np.ndarray, ys: np.ndarray, rng: np.random.Generator,
+                     hall_cfg: Mapping[str, Any]) -> list[Partition]:
+    """Partition walls on the boundaries between bays, each with a passage."""
+    segments = [(np.array([x, y0]), np.array([x, y1])) for x in xs[1:-1]
+                for y0, y1 in zip(ys[:-1], ys[1:])]
+    segments += [(np.array([x0, y]), np.array([x1, y])) for y in ys[1:-1]
+                 for x0, x1 in zip(xs[:-1], xs[1:])]
+    partitions = []
+    passage = float(hall_cfg['passage'])
+    for start, end in segments:
+        if rng.random() >= hall_cfg['partitions']:
+            continue
+        length = float(np.linalg.norm(end - start))
+        u0 = round(float(rng.uniform(0.5, length - 0.5 - passage)), 3)
+        partitions.append(Partition(start, end, u0, round(u0 + passage, 3)))
+    return partitions
+
+
+def generate_hall_layout(rng: np.random.Generator, catalog: Catalog,
+                         config: Mapping[str, Any]) -> RoomLayout:
+    """A factory hall: a rectangle cut into a grid of bays, each furnished by the room rules
+    (wall slots on the bay's sides, chairs on its inner boundary, clutter), optional partition
+    walls with a passage between bays, and doors and windows in the outer walls."""
+    hall_cfg, probs, layout_cfg = config['hall'], config['probabilities'], config['layout']
+    width = round(float(rng.uniform(*hall_cfg['width'])), 2)
+    depth = round(float(rng.uniform(*hall_cfg['depth'])), 2)
+    height = round(float(rng.uniform(*hall_cfg['height'])), 2)
+    polygon = np.array([(0.0, 0.0), (0.0, depth), (width, depth), (width, 0.0)])
+    xs = _bay_edges(width, hall_cfg['bay'], rng)
+    ys = _bay_edges(depth, hall_cfg['bay'], rng)
+    bays = [
+        np.array([[x0, y0], [x0, y1], [x1, y1], [x1, y0]]) for x0, x1 in zip(xs[:-1], xs[1:])
+        for y0, y1 in zip(ys[:-1], ys[1:])
+    ]
+    layout = RoomLayout(
+        'hall', polygon, height, bays=bays, partitions=_hall_partitions(xs, ys, rng, hall_cfg))
+    top_limit = min(height - 0.05, float(config['scanner']['sensor_height']) * height - 0.1)
+    placer = _Placer(polygon, top_limit, float(layout_cfg['clearance']))
+    _place_openings(rng, placer, hall_cfg, layout)
+    for bay in bays:
+        _furnish(rng, placer.within(bay), catalog, probs, layout_cfg)
     layout.objects = placer.objects
     return layout
 
@@ -535,6 +621,14 @@ def layout_meta(layout: RoomLayout) -> dict[str, Any]:
             'z': [o.z0, o.z1]
         } for name, o in zip(names, layout.openings)]
     }
+    if layout.shape == 'hall':
+        room['bays'] = [[[float(x), float(y)] for x, y in bay] for bay in layout.bays]
+        room['partitions'] = [{
+            'instance': name,
+            'start': [float(v) for v in p.start],
+            'end': [float(v) for v in p.end],
+            'passage': [p.u0, p.u1]
+        } for name, p in zip(partition_names(layout), layout.partitions)]
     objects = [{
         'instance': o.instance,
         'class': o.cls,
@@ -544,6 +638,11 @@ def layout_meta(layout: RoomLayout) -> dict[str, Any]:
         'on': o.on
     } for o in layout.objects]
     return {'room': room, 'objects': objects}
+
+
+def partition_names(layout: RoomLayout) -> list[str]:
+    """Annotation names of a hall's partitions: walls numbered after the outer walls."""
+    return [f'wall_{len(layout.polygon) + k}' for k in range(1, len(layout.partitions) + 1)]
 
 
 def _jsonable(value: Any) -> Any:

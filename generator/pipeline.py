@@ -125,9 +125,11 @@ class RoomGenerator:
             extra[f'{task.name}.blend'] = blend
         triangles, names, classes = export_triangles()
         scan_cfg = options.config['scanner']
+        # a hall gets a cross per bay, with as many sensor positions per bay as a room
         path, segments = sensor_path(layout.polygon, layout.height, rng_scan,
                                      scan_cfg['path_coverage'], scan_cfg['sensor_height'],
-                                     scan_cfg['path_steps'])
+                                     scan_cfg['path_steps'] * max(1, len(layout.bays)),
+                                     layout.bays or None)
         scan = Scanner(
             triangles, threads=options.threads).scan(path, options.points, options.object_ratio,
                                                      rng_scan, scan_cfg)

@@ -66,18 +66,19 @@ def sensor_path(polygon: np.ndarray,
                 rng: np.random.Generator,
                 coverage: float = 0.8,
                 height_fraction: float = 2 / 3,
-                steps: int = 512) -> tuple[np.ndarray, np.ndarray]:
+                steps: int = 512,
+                cells: list[np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Sensor positions (steps, 3) and the segments (S, 2, 2) they run along, in order.
 
     The paper's path: two segments at right angles, crossing at the centre at a random angle,
     each spanning ``coverage`` of the room's extent along its line. A rectangle gets exactly
     that. An L-, U- or T-shaped room gets such a cross in every cell of :func:`grid_cells`, so
     that the sensor also walks into the arms (a single cross leaves an arm's inner walls
-    unscanned). Each segment is clipped to the room; the steps are shared equally by the
-    segments.
+    unscanned). A hall passes its bays as ``cells``: a cross in each bay. Each segment is
+    clipped to the room; the steps are shared equally by the segments.
     """
     segments = []
-    for cell in grid_cells(polygon):
+    for cell in grid_cells(polygon) if cells is None else cells:
         origin = (cell.min(axis=0) + cell.max(axis=0)) / 2
         angle = rng.uniform(0.0, np.pi)
         for a in (angle, angle + np.pi / 2):

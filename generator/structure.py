@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from generator.layout import AssetSpec, RoomLayout
+from generator.layout import AssetSpec, RoomLayout, partition_names
 from synthdet.geometry import grid_cells
 
 
@@ -106,7 +106,24 @@ def structure_parts(layout: RoomLayout, rng: np.random.Generator) -> list[PartMe
             parts.append(
                 PartMesh(name, opening.kind, vertices, triangles,
                          np.tile(rgb.astype(np.uint8), (len(triangles), 1))))
+    for name, partition in zip(partition_names(layout), layout.partitions):
+        vertices, triangles = _partition_mesh(partition, height)
+        parts.append(
+            PartMesh(name, 'wall', vertices, triangles,
+                     np.tile(wall_rgb.astype(np.uint8), (len(triangles), 1))))
     return parts
+
+
+def _partition_mesh(partition, height: float) -> tuple[np.ndarray, np.ndarray]:
+    """The two full-height pieces of a hall's partition wall, either side of its passage."""
+    length = float(np.linalg.norm(partition.end - partition.start))
+    direction = (partition.end - partition.start) / length
+    quads = []
+    for u0, u1 in ((0.0, partition.u0), (partition.u1, length)):
+        a, b = partition.start + direction * u0, partition.start + direction * u1
+        quads.append([[a[0], a[1], 0.0], [b[0], b[1], 0.0], [b[0], b[1], height],
+                      [a[0], a[1], height]])
+    return _quads_to_mesh(np.array(quads, dtype=float))
 
 
 def clutter_mesh(spec: AssetSpec, segments: int = 16) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -38,6 +38,7 @@ ARGUMENTS = {
     ['--rooms', '20', '--points-per-object', '18000', '--workers', '2', '--repeats', '2'],
     'model': ['--points', '100000', '--iters', '3', '--threads', '1'],
     'corners': [],
+    'hall': ['--checkpoint', 'work_dirs/demo/train/epoch_5.pth'],  # the model of `make demo`
 }
 WHAT = {
     'scanner':
@@ -55,6 +56,7 @@ WHAT = {
     'corners':
     'room corners: traced outline vs the paper\'s method and a convex hull (error, '
     'count, order, time)',
+    'hall': '30M-point generated hall as LAZ -> FCStd (time, memory); windowed vs room recall',
 }
 # The issues' goals, shown next to the results.
 GOALS = {
@@ -62,6 +64,7 @@ GOALS = {
     'generate': '<= 600 s for 150 rooms',
     'convert': '>= 3x at equal parallelism',
     'corners': 'traced <= 3 cm, >= 95% right count, <= 1 s per 1M points',
+    'hall': 'windowed recall >= 0.95 x room recall, peak < 8 GB',
 }
 OUTPUT_DIR = REPO_ROOT / 'docs' / 'benchmarks'
 

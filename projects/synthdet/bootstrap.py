@@ -24,6 +24,27 @@ def add_cfg_options(parser: argparse.ArgumentParser) -> None:
         'test_dataloader.dataset.ann_file=s3dis_infos_Area_9.pkl')
 
 
+def add_detection_arguments(parser: argparse.ArgumentParser, voxel: float | None) -> None:
+    """Add the options of detecting in scans (``predict.py``, ``scan2cad.py``): ``--score-thr``,
+    ``--device``, ``--seed`` and the reading options ``--voxel`` (default ``voxel``; None keeps
+    every point) and ``--columns``."""
+    import torch
+    parser.add_argument(
+        '--score-thr',
+        type=float,
+        default=0.3,
+        help='keep detections with at least this score (default 0.3)')
+    parser.add_argument('--device', default='cuda:0' if torch.cuda.is_available() else 'cpu')
+    parser.add_argument('--seed', type=int, default=0, help='seed of the point sampling')
+    parser.add_argument(
+        '--voxel',
+        type=float,
+        default=voxel,
+        help='keep one point per voxel of this size (m) while reading (default: %(default)s)')
+    parser.add_argument('--columns', help='text scans: the columns, e.g. x,y,z,r,g,b or x,y,z,i')
+    add_cfg_options(parser)
+
+
 def add_runner_arguments(parser: argparse.ArgumentParser, work_dir_help: str) -> None:
     """Add ``--work-dir``, ``--cfg-options``, ``--launcher`` and ``--local-rank``."""
     parser.add_argument('--work-dir', help=work_dir_help)

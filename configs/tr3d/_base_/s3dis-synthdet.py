@@ -68,3 +68,10 @@ test_dataloader = val_dataloader
 # out (the paper's "-"; otherwise their NaN AP makes mAP NaN and no best epoch is kept).
 val_evaluator = dict(type='SynthdetIndoorMetric')
 test_evaluator = val_evaluator
+
+# Whole-hall detection (tools/predict.py, tools/scan2cad.py): a scan larger than a window is cut
+# into overlapping square windows, each sampled like a training room, and the detections merged.
+# The rule of projects/synthdet/inference/windows.py applied to the generator's default rooms
+# (6-11 m x 5-9 m: median floor area 59 m^2 -> 8.0 m) and to the largest object of its library
+# (a sofa, 2.64 m footprint diagonal -> 2.7 m overlap).
+inference_window = dict(size=8.0, overlap=2.7)

@@ -1,0 +1,110 @@
+"""A model as a detector function of :mod:`projects.synthdet.inference.windows`.
+
+Each call runs the config's test pipeline (``PointSample`` with the training number of points,
+colour normalisation) through mmdet3d's ``inference_detector`` on the given points, shifted so
+that their minimum is at the origin like the converted training data, and shifts the boxes back.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+from mmdet3d.apis import inference_detector, init_model
+from mmengine.config import Config
+from mmengine.runner import set_random_seed
+
+from projects.synthdet.checkpoint import CheckpointError, load_model_weights
+from projects.synthdet.inference.windows import Detections, WindowSpec, detect_in_windows
+from synthdet.contracts import PREDICTIONS_FORMAT
+from synthdet.prepare import PreparedScan
+
+
+def load_model(cfg: Config, checkpoint: str, device: str) -> torch.nn.Module:
+    """The config's model with the checkpoint's weights, loaded weights-only.
+
+    Raises :class:`CheckpointError` (naming the file) for a checkpoint that is refused, does not
+    fit the model or names no classes.
+    """
+    model = init_model(cfg, None, device=device)
+    meta = load_model_weights(model, checkpoint)
+    if not isinstance(meta.get('dataset_meta'), dict) or 'classes' not in meta['dataset_meta']:
+        raise CheckpointError(f'{checkpoint}: the checkpoint\'s meta names no classes '
+                              '(dataset_meta)')
+    model.dataset_meta = meta['dataset_meta']
+    return model
+
+
+class ModelDetector:
+    """``detector(points) -> Detections`` for an initialised mmdet3d model.
+
+    Every call reseeds the point sampling with ``seed``, so a scan (or a window) gives the same
+    detections whatever was detected before it. Boxes scoring below ``score_thr`` are dropped.
+    """
+
+    def __init__(self, model: torch.nn.Module, score_thr: float, seed: int = 0):
+        self.model = model
+        self.score_thr = score_thr
+        self.seed = seed
+
+    @property
+    def classes(self) -> list[str]:
+        return list(self.model.dataset_meta['classes'])
+
+    @property
+    def iou_thr(self) -> float:
+        """The NMS threshold of the model's head, used to merge windows alike."""
+        return float(self.model.cfg.model.test_cfg.iou_thr)
+
+    def __call__(self, points: np.ndarray) -> Detections:
+        shift = points[:, :3].min(axis=0)
+        shifted = points.astype(np.float32)
+        shifted[:, :3] = points[:, :3] - shift
+        set_random_seed(self.seed)
+        result, _ = inference_detector(self.model, shifted)
+        pred = result.pred_instances_3d
+        keep = pred.scores_3d >= self.score_thr
+        boxes = pred.bboxes_3d[keep]
+        centres = boxes.gravity_center.cpu().numpy().astype(np.float64) + shift
+        dims = boxes.dims.cpu().numpy().astype(np.float64)
+        yaws = boxes.yaw.cpu().numpy().astype(np.float64)[:, None]
+        scores = pred.scores_3d[keep].cpu().numpy().astype(np.float64)
+        labels = pred.labels_3d[keep].cpu().numpy().astype(np.int64)
+        order = np.argsort(-scores, kind='stable')
+        return Detections(np.hstack([centres, dims, yaws])[order], scores[order], labels[order])
+
+    def detect(self, points: np.ndarray, spec: WindowSpec, progress: bool = True) -> Detections:
+        """Detect in ``points`` by windows of ``spec`` (one window for a room-sized scan)."""
+        detections, _ = detect_in_windows(points, self, spec, self.iou_thr, progress)
+        return detections
+
+    def predictions(self,
+                    prepared: PreparedScan,
+                    spec: WindowSpec,
+                    model_name: str,
+                    progress: bool = True) -> dict:
+        """The ``synthdet.predictions/1`` document of a prepared scan, detected by windows."""
+        return {
+            'format': PREDICTIONS_FORMAT,
+            'scan': prepared.source,
+            'model': model_name,
+            'classes': self.classes,
+            'detections': self.detect_scan(prepared, spec, progress),
+        }
+
+    def detect_scan(self,
+                    prepared: PreparedScan,
+                    spec: WindowSpec,
+                    progress: bool = True) -> list[dict]:
+        """Detect in a prepared scan by windows; the ``synthdet.predictions/1`` detections in
+        the scan's own coordinates (centres moved back exactly, yaws turned by the scan's)."""
+        found = self.detect(prepared.points, spec, progress)
+        centres, sizes, yaws = prepared.boxes_to_scan(found.boxes[:, :3], found.boxes[:, 3:6],
+                                                      found.boxes[:, 6])
+        classes = self.classes
+        return [{
+            'class': classes[label],
+            'score': round(float(score), 6),
+            'center': [round(float(v), 6) for v in centre],
+            'size': [round(float(v), 6) for v in size],
+            'yaw': round(float(yaw), 6),
+        } for label, score, centre, size, yaw in zip(found.labels, found.scores, centres, sizes,
+                                                     yaws)]

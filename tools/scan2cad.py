@@ -1,0 +1,110 @@
+"""One command from a scan to a FreeCAD document: read, prepare, detect, trace corners, build.
+
+Usage: python tools/scan2cad.py SCAN --config CFG --checkpoint CKPT --out hall.FCStd
+                                [--score-thr 0.3] [--device cpu] [--seed 0] [--voxel 0.02]
+                                [--columns x,y,z,r,g,b] [--library DIR] [--wall-thickness 0.1]
+
+The stages are the ones a user runs one by one, on the same prepared scan:
+1. ``synthdet.scan_io.load_scan`` (one point per ``--voxel``, 2 cm by default as the corners:
+   a hall's memory stays bounded) and ``synthdet.prepare.prepare_scan`` (each step reported);
+2. detection by windows sized from the training rooms (``ModelDetector.predictions``, as
+   ``tools/predict.py --voxel`` with the same voxel) -> ``<out stem>.pred.json`` beside it;
+3. the room corners on the prepared points, written in the scan's coordinates
+   (``configurator.corners.outline_in_scan``, as ``python -m configurator corners``)
+   -> ``<out stem>.corners.json``;
+4. the FreeCAD document (``configurator.freecad_cli.build_document``, as
+   ``python -m configurator freecad``).
+Every output is in the scan's own coordinates (a georeferenced scan gives georeferenced boxes).
+"""
+import argparse
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
+
+from configurator.corners import SCAN_VOXEL, CornerDetectionError, detect_corners  # noqa: E402
+from configurator.corners import outline_in_scan, outline_to_dict  # noqa: E402
+from configurator.freecad_cli import FreecadFailed, build_document  # noqa: E402
+from projects.synthdet.bootstrap import add_detection_arguments, load_config  # noqa: E402
+from projects.synthdet.inference.detector import ModelDetector, load_model  # noqa: E402
+from projects.synthdet.inference.windows import window_spec_from_config  # noqa: E402
+from synthdet.contracts import write_corners, write_predictions  # noqa: E402
+from synthdet.prepare import prepare_scan  # noqa: E402
+from synthdet.scan_io import load_scan  # noqa: E402
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """Parse the command line."""
+    parser = argparse.ArgumentParser(description='Scan -> detections, corners -> FreeCAD .FCStd')
+    parser.add_argument('scan', help='.e57, .las/.laz, .ply, .pcd, .xyz/.pts/.csv, .txt or .bin')
+    parser.add_argument('--config', required=True, help='model config, e.g. configs/tr3d/exp2.py')
+    parser.add_argument('--checkpoint', required=True, help='checkpoint file')
+    parser.add_argument('--out', required=True, help='FreeCAD document to write (.FCStd)')
+    parser.add_argument('--library', help='folder of <class>.step files replacing built-ins')
+    parser.add_argument('--wall-thickness', type=float, default=0.1, help='metres (default 0.1)')
+    parser.add_argument('--freecadcmd', default='freecadcmd', help='FreeCAD command line')
+    add_detection_arguments(parser, voxel=SCAN_VOXEL)
+    return parser.parse_args(argv)
+
+
+def output_paths(out: Path) -> tuple[Path, Path]:
+    """The predictions and corners JSON written beside ``out``."""
+    return out.with_suffix('.pred.json'), out.with_suffix('.corners.json')
+
+
+def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
+    """Run the four stages on ``args.scan``; returns FreeCAD's result (objects, warnings)."""
+    scan, out = Path(args.scan), Path(args.out)
+    if out.suffix.lower() != '.fcstd':
+        raise ValueError(f'{out}: the output must end with .FCStd')
+    predictions_path, corners_path = output_paths(out)
+    start = time.perf_counter()
+    prepared = prepare_scan(load_scan(scan, voxel=args.voxel, columns=args.columns))
+    for line in prepared.report:
+        report(f'prepare: {line}')
+    cfg = load_config(args.config, args.cfg_options)
+    spec = window_spec_from_config(cfg)
+    detector = ModelDetector(
+        load_model(cfg, args.checkpoint, args.device), args.score_thr, args.seed)
+    predictions = detector.predictions(prepared, spec, Path(args.config).stem)
+    write_predictions(predictions_path, predictions)
+    report(f'detect: {len(predictions["detections"])} objects -> {predictions_path}')
+    corners = outline_to_dict(
+        outline_in_scan(detect_corners(prepared.points), prepared), str(scan))
+    write_corners(corners_path, corners)
+    report(f'corners: {len(corners["corners"])} corners -> {corners_path}')
+    result = build_document(
+        scan,
+        predictions_path,
+        out,
+        corners=corners_path,
+        library=args.library,
+        min_score=args.score_thr,
+        wall_thickness=args.wall_thickness,
+        freecadcmd=args.freecadcmd)
+    report(f'freecad: {len(result["objects"])} objects -> {result["document"]} '
+           f'({time.perf_counter() - start:.1f} s from reading the scan)')
+    return result
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run scan2cad; returns 0, 2 for bad input (scan, checkpoint, no room found), 1 for a
+    failure at run time (FreeCAD, an unwritable output), each with a one-line message."""
+    args = parse_args(argv)
+    try:
+        result = scan_to_cad(args)
+    except ValueError as error:  # ScanFormatError, CheckpointError, SchemaError too
+        kind = 'no room found' if isinstance(error, CornerDetectionError) else 'bad input'
+        print(f'scan2cad: {kind}: {error}', file=sys.stderr)
+        return 2
+    except (OSError, FreecadFailed) as error:
+        print(f'scan2cad: failed: {error}', file=sys.stderr)
+        return 1
+    for warning in result['warnings']:
+        print(f'warning: {warning}', file=sys.stderr)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
