@@ -79,7 +79,10 @@ def main(argv: list[str] | None = None) -> list[Path]:
     out_dir = Path(args.out)
     targets = check_scans([Path(p) for p in args.points], out_dir, args.voxel, args.columns)
     cfg = load_config(args.config, args.cfg_options)
-    spec = window_spec_from_config(cfg)
+    try:
+        spec = window_spec_from_config(cfg)
+    except ValueError as error:
+        raise BadInput(f'{args.config}: {error}') from None
     try:
         model = load_model(cfg, args.checkpoint, args.device)
     except ValueError as error:  # CheckpointError

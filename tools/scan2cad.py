@@ -64,7 +64,10 @@ def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
     for line in prepared.report:
         report(f'prepare: {line}')
     cfg = load_config(args.config, args.cfg_options)
-    spec = window_spec_from_config(cfg)
+    try:
+        spec = window_spec_from_config(cfg)
+    except ValueError as error:
+        raise ValueError(f'{args.config}: {error}') from None
     detector = ModelDetector(
         load_model(cfg, args.checkpoint, args.device), args.score_thr, args.seed)
     predictions = detector.predictions(prepared, spec, Path(args.config).stem)
