@@ -27,7 +27,8 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
 
-from projects.synthdet.bootstrap import add_detection_arguments, load_config  # noqa: E402
+from projects.synthdet.bootstrap import (  # noqa: E402
+    add_detection_arguments, load_config, run_tool)
 from projects.synthdet.inference.detector import ModelDetector, load_model  # noqa: E402
 from projects.synthdet.inference.windows import window_spec_from_config  # noqa: E402
 from synthdet.contracts import write_predictions  # noqa: E402
@@ -105,11 +106,4 @@ def main(argv: list[str] | None = None) -> list[Path]:
 
 
 if __name__ == '__main__':
-    try:
-        main()
-    except BadInput as error:
-        print(f'predict.py: error: {error}', file=sys.stderr)
-        sys.exit(2)
-    except (RuntimeError, OSError) as error:
-        print(f'predict.py: error: {error}', file=sys.stderr)
-        sys.exit(1)
+    run_tool(main, 'predict.py', bad_input=(BadInput, ), failure=(RuntimeError, OSError))

@@ -26,7 +26,7 @@ from mmengine.model import is_model_wrapper  # noqa: E402
 from mmengine.runner import Runner  # noqa: E402
 
 from projects.synthdet.bootstrap import (  # noqa: E402
-    add_runner_arguments, parse_runner_args, runner_config)
+    add_runner_arguments, parse_runner_args, run_tool, runner_config)
 from projects.synthdet.checkpoint import CheckpointError, load_model_weights  # noqa: E402
 from projects.synthdet.evaluation.table3 import format_table3, table3  # noqa: E402
 from projects.synthdet.evaluation.table_files import write_table  # noqa: E402
@@ -82,8 +82,4 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 if __name__ == '__main__':
-    try:
-        main()
-    except CheckpointError as error:
-        print(f'test.py: error: {error}', file=sys.stderr)
-        sys.exit(2)
+    run_tool(main, 'test.py', bad_input=(CheckpointError, ))

@@ -7,11 +7,30 @@ work directory and the launcher. Checkpoints are loaded weights-only
 """
 import argparse
 import os
+import sys
 from pathlib import Path
+from typing import Callable, NoReturn
 
 from mmengine.config import Config, DictAction
 
 from projects.synthdet.distributed import prepare_distributed
+
+
+def run_tool(main: Callable[[], object],
+             prog: str,
+             bad_input: tuple[type[BaseException], ...],
+             failure: tuple[type[BaseException], ...] = (OSError, )) -> NoReturn:
+    """Run a tool's ``main`` with the project's exit codes (README, "Safety"): 0 on success,
+    2 with one line for ``bad_input`` errors, 1 with one line for ``failure`` errors."""
+    try:
+        main()
+    except bad_input as error:
+        print(f'{prog}: error: {error}', file=sys.stderr)
+        sys.exit(2)
+    except failure as error:
+        print(f'{prog}: error: {error}', file=sys.stderr)
+        sys.exit(1)
+    sys.exit(0)
 
 
 def add_cfg_options(parser: argparse.ArgumentParser) -> None:
