@@ -26,7 +26,7 @@ from projects.synthdet.core.box_ops import pairwise_bev_iou
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.inference.detector import ModelDetector, load_model
 from projects.synthdet.inference.windows import (density_from_config, detect_in_windows,
-                                                  window_spec_from_config)
+                                                 window_spec_from_config)
 from synthdet.contracts import read_corners, read_predictions
 from synthdet.geometry import rotation_z
 from synthdet.prepare import floor_density, prepare_scan
@@ -98,8 +98,9 @@ def test_room_sized_scan_is_one_window_as_before(tiny, tmp_path):
 
 
 def test_scan_density_is_brought_to_the_training_density(tiny, tmp_path, capsys):
-    """A scan 10x denser than training is thinned to about the training density; one 5x
-    sparser is detected with a warning; the fixture rooms, at training density, are kept."""
+    """A scan 10x denser than training is thinned to about the training density; every 5th
+    point of a room (3x sparser than training) is detected with a warning printed; the fixture
+    rooms, at training density (163 points per m^2 for 169), are kept as they are."""
     target = density_from_config(load_config(TINY))
     kept = prepare_scan(load_scan(tiny['rooms'][0]), target_density=target)
     assert np.array_equal(kept.points, prepare_scan(load_scan(tiny['rooms'][0])).points)
@@ -169,8 +170,8 @@ def test_rotated_and_tilted_copy_gives_the_same_objects(overfit, tmp_path):
     centres = np.array([d['center'] for d in copy]) @ rotation  # rotation.T applied to each
     directions = np.array([[math.cos(d['yaw']), math.sin(d['yaw']), 0.0] for d in copy])
     directions = directions @ rotation
-    back = np.column_stack([centres, [d['size'] for d in copy],
-                            np.arctan2(directions[:, 1], directions[:, 0])])
+    yaws = np.arctan2(directions[:, 1], directions[:, 0])
+    back = np.column_stack([centres, [d['size'] for d in copy], yaws])
     overlaps = DepthInstance3DBoxes.overlaps(
         _boxes([[*d['center'], *d['size'], d['yaw']] for d in original]), _boxes(back))
     same_class = torch.tensor([[a['class'] == b['class'] for b in copy] for a in original])
@@ -180,8 +181,8 @@ def test_rotated_and_tilted_copy_gives_the_same_objects(overfit, tmp_path):
 
 def _boxes(rows) -> DepthInstance3DBoxes:
     """Gravity-centred boxes (x, y, z, dx, dy, dz, yaw)."""
-    return DepthInstance3DBoxes(torch.tensor(np.asarray(rows), dtype=torch.float32),
-                                origin=(0.5, 0.5, 0.5))
+    return DepthInstance3DBoxes(
+        torch.tensor(np.asarray(rows), dtype=torch.float32), origin=(0.5, 0.5, 0.5))
 
 
 def test_shifted_copy_gives_boxes_shifted_by_exactly_the_offset(tiny, tmp_path):
