@@ -132,6 +132,30 @@ def test_scan_density_is_brought_to_the_training_density(tiny, tmp_path, capsys)
     assert read_predictions(str(out / 'dense.pred.json'))['detections']
 
 
+def test_scan2cad_detects_at_training_density_and_traces_corners_on_every_point(tiny, tmp_path):
+    """scan2cad on a scan denser than training: detection gets it resampled, the corners get
+    every point, as ``python -m configurator corners``."""
+    room = read_scan(tiny['rooms'][0])
+    rng = np.random.default_rng(1)
+    dense = np.concatenate([room + np.r_[rng.normal(0, 0.005, 3), 0, 0, 0] for _ in range(10)])
+    scan, out = tmp_path / 'dense.ply', tmp_path / 'dense.FCStd'
+    write_scan(scan, dense)
+    scan2cad = load_tool('scan2cad')
+    lines = []
+    scan2cad.scan_to_cad(
+        scan2cad.parse_args([
+            str(scan), '--config',
+            str(TINY), '--checkpoint',
+            str(tiny['checkpoint']), '--out',
+            str(out), '--score-thr', '1.0', '--device', 'cpu'
+        ]), lines.append)
+    [density] = [line for line in lines if 'points per m^2 of floor' in line]
+    assert 'resampled to' in density
+    corners = tmp_path / 'corners.json'
+    assert configurator_main(['corners', str(scan), '--out', str(corners)]) == 0
+    assert read_corners(str(corners)) == read_corners(str(out.with_suffix('.corners.json')))
+
+
 @pytest.fixture(scope='module')
 def overfit(tmp_path_factory: pytest.TempPathFactory) -> dict:
     """Three 4 m x 4 m rooms learnt by heart: the tiny config's 24 epochs, as
