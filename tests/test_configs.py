@@ -9,6 +9,7 @@ import pytest
 from mmengine.config import Config
 
 from projects.synthdet.config_helpers import area_datasets, with_num_points
+from projects.synthdet.inference.windows import density_from_config
 
 CONFIGS = Path(__file__).resolve().parents[1] / 'configs' / 'tr3d'
 AUGMENTATION = ['RandomFlip3D', 'GlobalRotScaleTrans']
@@ -83,3 +84,13 @@ def test_helpers_copy_and_refuse_a_pipeline_without_point_sample():
         dict(template, ann_file=f's3dis_infos_Area_{a}.pkl', metainfo=dict(classes=('sofa', )))
         for a in (2, 9)
     ]
+
+
+@pytest.mark.parametrize('name', sorted(EXPECTED))
+def test_training_density_is_the_sampled_points_over_the_median_floor_area(name):
+    cfg = load(name)
+    assert cfg.inference_window == dict(size=8.0, overlap=2.7)
+    assert cfg.inference_density == dict(floor_area=59.0)
+    assert density_from_config(cfg) == pytest.approx(EXPECTED[name][3] / 59.0)
+    with pytest.raises(ValueError, match='no inference_density'):
+        density_from_config({key: cfg[key] for key in cfg if key != 'inference_density'})

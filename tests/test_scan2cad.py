@@ -6,6 +6,7 @@ Such a model is weak, so the tests keep every detection scoring at least 0.01 (T
 threshold) and compare outputs, never their quality. FreeCAD is the real ``freecadcmd``.
 """
 import json
+import math
 import os
 import subprocess
 from pathlib import Path
@@ -14,6 +15,7 @@ import numpy as np
 import pytest
 import torch
 from mmdet3d.apis import inference_detector
+from mmdet3d.structures import DepthInstance3DBoxes
 from mmengine.runner import set_random_seed
 
 from configurator.__main__ import main as configurator_main
@@ -23,9 +25,11 @@ from projects.synthdet.bootstrap import load_config
 from projects.synthdet.core.box_ops import pairwise_bev_iou
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.inference.detector import ModelDetector, load_model
-from projects.synthdet.inference.windows import detect_in_windows, window_spec_from_config
+from projects.synthdet.inference.windows import (density_from_config, detect_in_windows,
+                                                 window_spec_from_config)
 from synthdet.contracts import read_corners, read_predictions
-from synthdet.prepare import prepare_scan
+from synthdet.geometry import rotation_z
+from synthdet.prepare import floor_density, prepare_scan
 from synthdet.scan_io import load_scan, read_scan, write_scan
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
 from tests.test_tr3d_tools import data_options, load_tool, run_tool
@@ -91,6 +95,118 @@ def test_room_sized_scan_is_one_window_as_before(tiny, tmp_path):
     assert np.allclose([d['size'] for d in found], sizes, atol=2e-6)
     assert np.allclose([d['yaw'] for d in found], yaws, atol=2e-6)
     assert np.allclose([d['score'] for d in found], pred.scores_3d[keep].numpy()[order], atol=2e-6)
+
+
+def test_scan_density_is_brought_to_the_training_density(tiny, tmp_path, capsys):
+    """A scan 10x denser than training is thinned to about the training density; every 5th
+    point of a room (3x sparser than training) is detected with a warning printed; the fixture
+    rooms, at training density (163 points per m^2 for 169), are kept as they are."""
+    target = density_from_config(load_config(TINY))
+    kept = prepare_scan(load_scan(tiny['rooms'][0]), target_density=target)
+    assert np.array_equal(kept.points, prepare_scan(load_scan(tiny['rooms'][0])).points)
+    assert kept.report[-1].startswith('density: ') and 'resampled' not in kept.report[-1]
+    room = read_scan(tiny['rooms'][0])
+    rng = np.random.default_rng(0)
+    dense = np.concatenate([room + np.r_[rng.normal(0, 0.005, 3), 0, 0, 0] for _ in range(10)])
+    write_scan(tmp_path / 'dense.ply', dense)
+    write_scan(tmp_path / 'sparse.ply', room[::5])
+    out = tmp_path / 'out'
+    load_tool('predict').main([
+        str(TINY),
+        str(tiny['checkpoint']),
+        str(tmp_path / 'dense.ply'),
+        str(tmp_path / 'sparse.ply'), '--out',
+        str(out), '--score-thr', SCORE, '--device', 'cpu'
+    ])
+    printed = capsys.readouterr().out
+    prepared = prepare_scan(load_scan(tmp_path / 'dense.ply'), target_density=target)
+    assert prepared.density > 9 * target
+    assert floor_density(prepared.points[:, :3]) == pytest.approx(target, rel=0.1)
+    density_lines = [line for line in printed.splitlines() if 'points per m^2 of floor' in line]
+    [dense_line] = [line for line in density_lines if line.startswith('dense.ply: ')]
+    assert dense_line == f'dense.ply: {prepared.report[-1]}'
+    assert f'resampled to {len(prepared.points):,} points' in dense_line
+    [sparse_line] = [line for line in density_lines if line.startswith('sparse.ply: ')]
+    assert sparse_line.startswith('sparse.ply: warning: density: ')
+    assert 'sparser than training, expect weaker detections' in sparse_line
+    assert read_predictions(str(out / 'dense.pred.json'))['detections']
+
+
+def test_scan2cad_detects_at_training_density_and_traces_corners_on_every_point(tiny, tmp_path):
+    """scan2cad on a scan denser than training: detection gets it resampled, the corners get
+    every point, as ``python -m configurator corners``."""
+    room = read_scan(tiny['rooms'][0])
+    rng = np.random.default_rng(1)
+    dense = np.concatenate([room + np.r_[rng.normal(0, 0.005, 3), 0, 0, 0] for _ in range(10)])
+    scan, out = tmp_path / 'dense.ply', tmp_path / 'dense.FCStd'
+    write_scan(scan, dense)
+    scan2cad = load_tool('scan2cad')
+    lines = []
+    scan2cad.scan_to_cad(
+        scan2cad.parse_args([
+            str(scan), '--config',
+            str(TINY), '--checkpoint',
+            str(tiny['checkpoint']), '--out',
+            str(out), '--score-thr', '1.0', '--device', 'cpu'
+        ]), lines.append)
+    [density] = [line for line in lines if 'points per m^2 of floor' in line]
+    assert 'resampled to' in density
+    corners = tmp_path / 'corners.json'
+    assert configurator_main(['corners', str(scan), '--out', str(corners)]) == 0
+    assert read_corners(str(corners)) == read_corners(str(out.with_suffix('.corners.json')))
+
+
+@pytest.fixture(scope='module')
+def overfit(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """Three 4 m x 4 m rooms learnt by heart: the tiny config's 24 epochs, as
+    tests/test_tr3d_overfit.py (mAP@0.25 >= 0.9 there), so its boxes are the rooms' objects."""
+    root = tmp_path_factory.mktemp('overfit')
+    write_synthetic_area(root / 'raw', area=1, n_rooms=3, seed=7, points_per_object=300)
+    convert_s3dis(root / 'raw', root / 'data', areas=[1])
+    run_tool('tools/train.py', TINY, '--work-dir', root / 'work', '--cfg-options',
+             *data_options(root / 'data'), 'val_cfg=None', 'val_dataloader=None',
+             'val_evaluator=None')
+    rooms = sorted((root / 'raw' / S3DIS_DIR / 'Area_1').glob('*/*.txt'))
+    return {'checkpoint': root / 'work' / 'epoch_24.pth', 'rooms': rooms}
+
+
+@pytest.mark.slow
+def test_rotated_and_tilted_copy_gives_the_same_objects(overfit, tmp_path):
+    """A copy turned 30 deg about z and tilted 3 deg: its boxes, turned back into the
+    original's frame, match every box of the original with a 3D IoU of at least 0.5.
+
+    The model knows the room (``overfit``): the 2-iteration ``tiny`` model's boxes are noise
+    near its score threshold, which moves with any sub-millimetre change of the points (a
+    0.01 degree turn of the prepared points alone leaves 23 of its 699 boxes unmatched)."""
+    points = read_scan(overfit['rooms'][0])
+    cos, sin = math.cos(math.radians(3.0)), math.sin(math.radians(3.0))
+    tilt = np.array([[1.0, 0.0, 0.0], [0.0, cos, -sin], [0.0, sin, cos]])  # about x
+    rotation = tilt @ rotation_z(math.radians(30.0))
+    turned = points.copy()
+    turned[:, :3] = points[:, :3] @ rotation.T
+    write_scan(tmp_path / 'original.ply', points)
+    write_scan(tmp_path / 'turned.ply', turned)
+    threshold = ('--score-thr', '0.3')  # predict's default
+    original = _predict(overfit, tmp_path / 'original.ply', tmp_path / 'a', *threshold)
+    copy = _predict(overfit, tmp_path / 'turned.ply', tmp_path / 'b', *threshold)
+    original, copy = original['detections'], copy['detections']
+    assert len(original) >= 3 and copy
+    centres = np.array([d['center'] for d in copy]) @ rotation  # rotation.T applied to each
+    directions = np.array([[math.cos(d['yaw']), math.sin(d['yaw']), 0.0] for d in copy])
+    directions = directions @ rotation
+    yaws = np.arctan2(directions[:, 1], directions[:, 0])
+    back = np.column_stack([centres, [d['size'] for d in copy], yaws])
+    overlaps = DepthInstance3DBoxes.overlaps(
+        _boxes([[*d['center'], *d['size'], d['yaw']] for d in original]), _boxes(back))
+    same_class = torch.tensor([[a['class'] == b['class'] for b in copy] for a in original])
+    best = (overlaps * same_class).max(dim=1).values
+    assert best.min() >= 0.5, f'{int((best < 0.5).sum())} of {len(original)} boxes unmatched'
+
+
+def _boxes(rows) -> DepthInstance3DBoxes:
+    """Gravity-centred boxes (x, y, z, dx, dy, dz, yaw)."""
+    return DepthInstance3DBoxes(
+        torch.tensor(np.asarray(rows), dtype=torch.float32), origin=(0.5, 0.5, 0.5))
 
 
 def test_shifted_copy_gives_boxes_shifted_by_exactly_the_offset(tiny, tmp_path):

@@ -8,7 +8,8 @@ POINTS are scans in any format of ``synthdet.scan_io``, read with ``load_scan`` 
 float64 frame (every point, or one per ``--voxel`` as ``python -m configurator corners``; the
 voxels are those of the scan's coordinates) and prepared
 with ``synthdet.prepare.prepare_scan`` (outliers, up axis, floor levelling, walls along the
-axes), each step reported. A scan larger than the config's
+axes, a denser scan resampled down to the config's training density and one far from it warned
+about: ``density_from_config``), each step reported. A scan larger than the config's
 ``inference_window`` is detected window by window, each window sampled by the config's test
 pipeline like a training room, and the windows' boxes are merged with the project's 3D NMS
 (``projects/synthdet/inference/windows.py``); a room-sized scan is one window. The boxes are
@@ -30,7 +31,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's 
 from projects.synthdet.bootstrap import (  # noqa: E402
     add_detection_arguments, load_config, run_tool)
 from projects.synthdet.inference.detector import ModelDetector, load_model  # noqa: E402
-from projects.synthdet.inference.windows import window_spec_from_config  # noqa: E402
+from projects.synthdet.inference.windows import (  # noqa: E402
+    density_from_config, window_spec_from_config)
 from synthdet.contracts import write_predictions  # noqa: E402
 from synthdet.prepare import prepare_scan  # noqa: E402
 from synthdet.scan_io import load_scan  # noqa: E402
@@ -82,6 +84,7 @@ def main(argv: list[str] | None = None) -> list[Path]:
     cfg = load_config(args.config, args.cfg_options)
     try:
         spec = window_spec_from_config(cfg)
+        density = density_from_config(cfg)
     except ValueError as error:
         raise BadInput(f'{args.config}: {error}') from None
     try:
@@ -93,7 +96,10 @@ def main(argv: list[str] | None = None) -> list[Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     for target, scan in tqdm(targets.items(), desc='predict', unit='scan'):
-        prepared = prepare_scan(load_scan(scan, voxel=args.voxel, columns=args.columns))
+        prepared = prepare_scan(
+            load_scan(scan, voxel=args.voxel, columns=args.columns),
+            target_density=density,
+            seed=args.seed)
         for line in prepared.report:
             tqdm.write(f'{scan.name}: {line}')
         try:

@@ -6,7 +6,9 @@ Usage: python tools/scan2cad.py SCAN --config CFG --checkpoint CKPT --out hall.F
 
 The stages are the ones a user runs one by one, on the same prepared scan:
 1. ``synthdet.scan_io.load_scan`` (one point per ``--voxel``, 2 cm by default as the corners:
-   a hall's memory stays bounded) and ``synthdet.prepare.prepare_scan`` (each step reported);
+   a hall's memory stays bounded) and ``synthdet.prepare.prepare_scan`` (each step reported;
+   for detection a scan denser than the config's training density is resampled down to it,
+   ``density_from_config``, while the corners use every point);
 2. detection by windows sized from the training rooms (``ModelDetector.predictions``, as
    ``tools/predict.py --voxel`` with the same voxel) -> ``<out stem>.pred.json`` beside it;
 3. the room corners on the prepared points, written in the scan's coordinates
@@ -28,7 +30,8 @@ from configurator.corners import outline_in_scan, outline_to_dict  # noqa: E402
 from configurator.freecad_cli import FreecadFailed, build_document  # noqa: E402
 from projects.synthdet.bootstrap import add_detection_arguments, load_config  # noqa: E402
 from projects.synthdet.inference.detector import ModelDetector, load_model  # noqa: E402
-from projects.synthdet.inference.windows import window_spec_from_config  # noqa: E402
+from projects.synthdet.inference.windows import (  # noqa: E402
+    density_from_config, window_spec_from_config)
 from synthdet.contracts import write_corners, write_predictions  # noqa: E402
 from synthdet.prepare import prepare_scan  # noqa: E402
 from synthdet.scan_io import load_scan  # noqa: E402
@@ -60,21 +63,26 @@ def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
         raise ValueError(f'{out}: the output must end with .FCStd')
     predictions_path, corners_path = output_paths(out)
     start = time.perf_counter()
-    prepared = prepare_scan(load_scan(scan, voxel=args.voxel, columns=args.columns))
-    for line in prepared.report:
-        report(f'prepare: {line}')
+    loaded = load_scan(scan, voxel=args.voxel, columns=args.columns)
     cfg = load_config(args.config, args.cfg_options)
     try:
         spec = window_spec_from_config(cfg)
+        density = density_from_config(cfg)
     except ValueError as error:
         raise ValueError(f'{args.config}: {error}') from None
+    prepared = prepare_scan(loaded, target_density=density, seed=args.seed)
+    for line in prepared.report:
+        report(f'prepare: {line}')
+    # the corners, as `configurator corners`, use every point: a second preparation without
+    # the resampling (the same frame) when the scan was denser than training
+    outlined = prepared if prepared.density <= density else prepare_scan(loaded)
     detector = ModelDetector(
         load_model(cfg, args.checkpoint, args.device), args.score_thr, args.seed)
     predictions = detector.predictions(prepared, spec, Path(args.config).stem)
     write_predictions(predictions_path, predictions)
     report(f'detect: {len(predictions["detections"])} objects -> {predictions_path}')
     corners = outline_to_dict(
-        outline_in_scan(detect_corners(prepared.points), prepared), str(scan))
+        outline_in_scan(detect_corners(outlined.points), outlined), str(scan))
     write_corners(corners_path, corners)
     report(f'corners: {len(corners["corners"])} corners -> {corners_path}')
     result = build_document(

@@ -75,3 +75,10 @@ test_evaluator = val_evaluator
 # (6-11 m x 5-9 m: median floor area 59 m^2 -> 8.0 m) and to the largest object of its library
 # (a sofa, 2.64 m footprint diagonal -> 2.7 m overlap).
 inference_window = dict(size=8.0, overlap=2.7)
+# The point density the model was trained on, in points per m^2 of floor: the test pipeline's
+# PointSample num_points over this median training floor area (the window rule's 59 m^2), read
+# by density_from_config (windows.py) at run time, so a config that changes num_points with
+# with_num_points gets its own density (100,000 -> 1,695; exp2_cpu 40,000 -> 678; tiny 10,000
+# -> 169). tools/predict.py and tools/scan2cad.py resample denser scans down to it and warn about
+# scans more than 2x off it (synthdet.prepare.prepare_scan's target_density).
+inference_density = dict(floor_area=59.0)

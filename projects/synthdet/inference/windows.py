@@ -23,7 +23,10 @@ filtering or NMS (the model's own output, unchanged).
 
 ``configs/tr3d/_base_/s3dis-synthdet.py`` holds ``inference_window = dict(size=8.0,
 overlap=2.7)``: :func:`window_spec_from_training` applied to the generator's default rooms (6-11 m
-by 5-9 m) and to the largest object of its procedural library (a sofa, 2.64 m diagonal).
+by 5-9 m) and to the largest object of its procedural library (a sofa, 2.64 m diagonal). Its
+``inference_density = dict(floor_area=59.0)`` is that median floor area: the training density is
+the test pipeline's ``PointSample`` ``num_points`` over it (:func:`density_from_config`), the
+points per m^2 of floor a median training room was sampled to.
 """
 from __future__ import annotations
 
@@ -105,6 +108,21 @@ def window_spec_from_config(cfg: Mapping) -> WindowSpec:
         raise ValueError('the config has no inference_window = dict(size=..., overlap=...): '
                          'see projects/synthdet/inference/windows.py for the rule')
     return WindowSpec(float(window['size']), float(window['overlap']))
+
+
+def density_from_config(cfg: Mapping) -> float:
+    """The points per m^2 of floor the model was trained on: the ``num_points`` of the test
+    pipeline's ``PointSample`` over the ``inference_density = dict(floor_area=...)`` of a model
+    config (the median training floor area, as for the window size)."""
+    density = cfg.get('inference_density')
+    if density is None:
+        raise ValueError('the config has no inference_density = dict(floor_area=...): see '
+                         'configs/tr3d/_base_/s3dis-synthdet.py for the rule')
+    pipeline = cfg['test_dataloader']['dataset']['pipeline']
+    counts = [step['num_points'] for step in pipeline if step['type'] == 'PointSample']
+    if not counts:
+        raise ValueError('the test pipeline has no PointSample step, so no training density')
+    return float(counts[0]) / float(density['floor_area'])
 
 
 def _axis_windows(low: float, high: float,
