@@ -31,8 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's 
 from projects.synthdet.bootstrap import (  # noqa: E402
     add_detection_arguments, load_config, run_tool)
 from projects.synthdet.inference.detector import ModelDetector, load_model  # noqa: E402
-from projects.synthdet.inference.windows import (  # noqa: E402
-    density_from_config, window_spec_from_config)
+from projects.synthdet.inference.windows import inference_settings  # noqa: E402
 from synthdet.contracts import write_predictions  # noqa: E402
 from synthdet.prepare import prepare_scan  # noqa: E402
 from synthdet.scan_io import load_scan  # noqa: E402
@@ -83,10 +82,9 @@ def main(argv: list[str] | None = None) -> list[Path]:
     targets = check_scans([Path(p) for p in args.points], out_dir, args.voxel, args.columns)
     cfg = load_config(args.config, args.cfg_options)
     try:
-        spec = window_spec_from_config(cfg)
-        density = density_from_config(cfg)
+        spec, density = inference_settings(cfg, args.config)
     except ValueError as error:
-        raise BadInput(f'{args.config}: {error}') from None
+        raise BadInput(str(error)) from None
     try:
         model = load_model(cfg, args.checkpoint, args.device)
     except ValueError as error:  # CheckpointError

@@ -30,8 +30,7 @@ from configurator.corners import outline_in_scan, outline_to_dict  # noqa: E402
 from configurator.freecad_cli import FreecadFailed, build_document  # noqa: E402
 from projects.synthdet.bootstrap import add_detection_arguments, load_config  # noqa: E402
 from projects.synthdet.inference.detector import ModelDetector, load_model  # noqa: E402
-from projects.synthdet.inference.windows import (  # noqa: E402
-    density_from_config, window_spec_from_config)
+from projects.synthdet.inference.windows import inference_settings  # noqa: E402
 from synthdet.contracts import write_corners, write_predictions  # noqa: E402
 from synthdet.prepare import prepare_scan  # noqa: E402
 from synthdet.scan_io import load_scan  # noqa: E402
@@ -65,11 +64,7 @@ def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
     start = time.perf_counter()
     loaded = load_scan(scan, voxel=args.voxel, columns=args.columns)
     cfg = load_config(args.config, args.cfg_options)
-    try:
-        spec = window_spec_from_config(cfg)
-        density = density_from_config(cfg)
-    except ValueError as error:
-        raise ValueError(f'{args.config}: {error}') from None
+    spec, density = inference_settings(cfg, args.config)
     prepared = prepare_scan(loaded, target_density=density, seed=args.seed)
     for line in prepared.report:
         report(f'prepare: {line}')

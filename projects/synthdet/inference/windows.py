@@ -125,6 +125,15 @@ def density_from_config(cfg: Mapping) -> float:
     return float(counts[0]) / float(density['floor_area'])
 
 
+def inference_settings(cfg: Mapping, config: str) -> tuple[WindowSpec, float]:
+    """The window spec and the training density of a model config; a ``ValueError`` naming
+    ``config`` (its path) when either is missing."""
+    try:
+        return window_spec_from_config(cfg), density_from_config(cfg)
+    except ValueError as error:
+        raise ValueError(f'{config}: {error}') from None
+
+
 def _axis_windows(low: float, high: float,
                   spec: WindowSpec) -> list[tuple[float, float, float, float]]:
     """Windows along one axis as ``(start, end, core_start, core_end)``."""
