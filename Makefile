@@ -10,6 +10,9 @@ setup:
 	bash scripts/setup.sh
 
 # pytest exits 5 when it collected no test: that is a failure here, with a message saying so.
+# One OpenMP thread per process: the tests compare results across processes, and several
+# threads make MinkowskiEngine's CPU sums run in a varying order.
+test: export OMP_NUM_THREADS ?= 1
 test: setup
 	@$(PY) -m pytest $(PYTEST_ARGS); rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests (exit 5)"; fi; exit $$rc

@@ -7,6 +7,8 @@
 device ids for a CPU model), so :func:`prepare_distributed` starts the gloo process group itself
 (the Runner then skips its own initialisation) and selects :class:`CPUDistributedDataParallel`.
 """
+import atexit
+
 import torch
 from mmengine.config import Config
 from mmengine.model import MMDistributedDataParallel
@@ -30,8 +32,16 @@ def prepare_distributed(cfg: Config) -> None:
         return
     if not torch.distributed.is_initialized():
         torch.distributed.init_process_group(backend='gloo')
+        atexit.register(_end_process_group)
     cfg.env_cfg.dist_cfg.backend = 'gloo'
     cfg.model_wrapper_cfg = dict(
         type='CPUDistributedDataParallel',
         broadcast_buffers=False,
         find_unused_parameters=cfg.get('find_unused_parameters', False))
+
+
+def _end_process_group() -> None:
+    """Tear the gloo group down before the interpreter exits: left to the final clean-up, its
+    threads can abort a finished process ("terminate called without an active exception")."""
+    if torch.distributed.is_initialized():
+        torch.distributed.destroy_process_group()
