@@ -8,7 +8,7 @@ found in it are written back in the scan's coordinates exactly (float64 througho
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -90,6 +90,26 @@ def prepare_scan(loaded: LoadedScan,
     ``target_density`` is the training data's points per m^2 of floor footprint: a denser
     scan is resampled down to it (at random, ``seed``); one far from it is warned about.
     """
+    aligned = align_scan(
+        loaded, remove_outliers=remove_outliers, level=level, align_yaw=align_yaw)
+    return resample_to_density(aligned, target_density, seed)
+
+
+def resample_to_density(aligned: PreparedScan,
+                        target_density: float | None,
+                        seed: int = 0) -> PreparedScan:
+    """The last step of :func:`prepare_scan` on an :func:`align_scan` result: thinned at random
+    (``seed``) to ``target_density`` when denser, a warning when far from it, one report line."""
+    points, line = _resampled(aligned.points, aligned.density, target_density, seed)
+    return replace(aligned, points=points, report=[*aligned.report, line])
+
+
+def align_scan(loaded: LoadedScan,
+               *,
+               remove_outliers: bool = True,
+               level: bool = True,
+               align_yaw: bool = True) -> PreparedScan:
+    """:func:`prepare_scan` without the resampling: outliers, up axis, levelling, yaw."""
     report = list(loaded.report)
     xyz = loaded.points[:, :3]
     keep = np.ones(len(xyz), dtype=bool)
@@ -143,8 +163,6 @@ def prepare_scan(loaded: LoadedScan,
     to_scan[:3, 3] = rotation.T @ np.array([0.0, 0.0, floor]) + loaded.origin
 
     density = floor_density(prepared[:, :3])
-    prepared, line = _resampled(prepared, density, target_density, seed)
-    report.append(line)
     return PreparedScan(
         points=prepared,
         to_scan=to_scan,

@@ -32,7 +32,7 @@ from projects.synthdet.bootstrap import add_detection_arguments, load_config  # 
 from projects.synthdet.inference.detector import ModelDetector, load_model  # noqa: E402
 from projects.synthdet.inference.windows import inference_settings  # noqa: E402
 from synthdet.contracts import write_corners, write_predictions  # noqa: E402
-from synthdet.prepare import prepare_scan  # noqa: E402
+from synthdet.prepare import align_scan, resample_to_density  # noqa: E402
 from synthdet.scan_io import load_scan  # noqa: E402
 
 
@@ -65,12 +65,11 @@ def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
     loaded = load_scan(scan, voxel=args.voxel, columns=args.columns)
     cfg = load_config(args.config, args.cfg_options)
     spec, density = inference_settings(cfg, args.config)
-    prepared = prepare_scan(loaded, target_density=density, seed=args.seed)
+    # the corners, as `configurator corners`, use every point; detection the resampled ones
+    outlined = align_scan(loaded)
+    prepared = resample_to_density(outlined, density, args.seed)
     for line in prepared.report:
         report(f'prepare: {line}')
-    # the corners, as `configurator corners`, use every point: a second preparation without
-    # the resampling (the same frame) when the scan was denser than training
-    outlined = prepared if prepared.density <= density else prepare_scan(loaded)
     detector = ModelDetector(
         load_model(cfg, args.checkpoint, args.device), args.score_thr, args.seed)
     predictions = detector.predictions(prepared, spec, Path(args.config).stem)
