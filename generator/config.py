@@ -64,6 +64,13 @@ DEFAULTS: dict[str, Any] = {
         'angular_jitter': 0.0,  # std of the beam direction error, radians
         'dropout': 0.0,  # probability that a return is lost
     },
+    'appearance': {  # drawn per room (generator/appearance.py); all 0 = the paper's flat colours
+        'shading': 0.5,  # probability that colours are shaded by the angle to a light
+        'instance_variation': 0.1,  # std of the per-instance colour factor
+        'colourless': 0.1,  # probability that every colour is 0 (a scanner without camera)
+        'ambient': 0.5,  # colour factor of faces turned away from the light
+        'light_tilt': [0.0, 60.0],  # angle of the light from the vertical, degrees [min, max]
+    },
 }
 
 # A factory hall instead of rooms, used when a configuration file has a ``hall`` section (any
@@ -229,6 +236,7 @@ def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
     for key in ('range_noise', 'angular_jitter'):
         if _number(config, 'scanner', key, source) < 0:
             raise ConfigError(f'{source}: "scanner.{key}" must not be negative')
+    _validate_appearance(config, source)
     if 'hall' in config:
         _validate_hall(config, source)
     for key in ('path_steps', 'batch_rays', 'max_object_rays'):
@@ -236,6 +244,18 @@ def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ConfigError(f'{source}: "scanner.{key}" must be a positive integer, '
                               f'got {value!r}')
+
+
+def _validate_appearance(config: dict[str, Any], source: str) -> None:
+    for key in ('shading', 'colourless', 'ambient'):
+        value = _number(config, 'appearance', key, source)
+        if not 0.0 <= value <= 1.0:
+            raise ConfigError(f'{source}: "appearance.{key}" = {value} is outside [0, 1]')
+    if _number(config, 'appearance', 'instance_variation', source) < 0:
+        raise ConfigError(f'{source}: "appearance.instance_variation" must not be negative')
+    _range(config, 'appearance', 'light_tilt', source)
+    if config['appearance']['light_tilt'][1] > 90:
+        raise ConfigError(f'{source}: "appearance.light_tilt" must stay within [0, 90] degrees')
 
 
 def _validate_hall(config: dict[str, Any], source: str) -> None:

@@ -102,6 +102,7 @@ class RoomGenerator:
 
     def generate(self, task: RoomTask) -> tuple[RoomTask, str, float]:
         """Generate and write one room unless it exists; return (task, status, seconds)."""
+        from generator.appearance import apply_appearance, draw_appearance
         from generator.layout import generate_layout, layout_meta
         from generator.scanner import Scanner, sensor_path
         from generator.scene import export_triangles
@@ -133,6 +134,10 @@ class RoomGenerator:
         scan = Scanner(
             triangles, threads=options.threads).scan(path, options.points, options.object_ratio,
                                                      rng_scan, scan_cfg)
+        # a stream of its own: appearance settings change neither the layout nor the scan
+        appearance = draw_appearance(
+            np.random.default_rng([task.seed, 3]), options.config['appearance'], len(names))
+        rgb = apply_appearance(appearance, scan, triangles)
         meta = {
             'format': ROOM_FORMAT,
             'seed': task.seed,
@@ -149,6 +154,7 @@ class RoomGenerator:
                 'rays': int(scan.rays_cast),
                 'sensor_path': np.round(segments, 6).tolist(),
                 'sensor_height': round(scan_cfg['sensor_height'] * layout.height, 6),
+                'appearance': appearance.meta(),
                 'config': options.config
             },
             **layout_meta(layout)
@@ -157,7 +163,7 @@ class RoomGenerator:
             area_dir,
             task.name,
             scan.xyz,
-            scan.rgb,
+            rgb,
             scan.part,
             names,
             meta,
