@@ -47,8 +47,9 @@ class RoomAppearance:
 def draw_appearance(rng: np.random.Generator, config: Mapping[str, Any],
                     parts: int) -> RoomAppearance:
     """Draw a room's appearance for ``parts`` annotated parts from the ``appearance`` config."""
-    shading = bool(rng.random() < config['shading'])
+    shading_drawn = bool(rng.random() < config['shading'])
     colourless = bool(rng.random() < config['colourless'])
+    shading = shading_drawn and not colourless  # nothing to shade in a colourless room
     tilt = np.radians(rng.uniform(*config['light_tilt']))
     azimuth = rng.uniform(0.0, 2 * np.pi)
     light = np.array(

@@ -190,7 +190,7 @@ def test_switching_one_effect_leaves_the_other_draws_unchanged():
         for p, q in ((0.0, 0.0), (1.0, 0.0), (1.0, 1.0))
     ]
     flags = [(d.shading, d.colourless) for d in draws]
-    assert flags == [(False, False), (True, False), (True, True)]
+    assert flags == [(False, False), (True, False), (False, True)]
     for other in draws[1:]:
         assert np.array_equal(other.light, draws[0].light)
         assert np.array_equal(other.part_factor, draws[0].part_factor)
