@@ -45,7 +45,7 @@ class RandomQuarterTurn(BaseTransform):
 
     Axis-aligned boxes stay axis-aligned and exact: centres turn with the points and the x and
     y sizes swap on odd turns (no enlargement, no rounding: the turn only swaps and negates
-    coordinates). Boxes with yaw turn their yaw too. Scans reach the detector aligned with
+    coordinates). Boxes with yaw keep their sizes and turn their yaw instead. Scans reach the detector aligned with
     their walls only up to a quarter turn (``synthdet.prepare`` aligns the yaw into
     [-45, 45) degrees), so every quarter turn is a view the model must handle.
 
@@ -75,10 +75,10 @@ class RandomQuarterTurn(BaseTransform):
         boxes = results.get('gt_bboxes_3d')
         if boxes is not None:
             boxes.tensor[:, :2] = boxes.tensor[:, :2] @ boxes.tensor.new_tensor(rotation_t)
-            if quarters % 2:
-                boxes.tensor[:, [3, 4]] = boxes.tensor[:, [4, 3]]
             if boxes.with_yaw:
                 boxes.tensor[:, 6] += quarters * np.pi / 2
+            elif quarters % 2:
+                boxes.tensor[:, [3, 4]] = boxes.tensor[:, [4, 3]]
         return results
 
     def __repr__(self) -> str:
