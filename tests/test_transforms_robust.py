@@ -47,7 +47,9 @@ def at_full_strength(steps: list[dict]) -> list[dict]:
     ]
 
 
-def make_scene(xyz: np.ndarray, rgb: np.ndarray, boxes: np.ndarray = BOXES,
+def make_scene(xyz: np.ndarray,
+               rgb: np.ndarray,
+               boxes: np.ndarray = BOXES,
                with_yaw: bool = False) -> dict:
     """An mmdet3d results dict as LoadPointsFromFile and LoadAnnotations3D leave it."""
     points = DepthPoints(
@@ -126,8 +128,8 @@ def test_quarter_turn_turns_yaw_boxes_like_mmdet3d():
     reference = make_scene(scene['points'].coord.numpy(), np.zeros((50, 3)), boxes, True)
     RandomQuarterTurn.turn(scene, 3)
     reference['gt_bboxes_3d'].rotate(3 * math.pi / 2, reference['points'])
-    assert torch.allclose(scene['gt_bboxes_3d'].tensor, reference['gt_bboxes_3d'].tensor,
-                          atol=1e-5)
+    assert torch.allclose(
+        scene['gt_bboxes_3d'].tensor, reference['gt_bboxes_3d'].tensor, atol=1e-5)
     assert torch.allclose(scene['points'].tensor, reference['points'].tensor, atol=1e-5)
 
 
@@ -181,8 +183,8 @@ def test_colour_jitter_brightness_contrast_and_gain():
     assert torch.allclose(factor, factor[0, 0], atol=1e-3) and 0.8 <= factor[0, 0] <= 1.2
     assert abs(float(factor[0, 0]) - 1.0) > 1e-3
 
-    gains = _colour_jitter(colours, seed=2, brightness=0.0, contrast=0.0,
-                           channel_gain=0.1) / original
+    gains = _colour_jitter(
+        colours, seed=2, brightness=0.0, contrast=0.0, channel_gain=0.1) / original
     assert torch.allclose(gains, gains[0], atol=1e-4)
     assert (gains[0] >= 0.9).all() and (gains[0] <= 1.1).all() and gains[0].std() > 1e-3
 
@@ -193,7 +195,8 @@ def test_colour_jitter_leaves_scans_without_colour_black():
 
 @pytest.mark.parametrize('drop_ratio', [0.0, 1.0])
 def test_colour_dropout_gives_zeros_after_normalisation(drop_ratio):
-    [dropout] = [s for s in base_config().robust_augmentations if s.type == 'RandomDropPointsColor']
+    steps = base_config().robust_augmentations
+    [dropout] = [step for step in steps if step.type == 'RandomDropPointsColor']
     pipeline = Compose([
         TRANSFORMS.build(dict(dropout, drop_ratio=drop_ratio)),
         TRANSFORMS.build(dict(type='NormalizePointsColor', color_mean=None))
@@ -219,8 +222,8 @@ def test_point_dropout_keeps_the_share_and_the_masks():
     assert np.array_equal(out['pts_instance_mask'], rows * 2)
 
 
-@pytest.mark.parametrize('n, prob, expected', [(1000, 1.0, 500), (300, 1.0, 300), (1000, 0.0,
-                                                                                   1000)])
+@pytest.mark.parametrize('n, prob, expected', [(1000, 1.0, 500), (300, 1.0, 300),
+                                               (1000, 0.0, 1000)])
 def test_point_dropout_keeps_at_least_min_points(n, prob, expected):
     out = RandomPointDropout(prob=prob, ratio_range=(0.9, 0.9), min_points=500)(uniform_floor(n))
     assert len(out['points']) == expected
@@ -260,8 +263,8 @@ def test_density_falloff_keeps_near_points_more_often_than_far_ones():
 
 def test_density_falloff_tops_up_to_min_points():
     np.random.seed(6)
-    transform = RandomDensityFalloff(prob=1.0, full_density_range=0.1, min_keep=0.0,
-                                     min_points=3000)
+    transform = RandomDensityFalloff(
+        prob=1.0, full_density_range=0.1, min_keep=0.0, min_points=3000)
     assert len(transform(uniform_floor(20000))['points']) == 3000
     assert len(transform(uniform_floor(2000))['points']) == 2000
 
@@ -316,8 +319,10 @@ def test_with_robustness_inserts_after_point_sample():
         with_robustness(robust, base.robust_augmentations)
     with pytest.raises(ValueError, match='no PointSample'):
         with_robustness(base.train_pipeline[:2], base.robust_augmentations)
-    colour_first = [base.train_pipeline[0], dict(type='NormalizePointsColor', color_mean=None),
-                    *base.train_pipeline[1:-2]]
+    colour_first = [
+        base.train_pipeline[0],
+        dict(type='NormalizePointsColor', color_mean=None), *base.train_pipeline[1:-2]
+    ]
     with pytest.raises(ValueError, match='normalises colours before PointSample'):
         with_robustness(colour_first, base.robust_augmentations)
 
@@ -327,8 +332,10 @@ def generated_room(tmp_path_factory) -> Path:
     """One room of the real generator (bpy, Embree), converted to info pickles."""
     root = tmp_path_factory.mktemp('robust')
     assert generate([
-        '--out', str(root / 'raw' / S3DIS_DIR), '--areas', '7', '--rooms-per-area', '1',
-        '--points', '50000', '--seed', '3', '--asset-cache', str(root / 'assets'), '--quiet'
+        '--out',
+        str(root / 'raw' / S3DIS_DIR), '--areas', '7', '--rooms-per-area', '1', '--points',
+        '50000', '--seed', '3', '--asset-cache',
+        str(root / 'assets'), '--quiet'
     ]) == 0
     convert_s3dis(root / 'raw', root / 'data', areas=[7])
     return root / 'data'
@@ -338,8 +345,12 @@ def _dataset(data_root: Path, pipeline: list[dict]):
     cfg = Config.fromfile(CONFIGS / 'exp2_cpu.py', import_custom_modules=False)
     init_default_scope('mmdet3d')
     return DATASETS.build(
-        dict(cfg.train_area_dataset, data_root=f'{data_root}/', ann_file='s3dis_infos_Area_7.pkl',
-             metainfo=cfg.metainfo, pipeline=pipeline)), cfg
+        dict(
+            cfg.train_area_dataset,
+            data_root=f'{data_root}/',
+            ann_file='s3dis_infos_Area_7.pkl',
+            metainfo=cfg.metainfo,
+            pipeline=pipeline)), cfg
 
 
 def _check_sample(sample: dict, num_points: int, n_boxes: int) -> tuple[torch.Tensor, int]:
@@ -371,9 +382,9 @@ def test_robust_pipeline_runs_on_a_generated_room(generated_room):
         counts.append(_check_sample(default[0], num_points, n_boxes)[1])
     assert min(counts) < num_points == max(counts)  # some scenes thinned, some not
     # every augmentation applied at full strength
-    strong, _ = _dataset(generated_room,
-                         with_robustness(cfg.train_pipeline,
-                                         at_full_strength(cfg.robust_augmentations)))
+    strong, _ = _dataset(
+        generated_room,
+        with_robustness(cfg.train_pipeline, at_full_strength(cfg.robust_augmentations)))
     set_random_seed(0)
     colours, count = _check_sample(strong[0], num_points, n_boxes)
     assert not colours.any() and count < 0.9 * num_points

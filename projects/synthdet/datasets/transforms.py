@@ -45,9 +45,9 @@ class RandomQuarterTurn(BaseTransform):
 
     Axis-aligned boxes stay axis-aligned and exact: centres turn with the points and the x and
     y sizes swap on odd turns (no enlargement, no rounding: the turn only swaps and negates
-    coordinates). Boxes with yaw keep their sizes and turn their yaw instead. Scans reach the detector aligned with
-    their walls only up to a quarter turn (``synthdet.prepare`` aligns the yaw into
-    [-45, 45) degrees), so every quarter turn is a view the model must handle.
+    coordinates). Boxes with yaw keep their sizes and turn their yaw instead. Scans reach the
+    detector aligned with their walls only up to a quarter turn (``synthdet.prepare`` aligns
+    the yaw into [-45, 45) degrees), so every quarter turn is a view the model must handle.
 
     Args:
         prob: probability of turning; a turn is then 1, 2 or 3 quarters, equally likely
@@ -109,8 +109,8 @@ class RandomColourJitter(BaseTransform):
                  contrast: float = 0.2,
                  channel_gain: float = 0.1) -> None:
         _check_probability('prob', prob)
-        for name, value in (('brightness', brightness), ('contrast', contrast),
-                            ('channel_gain', channel_gain)):
+        strengths = dict(brightness=brightness, contrast=contrast, channel_gain=channel_gain)
+        for name, value in strengths.items():
             if value < 0:
                 raise ValueError(f'{name} must be >= 0, got {value}')
         self.prob = prob
@@ -124,11 +124,11 @@ class RandomColourJitter(BaseTransform):
             return results
         points = results['points']
         colours = points.color
+        if not colours.any():
+            return results
         contrast = np.random.uniform(1 - self.contrast, 1 + self.contrast)
         gains = np.random.uniform(1 - self.channel_gain, 1 + self.channel_gain, 3)
         offset = np.random.uniform(-self.brightness, self.brightness)
-        if not colours.any():
-            return results
         grey = colours.mean()
         jittered = ((colours - grey) * contrast + grey) * colours.new_tensor(gains) + offset
         points.color = jittered.clamp(0.0, 255.0)
