@@ -33,14 +33,42 @@ def area_loaders(area_dataset: Mapping[str, Any], train_area: Iterable[int], tes
     return train, test
 
 
+def _point_sample_index(pipeline: Sequence[Mapping[str, Any]]) -> int:
+    """Index of the first ``PointSample`` step; ``ValueError`` if there is none."""
+    types = [step['type'] for step in pipeline]
+    if 'PointSample' not in types:
+        raise ValueError(f'the pipeline has no PointSample step: {types}')
+    return types.index('PointSample')
+
+
 def with_num_points(pipeline: Sequence[Mapping[str, Any]], num_points: int) -> list[dict]:
     """A copy of ``pipeline`` whose ``PointSample`` steps sample ``num_points`` points.
 
     Raises ``ValueError`` if the pipeline has no ``PointSample`` step.
     """
-    if not any(step['type'] == 'PointSample' for step in pipeline):
-        raise ValueError(f'the pipeline has no PointSample step: {[s["type"] for s in pipeline]}')
+    _point_sample_index(pipeline)
     return [
         dict(step, num_points=num_points) if step['type'] == 'PointSample' else dict(step)
         for step in pipeline
     ]
+
+
+def with_robustness(pipeline: Sequence[Mapping[str, Any]],
+                    augmentations: Sequence[Mapping[str, Any]]) -> list[dict]:
+    """A copy of the train ``pipeline`` with ``augmentations`` (``robust_augmentations`` of
+    ``_base_/s3dis-synthdet.py``) inserted right after its ``PointSample`` step.
+
+    There the point dropout and thinning change what the model sees (before it, sampling would
+    refill the count), they work on the sampled points only, and the colour steps act on
+    0..255 colours before ``NormalizePointsColor``. Raises ``ValueError`` if the pipeline has no
+    ``PointSample``, normalises colours before it, or already holds one of the augmentations.
+    """
+    index = _point_sample_index(pipeline)
+    types = [step['type'] for step in pipeline]
+    if 'NormalizePointsColor' in types[:index]:
+        raise ValueError(f'the pipeline normalises colours before PointSample: {types}')
+    repeated = sorted({step['type'] for step in augmentations} & set(types))
+    if repeated:
+        raise ValueError(f'the pipeline already has {repeated}: {types}')
+    steps = [dict(step) for step in pipeline]
+    return steps[:index + 1] + [dict(step) for step in augmentations] + steps[index + 1:]

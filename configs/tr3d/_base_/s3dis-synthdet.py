@@ -47,6 +47,29 @@ test_pipeline = [
     dict(type='Pack3DDetInputs', keys=['points'])
 ]
 
+# Robustness to real scans (issue #16), switched on by none of the experiments yet: a config
+# adds them with `train_pipeline = with_robustness(_base_.train_pipeline,
+# _base_.robust_augmentations)` (projects/synthdet/config_helpers.py), which inserts them right
+# after PointSample. Quarter turns about z (the boxes stay axis-aligned and exact), a tablet's
+# density falling with the distance to a virtual sensor, uniform point dropout, 5 mm xyz jitter,
+# colour jitter of contrast, per-channel gain and brightness, and colour-less scans (r g b = 0).
+# docs/training.md, "Robustness augmentations", explains them and their order.
+robust_augmentations = [
+    dict(type='RandomQuarterTurn', prob=0.75),
+    dict(
+        type='RandomDensityFalloff',
+        prob=0.3,
+        full_density_range=2.0,
+        power=2.0,
+        min_keep=0.1,
+        sensor_height=(1.0, 1.8),
+        min_points=2000),
+    dict(type='RandomPointDropout', prob=0.3, ratio_range=(0.1, 0.5), min_points=2000),
+    dict(type='RandomJitterPoints', jitter_std=[0.005, 0.005, 0.005], clip_range=[-0.015, 0.015]),
+    dict(type='RandomColourJitter', prob=0.8, brightness=20.0, contrast=0.2, channel_gain=0.1),
+    dict(type='RandomDropPointsColor', drop_ratio=0.2),
+]
+
 # One training area; experiments add `ann_file` and `metainfo`.
 train_area_dataset = dict(
     type=dataset_type,

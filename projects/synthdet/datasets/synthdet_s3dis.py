@@ -1,4 +1,7 @@
-"""S3DIS detection dataset with the synthetic classes yumi and 3dprinter (areas 1-9)."""
+"""S3DIS detection dataset with the synthetic classes yumi and 3dprinter (areas 1-9).
+
+Importing it also registers the robustness augmentations of ``transforms.py``.
+"""
 from typing import Optional
 
 import numpy as np
@@ -6,6 +9,7 @@ import torch
 from mmdet3d.datasets import S3DISDataset
 from mmdet3d.registry import DATASETS
 
+from projects.synthdet.datasets import transforms  # noqa: F401  (registers the augmentations)
 from synthdet.classes import (CLASS_COLOURS, DETECTION_CLASSES, DETECTION_SEMANTIC_IDS,
                               SEMANTIC_CLASSES)
 

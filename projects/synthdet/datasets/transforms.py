@@ -1,0 +1,253 @@
+"""Training augmentations that make TR3D robust to real scans (issue #16, item 5).
+
+Registered in mmdet3d's ``TRANSFORMS`` when ``projects.synthdet.datasets.synthdet_s3dis`` is
+imported (the configs' ``custom_imports``). They work on mmdet3d's ``results`` dicts after
+``LoadPointsFromFile`` (``DepthPoints`` with the colour in dims 3:6, still 0-255) and
+``LoadAnnotations3D`` (axis-aligned ``DepthInstance3DBoxes``); ``with_robustness`` of
+``projects/synthdet/config_helpers.py`` puts them right after ``PointSample`` and before
+``NormalizePointsColor`` (docs/training.md says why). Like mmdet3d's own transforms they draw
+from numpy's global generator, which mmengine seeds (``randomness.seed``, one seed per loader
+worker), so a seeded run repeats its augmentations.
+
+The colour dropout and the xyz jitter of the issue are mmdet3d's ``RandomDropPointsColor`` and
+``RandomJitterPoints``; ``robust_augmentations`` in ``configs/tr3d/_base_/s3dis-synthdet.py``
+lists them with these.
+"""
+import numpy as np
+from mmcv.transforms import BaseTransform
+from mmdet3d.registry import TRANSFORMS
+
+# one counter-clockwise quarter turn of (x, y) row vectors: (x, y) -> (-y, x)
+QUARTER_TURN_T = np.array([[0, 1], [-1, 0]])
+
+
+def _check_probability(name: str, value: float) -> None:
+    if not 0.0 <= value <= 1.0:
+        raise ValueError(f'{name} must be in [0, 1], got {value}')
+
+
+def _keep_smallest(results: dict, keys: np.ndarray, count: int) -> dict:
+    """Keep the ``count`` points with the smallest ``keys`` in their original order, with their
+    rows of ``pts_instance_mask`` and ``pts_semantic_mask`` when present."""
+    if count >= len(keys):
+        return results
+    keep = np.sort(np.argpartition(keys, count - 1)[:count])
+    results['points'] = results['points'][keep]
+    for mask in ('pts_instance_mask', 'pts_semantic_mask'):
+        if results.get(mask) is not None:
+            results[mask] = results[mask][keep]
+    return results
+
+
+@TRANSFORMS.register_module()
+class RandomQuarterTurn(BaseTransform):
+    """Turn the scene about the z axis by 90, 180 or 270 degrees, exactly.
+
+    Axis-aligned boxes stay axis-aligned and exact: centres turn with the points and the x and
+    y sizes swap on odd turns (no enlargement, no rounding: the turn only swaps and negates
+    coordinates). Boxes with yaw keep their sizes and turn their yaw instead. Scans reach the
+    detector aligned with their walls only up to a quarter turn (``synthdet.prepare`` aligns
+    the yaw into [-45, 45) degrees), so every quarter turn is a view the model must handle.
+
+    Args:
+        prob: probability of turning; a turn is then 1, 2 or 3 quarters, equally likely
+            (``prob=0.75`` makes all four orientations equally likely).
+    """
+
+    def __init__(self, prob: float = 0.75) -> None:
+        _check_probability('prob', prob)
+        self.prob = prob
+
+    def transform(self, results: dict) -> dict:
+        """Turn ``points`` and ``gt_bboxes_3d`` (if present) by a random number of quarters."""
+        if np.random.rand() >= self.prob:
+            return results
+        return self.turn(results, int(np.random.randint(1, 4)))
+
+    @staticmethod
+    def turn(results: dict, quarter_turns: int) -> dict:
+        """Turn ``points`` and ``gt_bboxes_3d`` counter-clockwise by ``quarter_turns`` x 90
+        degrees (mmdet3d's positive rotation about z)."""
+        quarters = quarter_turns % 4
+        rotation_t = np.linalg.matrix_power(QUARTER_TURN_T, quarters)
+        points = results['points']
+        points.tensor[:, :2] = points.tensor[:, :2] @ points.tensor.new_tensor(rotation_t)
+        boxes = results.get('gt_bboxes_3d')
+        if boxes is not None:
+            boxes.tensor[:, :2] = boxes.tensor[:, :2] @ boxes.tensor.new_tensor(rotation_t)
+            if boxes.with_yaw:
+                boxes.tensor[:, 6] += quarters * np.pi / 2
+            elif quarters % 2:
+                boxes.tensor[:, [3, 4]] = boxes.tensor[:, [4, 3]]
+        return results
+
+    def __repr__(self) -> str:
+        return f'{type(self).__name__}(prob={self.prob})'
+
+
+@TRANSFORMS.register_module()
+class RandomColourJitter(BaseTransform):
+    """Change the colours of the whole scene as another scanner or lighting would: contrast
+    about the mean grey level, a gain per channel, a brightness offset, then clipped to 0..255.
+
+    Works on colours in 0..255, before ``NormalizePointsColor``. A scene without colour (all
+    zeros, as colour-less scanners and the generator write them) stays without colour.
+
+    Args:
+        prob: probability of jittering a scene.
+        brightness: the offset added to every channel is uniform in
+            [-brightness, brightness] (colour units, 0..255).
+        contrast: the distances to the mean grey level are scaled by a factor uniform in
+            [1 - contrast, 1 + contrast].
+        channel_gain: each channel is multiplied by its own factor uniform in
+            [1 - channel_gain, 1 + channel_gain].
+    """
+
+    def __init__(self,
+                 prob: float = 0.8,
+                 brightness: float = 20.0,
+                 contrast: float = 0.2,
+                 channel_gain: float = 0.1) -> None:
+        _check_probability('prob', prob)
+        strengths = dict(brightness=brightness, contrast=contrast, channel_gain=channel_gain)
+        for name, value in strengths.items():
+            if value < 0:
+                raise ValueError(f'{name} must be >= 0, got {value}')
+        self.prob = prob
+        self.brightness = brightness
+        self.contrast = contrast
+        self.channel_gain = channel_gain
+
+    def transform(self, results: dict) -> dict:
+        """Jitter the colour of ``points``."""
+        if np.random.rand() >= self.prob:
+            return results
+        points = results['points']
+        colours = points.color
+        if not colours.any():
+            return results
+        contrast = np.random.uniform(1 - self.contrast, 1 + self.contrast)
+        gains = np.random.uniform(1 - self.channel_gain, 1 + self.channel_gain, 3)
+        offset = np.random.uniform(-self.brightness, self.brightness)
+        grey = colours.mean()
+        jittered = ((colours - grey) * contrast + grey) * colours.new_tensor(gains) + offset
+        points.color = jittered.clamp(0.0, 255.0)
+        return results
+
+    def __repr__(self) -> str:
+        return (f'{type(self).__name__}(prob={self.prob}, brightness={self.brightness}, '
+                f'contrast={self.contrast}, channel_gain={self.channel_gain})')
+
+
+@TRANSFORMS.register_module()
+class RandomPointDropout(BaseTransform):
+    """Drop a random share of the scene's points, uniformly, keeping at least ``min_points``.
+
+    Args:
+        prob: probability of dropping points from a scene.
+        ratio_range: the share of points dropped is uniform in this range (0 <= lo <= hi < 1).
+        min_points: never keep fewer points than this (nor drop any from a scene that has at
+            most this many).
+    """
+
+    def __init__(self,
+                 prob: float = 0.3,
+                 ratio_range: tuple[float, float] = (0.1, 0.5),
+                 min_points: int = 2000) -> None:
+        _check_probability('prob', prob)
+        low, high = ratio_range
+        if not 0.0 <= low <= high < 1.0:
+            raise ValueError(f'ratio_range must satisfy 0 <= lo <= hi < 1, got {ratio_range}')
+        if min_points < 1:
+            raise ValueError(f'min_points must be >= 1, got {min_points}')
+        self.prob = prob
+        self.ratio_range = (low, high)
+        self.min_points = min_points
+
+    def transform(self, results: dict) -> dict:
+        """Drop points of ``points`` and the same rows of the point masks."""
+        if np.random.rand() >= self.prob:
+            return results
+        total = len(results['points'])
+        ratio = np.random.uniform(*self.ratio_range)
+        count = max(round(total * (1.0 - ratio)), min(total, self.min_points))
+        return _keep_smallest(results, np.random.rand(total), count)
+
+    def __repr__(self) -> str:
+        return (f'{type(self).__name__}(prob={self.prob}, ratio_range={self.ratio_range}, '
+                f'min_points={self.min_points})')
+
+
+@TRANSFORMS.register_module()
+class RandomDensityFalloff(BaseTransform):
+    """Thin the scene as a handheld or tablet scanner sees it: dense near a virtual sensor,
+    sparser with distance.
+
+    The sensor stands at a random (x, y) inside the points' bounding box, ``sensor_height``
+    above their lowest point. A point at distance ``d`` from it is kept with probability
+    ``clip((full_density_range / d) ** power, min_keep, 1)`` (``power=2``: the density of a
+    fixed angular step); at least ``min_points`` points stay. The sensor position is recorded
+    as ``results['density_sensor_xyz']``.
+
+    Args:
+        prob: probability of thinning a scene.
+        full_density_range: points nearer than this (m) are all kept.
+        power: how fast the kept share falls with distance beyond it.
+        min_keep: the kept share never falls below this, however far.
+        sensor_height: range (m) of the sensor's height above the lowest point.
+        min_points: never keep fewer points than this.
+    """
+
+    def __init__(self,
+                 prob: float = 0.3,
+                 full_density_range: float = 2.0,
+                 power: float = 2.0,
+                 min_keep: float = 0.1,
+                 sensor_height: tuple[float, float] = (1.0, 1.8),
+                 min_points: int = 2000) -> None:
+        _check_probability('prob', prob)
+        _check_probability('min_keep', min_keep)
+        if full_density_range <= 0 or power <= 0:
+            raise ValueError(f'full_density_range and power must be > 0, got '
+                             f'{full_density_range} and {power}')
+        if not 0 <= sensor_height[0] <= sensor_height[1]:
+            raise ValueError(f'sensor_height must be a range (lo, hi) with 0 <= lo <= hi, got '
+                             f'{sensor_height}')
+        if min_points < 1:
+            raise ValueError(f'min_points must be >= 1, got {min_points}')
+        self.prob = prob
+        self.full_density_range = full_density_range
+        self.power = power
+        self.min_keep = min_keep
+        self.sensor_height = tuple(sensor_height)
+        self.min_points = min_points
+
+    def keep_probability(self, xyz: np.ndarray, sensor: np.ndarray) -> np.ndarray:
+        """The probability of keeping each point of ``xyz`` (N, 3) seen from ``sensor`` (3,)."""
+        distance = np.linalg.norm(xyz - sensor, axis=1)
+        with np.errstate(divide='ignore'):
+            share = (self.full_density_range / distance)**self.power
+        return np.clip(share, self.min_keep, 1.0)
+
+    def transform(self, results: dict) -> dict:
+        """Thin ``points`` (and the same rows of the point masks) around a random sensor."""
+        if np.random.rand() >= self.prob:
+            return results
+        xyz = results['points'].coord.numpy()
+        if len(xyz) == 0:
+            return results
+        low, high = xyz.min(axis=0), xyz.max(axis=0)
+        sensor = np.r_[np.random.uniform(low[:2], high[:2]),
+                       low[2] + np.random.uniform(*self.sensor_height)]
+        results['density_sensor_xyz'] = sensor
+        # a point is kept when u < p; ranking by u / p keeps the same points and tops them up
+        # to min_points with the points that came closest to being kept
+        ratio = np.random.rand(len(xyz)) / self.keep_probability(xyz, sensor)
+        count = max(int((ratio < 1.0).sum()), min(len(xyz), self.min_points))
+        return _keep_smallest(results, ratio, count)
+
+    def __repr__(self) -> str:
+        return (f'{type(self).__name__}(prob={self.prob}, '
+                f'full_density_range={self.full_density_range}, power={self.power}, '
+                f'min_keep={self.min_keep}, sensor_height={self.sensor_height}, '
+                f'min_points={self.min_points})')
