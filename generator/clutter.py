@@ -104,7 +104,7 @@ def _colour(rng: np.random.Generator, options: Sequence[Sequence[int]]) -> list[
 def _height(rng: np.random.Generator, low: float, high: float, max_height: float) -> float:
     """A height in [low, high], lowered to fit under ``max_height`` (a low room)."""
     high = min(high, max_height)
-    return _mm(rng.uniform(min(low, 0.8 * high), high))
+    return _mm(rng.uniform(low if low <= high else 0.8 * high, high))
 
 
 def _shelf(rng, max_height: float) -> tuple[Size, dict]:
@@ -180,8 +180,8 @@ def _crate(rng, max_height: float, small: bool = False) -> tuple[Size, dict]:
     style = styles[int(rng.integers(len(styles)))]
     if small:  # as big as a 3D printer
         layers = 1
-        size = (_mm(rng.uniform(0.35, 0.6)), _mm(rng.uniform(0.3, 0.55)),
-                _height(rng, 0.3, 0.6, max_height))
+        size = (_mm(rng.uniform(0.4, 0.65)), _mm(rng.uniform(0.38, 0.6)),
+                _height(rng, 0.4, 0.7, max_height))
     elif style == 'cardboard':
         layers = int(rng.integers(1, 4))
         size = (_mm(rng.uniform(0.3, 0.8)), _mm(rng.uniform(0.25, 0.6)),
