@@ -301,16 +301,14 @@ class _Placer:
         overhead = bottom >= self.overhead_from and top <= self.ceiling + EPS
         if top > self.top_limit and not overhead:
             return False
-        quad = box_corners_xy(candidate.center, candidate.size, candidate.yaw)
-        if not quad_inside_polygon(quad, self.polygon):
-            return False
         clearance = self.clearance if clearance is None else clearance
         for other in self.objects + self.blockers:
             if other.instance == ignore:
                 continue
             if boxes_intersect(candidate, other, clearance):
                 return False
-        return True
+        quad = box_corners_xy(candidate.center, candidate.size, candidate.yaw)
+        return quad_inside_polygon(quad, self.polygon)
 
     def add(self,
             spec: AssetSpec,
@@ -507,9 +505,8 @@ def _wall_lengths(polygon: np.ndarray) -> np.ndarray:
     return np.linalg.norm(np.roll(polygon, -1, axis=0) - polygon, axis=1)
 
 
-def _draw_wall(rng, polygon: np.ndarray, min_length: float) -> int | None:
+def _draw_wall(rng, lengths: np.ndarray, min_length: float) -> int | None:
     """A wall at least ``min_length`` long, drawn with probability proportional to length."""
-    lengths = _wall_lengths(polygon)
     walls = np.flatnonzero(lengths >= min_length)
     if len(walls) == 0:
         return None
@@ -534,15 +531,19 @@ def _place_against_wall(rng, placer: _Placer, spec: AssetSpec, gap_range,
                         tries: int = 12) -> PlacedObject | None:
     """Back to a wall (a gap in ``gap_range``), often side by side with what stands there."""
     width, depth = spec.size[0], spec.size[1]
-    if _draw_wall(rng, placer.polygon, width + 0.2) is None:
+    lengths = _wall_lengths(placer.polygon)
+    if _draw_wall(rng, lengths, width + 0.2) is None:
         return None
+    spans_of: dict[int, list[tuple[float, float]]] = {}
 
     def propose(_attempt: int) -> tuple[np.ndarray, float]:
-        wall = _draw_wall(rng, placer.polygon, width + 0.2)
+        wall = _draw_wall(rng, lengths, width + 0.2)
         p0, direction, length, normal = _wall_frame(placer.polygon, wall)
         low, high = 0.1 + width / 2, length - 0.1 - width / 2
         u = rng.uniform(low, high)
-        spans = _spans_at_wall(placer, p0, direction, normal)
+        if wall not in spans_of:
+            spans_of[wall] = _spans_at_wall(placer, p0, direction, normal)
+        spans = spans_of[wall]
         if spans and rng.random() < 0.6:
             u0, u1 = spans[int(rng.integers(len(spans)))]
             gap = rng.uniform(0.0, 0.02)
@@ -557,7 +558,7 @@ def _place_against_wall(rng, placer: _Placer, spec: AssetSpec, gap_range,
 def _place_pipe_run(rng, placer: _Placer, gap_range, tries: int = 12) -> PlacedObject | None:
     """A pipe run along a wall: on the wall (low, or high over the sensor) or hung from the
     ceiling 0.1-1.5 m in front of it."""
-    wall = _draw_wall(rng, placer.polygon, 1.5)
+    wall = _draw_wall(rng, _wall_lengths(placer.polygon), 1.5)
     if wall is None:
         return None
     p0, direction, length, normal = _wall_frame(placer.polygon, wall)
