@@ -20,10 +20,10 @@ from generator.clutter import (CLUTTER_KINDS, FACTORY_KINDS, WALL_KINDS, clutter
 from generator.config import ConfigError, load_config
 from generator.layout import generate_layout, layout_meta
 from synthdet.classes import GENERATED_CLASSES
+from tests.test_generator_layout import TOL, footprint, walls, z_range
 
 REPO = Path(__file__).resolve().parents[1]
 HEAVY = REPO / 'generator' / 'profiles' / 'clutter.json'
-TOL = 1e-5  # meta.json rounds to 6 decimals
 
 
 def kind_specs(kind: str, count: int = 40) -> list:
@@ -127,28 +127,6 @@ def test_every_kind_appears_as_clutter(rooms):
     assert mounts['wall'] >= 5 and mounts['ceiling'] >= 5, mounts
 
 
-def footprint(box: dict) -> np.ndarray:
-    hx, hy = box['size'][0] / 2, box['size'][1] / 2
-    c, s = math.cos(box['yaw']), math.sin(box['yaw'])
-    local = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
-    return local @ np.array([[c, s], [-s, c]]) + np.asarray(box['center'][:2])
-
-
-def z_range(box: dict) -> tuple[float, float]:
-    return box['center'][2] - box['size'][2] / 2, box['center'][2] + box['size'][2] / 2
-
-
-def walls(polygon) -> list:
-    """(start, unit direction, length, inward normal) per edge of a clockwise polygon."""
-    polygon = np.asarray(polygon, dtype=float)
-    result = []
-    for start, end in zip(polygon, np.roll(polygon, -1, axis=0)):
-        length = float(np.linalg.norm(end - start))
-        d = (end - start) / length
-        result.append((start, d, length, np.array([d[1], -d[0]])))
-    return result
-
-
 def test_wall_kinds_stand_at_a_wall_with_their_back_to_it(rooms):
     """Shelves, cabinets, machines and wall pipes: front towards the room, back within
     ``layout.wall_gap`` of one wall, along its length; ceiling pipes hang from the ceiling."""
@@ -158,15 +136,15 @@ def test_wall_kinds_stand_at_a_wall_with_their_back_to_it(rooms):
         for obj in clutter(room):
             kind, box = obj['params']['kind'], obj['box']
             if kind == 'pipe' and obj['params']['mount'] == 'ceiling':
-                assert z_range(box)[1] == pytest.approx(room['room']['height'], abs=TOL)
+                assert z_range(obj)[1] == pytest.approx(room['room']['height'], abs=TOL)
                 checked['ceiling pipe'] += 1
                 continue
             if kind not in WALL_KINDS and kind != 'pipe':
                 continue
             front = np.array([math.sin(box['yaw']), -math.cos(box['yaw'])])
-            centre, quad = np.asarray(box['center'][:2]), footprint(box)
+            centre, quad = np.asarray(box['center'][:2]), footprint(obj)
             at = []
-            for start, direction, length, normal in walls(room['room']['polygon']):
+            for start, direction, length, normal in walls(np.asarray(room['room']['polygon'])):
                 gap = float((centre - start) @ normal) - box['size'][1] / 2
                 along = (quad - start) @ direction
                 if (front @ normal > 1 - 1e-6 and gap_low - TOL <= gap <= gap_high + TOL
@@ -179,9 +157,9 @@ def test_wall_kinds_stand_at_a_wall_with_their_back_to_it(rooms):
 
 def penetration(a: dict, b: dict) -> float:
     """How deep the boxes of ``a`` and ``b`` enter each other (0 when apart or touching)."""
-    (a0, a1), (b0, b1) = z_range(a['box']), z_range(b['box'])
+    (a0, a1), (b0, b1) = z_range(a), z_range(b)
     depth = min(a1, b1) - max(a0, b0)
-    p, q = footprint(a['box']), footprint(b['box'])
+    p, q = footprint(a), footprint(b)
     for quad in (p, q):
         for i in range(4):
             edge = quad[(i + 1) % 4] - quad[i]
@@ -205,17 +183,16 @@ def test_clutter_touches_objects_but_never_enters_them(rooms):
                                       f"{other['instance']} by {depth:.4f} m")
                 if other['class'] != 'clutter':  # within 1 cm of it, side by side
                     grown = {**obj['box'], 'size': [s + 0.02 for s in obj['box']['size']]}
-                    side_by_side = min(z_range(obj['box'])[1], z_range(other['box'])[1]) > max(
-                        z_range(obj['box'])[0], z_range(other['box'])[0])
+                    side_by_side = min(z_range(obj)[1], z_range(other)[1]) > max(
+                        z_range(obj)[0], z_range(other)[0])
                     touching[other['class']] += side_by_side and penetration({'box': grown},
                                                                              other) > 0
             if obj['on'] is not None:  # on an empty pallet or a table top, inside it
                 support = by_name[obj['on']]
                 assert support['class'] == 'table' or support['params']['kind'] == 'pallet'
                 assert obj['params']['kind'] == 'crate'
-                assert z_range(obj['box'])[0] == pytest.approx(
-                    z_range(support['box'])[1], abs=0.011)
-                inside = footprint(obj['box']) - np.asarray(support['box']['center'][:2])
+                assert z_range(obj)[0] == pytest.approx(z_range(support)[1], abs=0.011)
+                inside = footprint(obj) - np.asarray(support['box']['center'][:2])
                 yaw = support['box']['yaw']
                 local = inside @ np.array([[math.cos(yaw), -math.sin(yaw)],
                                            [math.sin(yaw), math.cos(yaw)]])
