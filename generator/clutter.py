@@ -107,15 +107,19 @@ def _height(rng: np.random.Generator, low: float, high: float, max_height: float
     return _mm(rng.uniform(low if low <= high else 0.8 * high, high))
 
 
+def _size(rng, width: Sequence[float], depth: Sequence[float], height: Sequence[float],
+          max_height: float) -> Size:
+    """Width, depth and height drawn from their ranges, the height under ``max_height``."""
+    return _mm(rng.uniform(*width)), _mm(rng.uniform(*depth)), _height(rng, *height, max_height)
+
+
 def _shelf(rng, max_height: float) -> tuple[Size, dict]:
     style = 'rack' if rng.random() < 0.5 else 'shelving'
     if style == 'rack':  # pallet rack: coloured uprights and beams
-        size = (_mm(rng.uniform(1.8, 2.7)), _mm(rng.uniform(0.8, 1.1)),
-                _height(rng, 1.8, 2.6, max_height))
+        size = _size(rng, (1.8, 2.7), (0.8, 1.1), (1.8, 2.6), max_height)
         frame, board = _colour(rng, palette.INDUSTRIAL[1:5]), _colour(rng, palette.WOOD)
     else:  # boltless shelving: grey posts, steel or chipboard boards
-        size = (_mm(rng.uniform(0.8, 1.5)), _mm(rng.uniform(0.35, 0.6)),
-                _height(rng, 1.5, 2.2, max_height))
+        size = _size(rng, (0.8, 1.5), (0.35, 0.6), (1.5, 2.2), max_height)
         frame = _colour(rng, palette.METAL)
         board = _colour(rng, palette.METAL + palette.WOOD)
     levels = int(rng.integers(2, 4)) if size[2] < 1.2 else int(rng.integers(3, 6))
@@ -132,14 +136,11 @@ def _shelf(rng, max_height: float) -> tuple[Size, dict]:
 def _cabinet(rng, max_height: float) -> tuple[Size, dict]:
     style = ('tall', 'low', 'drawers')[int(rng.integers(3))]
     if style == 'tall':
-        size = (_mm(rng.uniform(0.8, 1.2)), _mm(rng.uniform(0.4, 0.6)),
-                _height(rng, 1.6, 2.0, max_height))
+        size = _size(rng, (0.8, 1.2), (0.4, 0.6), (1.6, 2.0), max_height)
     elif style == 'low':  # a sideboard with a worktop as high as a table
-        size = (_mm(rng.uniform(0.8, 1.8)), _mm(rng.uniform(0.45, 0.65)),
-                _height(rng, 0.7, 0.8, max_height))
+        size = _size(rng, (0.8, 1.8), (0.45, 0.65), (0.7, 0.8), max_height)
     else:  # tool cabinet
-        size = (_mm(rng.uniform(0.6, 1.2)), _mm(rng.uniform(0.45, 0.7)),
-                _height(rng, 0.8, 1.1, max_height))
+        size = _size(rng, (0.6, 1.2), (0.45, 0.7), (0.8, 1.1), max_height)
     return size, {
         'style': style,
         'color': _colour(rng, palette.INDUSTRIAL + palette.METAL),
@@ -150,8 +151,7 @@ def _cabinet(rng, max_height: float) -> tuple[Size, dict]:
 
 
 def _machine(rng, max_height: float) -> tuple[Size, dict]:
-    size = (_mm(rng.uniform(1.2, 3.0)), _mm(rng.uniform(1.0, 2.0)),
-            _height(rng, 1.5, 2.3, max_height))
+    size = _size(rng, (1.2, 3.0), (1.0, 2.0), (1.5, 2.3), max_height)
     return size, {
         'style': 'cnc',
         'color': _colour(rng, palette.INDUSTRIAL),
@@ -180,8 +180,7 @@ def _crate(rng, max_height: float, small: bool = False) -> tuple[Size, dict]:
     style = styles[int(rng.integers(len(styles)))]
     if small:  # as big as a 3D printer
         layers = 1
-        size = (_mm(rng.uniform(0.4, 0.65)), _mm(rng.uniform(0.38, 0.6)),
-                _height(rng, 0.4, 0.7, max_height))
+        size = _size(rng, (0.4, 0.65), (0.38, 0.6), (0.4, 0.7), max_height)
     elif style == 'cardboard':
         layers = int(rng.integers(1, 4))
         size = (_mm(rng.uniform(0.3, 0.8)), _mm(rng.uniform(0.25, 0.6)),
@@ -192,8 +191,7 @@ def _crate(rng, max_height: float, small: bool = False) -> tuple[Size, dict]:
         size = (width, depth, _height(rng, 0.12 * layers, 0.32 * layers, max_height))
     else:
         layers = 1
-        size = (_mm(rng.uniform(0.6, 1.2)), _mm(rng.uniform(0.5, 1.0)),
-                _height(rng, 0.4, 1.0, max_height))
+        size = _size(rng, (0.6, 1.2), (0.5, 1.0), (0.4, 1.0), max_height)
     colours = {'cardboard': palette.CARDBOARD, 'plastic': palette.PLASTIC, 'wooden': palette.WOOD}
     return size, {'style': style, 'layers': layers, 'color': _colour(rng, colours[style])}
 
@@ -201,11 +199,9 @@ def _crate(rng, max_height: float, small: bool = False) -> tuple[Size, dict]:
 def _cart(rng, max_height: float) -> tuple[Size, dict]:
     style = 'shelf' if rng.random() < 0.5 else 'platform'
     if style == 'shelf':  # like a small table: the top shelf at table height
-        size = (_mm(rng.uniform(0.8, 1.1)), _mm(rng.uniform(0.5, 0.7)),
-                _height(rng, 0.75, 0.95, max_height))
+        size = _size(rng, (0.8, 1.1), (0.5, 0.7), (0.75, 0.95), max_height)
     else:
-        size = (_mm(rng.uniform(0.8, 1.3)), _mm(rng.uniform(0.5, 0.8)),
-                _height(rng, 0.85, 1.05, max_height))
+        size = _size(rng, (0.8, 1.3), (0.5, 0.8), (0.85, 1.05), max_height)
     return size, {
         'style': style,
         'shelves': int(rng.integers(2, 4)) if style == 'shelf' else 1,
@@ -222,12 +218,10 @@ def _bin(rng, max_height: float) -> tuple[Size, dict]:
         size = (diameter, diameter, _height(rng, 0.5, 0.9, max_height))
         colour = _colour(rng, palette.INDUSTRIAL + palette.PLASTIC)
     elif style == 'wheelie':
-        size = (_mm(rng.uniform(0.48, 0.6)), _mm(rng.uniform(0.55, 0.75)),
-                _height(rng, 0.95, 1.07, max_height))
+        size = _size(rng, (0.48, 0.6), (0.55, 0.75), (0.95, 1.07), max_height)
         colour = _colour(rng, palette.PLASTIC)
     else:  # mesh pallet cage
-        size = (_mm(rng.uniform(0.8, 1.24)), _mm(rng.uniform(0.6, 0.84)),
-                _height(rng, 0.7, 0.97, max_height))
+        size = _size(rng, (0.8, 1.24), (0.6, 0.84), (0.7, 0.97), max_height)
         colour = _colour(rng, palette.METAL[1:4])
     return size, {'style': style, 'color': colour}
 
@@ -370,10 +364,10 @@ def _build_machine(s: _Solids, size: Size, p: dict) -> None:
     # the front door: a frame around a window set back in the recess
     a, b = -w / 2 + 0.15 * w, w / 2 - 0.15 * w
     z0, z1 = 0.1 + 0.45 * (body - 0.1), body - 0.12 * (body - 0.1)
-    for lo, hi in (((-w / 2, front, 0.1), (a, front + recess, body)),
-                   ((b, front, 0.1), (w / 2, front + recess, body)),
-                   ((a, front, 0.1), (b, front + recess, z0)),
-                   ((a, front, z1), (b, front + recess, body))):
+    for lo, hi in (((-w / 2, front, 0.1),
+                    (a, front + recess, body)), ((b, front, 0.1), (w / 2, front + recess, body)),
+                   ((a, front, 0.1), (b, front + recess, z0)), ((a, front, z1), (b, front + recess,
+                                                                                 body))):
         s.box(lo, hi, p['accent_color'])
     s.box((a, front + recess - 0.02, z0), (b, front + recess, z1), p['glass_color'])
     panel_w = min(0.45, 0.3 * w)
@@ -507,7 +501,11 @@ def _build_pipe(s: _Solids, size: Size, p: dict) -> None:
             s.box((x, -depth / 2, height - 0.04), (x + 0.04, depth / 2, height),
                   p['bracket_color'])
             for y, z in centres:
-                s.cylinder((x + 0.02, y, z), 2, 0.008, height - 0.04 - z, p['bracket_color'],
+                s.cylinder((x + 0.02, y, z),
+                           2,
+                           0.008,
+                           height - 0.04 - z,
+                           p['bracket_color'],
                            segments=8)
 
 

@@ -26,7 +26,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from generator.clutter import (PRIMITIVE_KINDS, WALL_KINDS, CLUTTER_KINDS, sample_clutter,
+from generator.clutter import (CLUTTER_KINDS, PRIMITIVE_KINDS, WALL_KINDS, sample_clutter,
                                sample_pipe_run, sample_primitive)
 from synthdet.classes import GENERATED_CLASSES
 from synthdet.geometry import (box_corners_xy, edges_cross, points_in_polygon, rotation2d,
@@ -371,7 +371,8 @@ def _turns_for(item: AssetSpec, table: AssetSpec) -> list[int]:
     return turns
 
 
-def _wall_frame(polygon: np.ndarray, wall: int) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+def _wall_frame(polygon: np.ndarray,
+                wall: int) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
     """Start, unit direction, length and inward unit normal of edge ``wall`` of ``polygon``."""
     p0, p1 = polygon[wall], polygon[(wall + 1) % len(polygon)]
     length = float(np.linalg.norm(p1 - p0))
@@ -527,7 +528,10 @@ def _spans_at_wall(placer: _Placer, p0: np.ndarray, direction: np.ndarray,
     return spans
 
 
-def _place_against_wall(rng, placer: _Placer, spec: AssetSpec, gap_range,
+def _place_against_wall(rng,
+                        placer: _Placer,
+                        spec: AssetSpec,
+                        gap_range,
                         tries: int = 12) -> PlacedObject | None:
     """Back to a wall (a gap in ``gap_range``), often side by side with what stands there."""
     width, depth = spec.size[0], spec.size[1]
@@ -547,8 +551,9 @@ def _place_against_wall(rng, placer: _Placer, spec: AssetSpec, gap_range,
         if spans and rng.random() < 0.6:
             u0, u1 = spans[int(rng.integers(len(spans)))]
             gap = rng.uniform(0.0, 0.02)
-            u = min(max(u1 + gap + width / 2 if rng.random() < 0.5 else u0 - gap - width / 2,
-                        low), high)
+            u = min(
+                max(u1 + gap + width / 2 if rng.random() < 0.5 else u0 - gap - width / 2, low),
+                high)
         xy = p0 + direction * u + normal * (rng.uniform(*gap_range) + depth / 2)
         return np.array([xy[0], xy[1], spec.size[2] / 2]), _facing_yaw(normal)
 
@@ -630,8 +635,9 @@ def _place_crate_on_top(rng, placer: _Placer, tries: int = 8) -> bool:
     """A crate on an empty pallet or on a free part of a table top (there as big as a 3D
     printer); False when none takes it."""
     supports = [
-        o for o in _floor_objects(placer) if o.cls in ('table', 'clutter')
-        and o.spec.top_z is not None and o.size[2] <= o.spec.top_z + 0.01
+        o for o in _floor_objects(placer)
+        if o.cls in ('table',
+                     'clutter') and o.spec.top_z is not None and o.size[2] <= o.spec.top_z + 0.01
     ]
     if not supports:
         return False
@@ -652,8 +658,8 @@ def _place_crate_on_top(rng, placer: _Placer, tries: int = 8) -> bool:
         k = turns[int(rng.integers(len(turns)))]
         slack = np.array([top_w - spec.size[k % 2], top_d - spec.size[1 - k % 2]]) / 2 - 0.01
         xy = support.center[:2] + rotation2d(support.yaw) @ rng.uniform(-slack, slack)
-        return (np.array([xy[0], xy[1], top_z + spec.size[2] / 2]),
-                _wrap_angle(support.yaw + k * np.pi / 2))
+        return (np.array([xy[0], xy[1],
+                          top_z + spec.size[2] / 2]), _wrap_angle(support.yaw + k * np.pi / 2))
 
     placed = placer.place_first_free(spec, propose, tries, on=support.instance, clearance=CONTACT)
     return placed is not None

@@ -164,8 +164,9 @@ def penetration(a: dict, b: dict) -> float:
         for i in range(4):
             edge = quad[(i + 1) % 4] - quad[i]
             axis = np.array([-edge[1], edge[0]]) / np.linalg.norm(edge)
-            depth = min(depth, min((p @ axis).max(), (q @ axis).max()) -
-                        max((p @ axis).min(), (q @ axis).min()))
+            depth = min(
+                depth,
+                min((p @ axis).max(), (q @ axis).max()) - max((p @ axis).min(), (q @ axis).min()))
     return max(depth, 0.0)
 
 
@@ -175,16 +176,17 @@ def test_clutter_touches_objects_but_never_enters_them(rooms):
         by_name = {o['instance']: o for o in room['objects']}
         for obj in clutter(room):
             for other in room['objects']:
-                if other is obj or obj['on'] == other['instance'] or other['on'] == obj[
-                        'instance']:
+                if other is obj or obj['on'] == other['instance'] or other['on'] == obj['instance']:
                     continue
                 depth = penetration(obj, other)
                 assert depth <= TOL, (f"{room['name']}: {obj['instance']} enters "
                                       f"{other['instance']} by {depth:.4f} m")
                 if other['class'] != 'clutter':  # within 1 cm of it, side by side
                     grown = {**obj['box'], 'size': [s + 0.02 for s in obj['box']['size']]}
-                    side_by_side = min(z_range(obj)[1], z_range(other)[1]) > max(
-                        z_range(obj)[0], z_range(other)[0])
+                    side_by_side = min(z_range(obj)[1],
+                                       z_range(other)[1]) > max(
+                                           z_range(obj)[0],
+                                           z_range(other)[0])
                     touching[other['class']] += side_by_side and penetration({'box': grown},
                                                                              other) > 0
             if obj['on'] is not None:  # on an empty pallet or a table top, inside it
@@ -216,8 +218,9 @@ def test_clutter_does_not_change_the_detection_objects(catalog):
     bare = copy.deepcopy(config)
     bare['layout']['clutter'] = [0, 0]
     for seed in range(20):
-        full, empty = (layout_meta(generate_layout(np.random.default_rng([seed, 0]), catalog, c))
-                       for c in (config, bare))
+        full, empty = (
+            layout_meta(generate_layout(np.random.default_rng([seed, 0]), catalog, c))
+            for c in (config, bare))
         assert [o for o in full['objects'] if o['class'] != 'clutter'] == empty['objects']
 
 
