@@ -260,7 +260,8 @@ def sample_clutter(rng: np.random.Generator, kind: str, max_height: float, small
 
 def sample_pipe_run(rng: np.random.Generator, length: float, mount: str, max_height: float):
     """Draw a run of 1-3 parallel pipes ``length`` long, mounted on a ``'wall'`` (stacked,
-    brackets towards +y) or hung from the ``'ceiling'`` (side by side, hangers up to its top)."""
+    brackets towards +y) or hung from the ``'ceiling'`` (side by side, hangers up to its top;
+    pipes and hangers at most ``max_height`` high)."""
     pipes = int(rng.integers(1, 4))
     diameter = _mm(rng.uniform(0.06, 0.25 if pipes == 1 else 0.16))
     gap = _mm(rng.uniform(0.03, 0.1))

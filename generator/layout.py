@@ -570,7 +570,7 @@ def _place_pipe_run(rng, placer: _Placer, gap_range, tries: int = 12) -> PlacedO
     overhead = placer.ceiling - placer.overhead_from  # free height over the sensor
     mount = 'ceiling' if overhead > 0.3 and rng.random() < 0.5 else 'wall'
     run = rng.uniform(0.4, 1.0) * (length - 0.2)
-    spec = sample_pipe_run(rng, run, mount, overhead if mount == 'ceiling' else placer.top_limit)
+    spec = sample_pipe_run(rng, run, mount, overhead)
     width, depth, height = spec.size
 
     def propose(_attempt: int) -> tuple[np.ndarray, float]:
