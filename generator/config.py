@@ -50,8 +50,21 @@ DEFAULTS: dict[str, Any] = {
         'chair_margin': 1.7,  # distance of the inner boundary from the walls, metres
         'wall_gap': [0.02, 0.12],  # gap between a wall item's back and its wall
         'clearance': 0.05,  # minimum free distance between any two objects
-        'clutter': [0, 4],  # inclusive range of clutter objects per room
-        'clutter_size': [0.2, 0.8],
+        'clutter': [2, 8],  # inclusive range of clutter objects per room
+        'clutter_size': [0.2, 0.8],  # sides of the plain boxes and cylinders
+        # probability of each clutter kind (generator/clutter.py); they must sum to 1
+        'clutter_kinds': {
+            'box': 0.0,
+            'cylinder': 0.04,
+            'shelf': 0.14,
+            'cabinet': 0.14,
+            'machine': 0.1,
+            'pallet': 0.1,
+            'crate': 0.2,
+            'cart': 0.08,
+            'bin': 0.1,
+            'pipe': 0.1
+        },
     },
     'scanner': {
         'path_coverage': 0.8,  # the two crossing segments span 80 % of the room (paper)
@@ -86,6 +99,8 @@ HALL_DEFAULTS: dict[str, Any] = {
     'windows': [0, 6],  # inclusive range of windows in the outer walls
 }
 
+# mappings a user file replaces as a whole, named by what they map
+_DISTRIBUTIONS = {'shapes': 'room shape', 'clutter_kinds': 'clutter kind'}
 _SUM_GROUPS = (('probabilities', ('table', 'sofa')), ('probabilities', ('yumi', '3dprinter')))
 
 
@@ -135,16 +150,18 @@ def _merge(target: dict, user: dict, reference: dict, source: str, prefix: str) 
         if key not in reference:
             known = ', '.join(sorted(reference))
             raise ConfigError(f'{source}: unknown key "{where}" (known here: {known})')
-        if isinstance(reference[key], dict) and key != 'shapes':
+        if isinstance(reference[key], dict) and key not in _DISTRIBUTIONS:
             if not isinstance(value, dict):
                 raise ConfigError(f'{source}: "{where}" must be a mapping')
             _merge(target[key], value, reference[key], source, where + '.')
-        elif key == 'shapes':
+        elif key in _DISTRIBUTIONS:  # a whole distribution: what it leaves out has p = 0
+            what = _DISTRIBUTIONS[key]
             if not isinstance(value, dict):
-                raise ConfigError(f'{source}: "{where}" must be a mapping of shape -> probability')
-            for shape in value:
-                if shape not in reference[key]:
-                    raise ConfigError(f'{source}: unknown room shape "{shape}" in "{where}" '
+                raise ConfigError(f'{source}: "{where}" must be a mapping of {what} -> '
+                                  f'probability')
+            for name in value:
+                if name not in reference[key]:
+                    raise ConfigError(f'{source}: unknown {what} "{name}" in "{where}" '
                                       f'(known: {", ".join(reference[key])})')
             target[key] = {s: value.get(s, 0.0) for s in reference[key]}
         else:
@@ -173,6 +190,17 @@ def _range(config: dict, section: str, key: str, source: str, integer: bool = Fa
         raise ConfigError(f'{source}: "{section}.{key}" has min > max: {value!r}')
 
 
+def _distribution(config: dict, section: str, key: str, source: str) -> None:
+    probs = config[section][key]
+    for name, p in probs.items():
+        if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0.0 <= p <= 1.0:
+            raise ConfigError(f'{source}: "{section}.{key}.{name}" must be a probability in '
+                              f'[0, 1], got {p!r}')
+    if abs(sum(probs.values()) - 1.0) > 1e-6:
+        raise ConfigError(f'{source}: "{section}.{key}" probabilities sum to '
+                          f'{sum(probs.values()):g}, not 1')
+
+
 def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
     """Raise :class:`ConfigError` when any value of ``config`` is out of its domain."""
     probs = config['probabilities']
@@ -190,15 +218,7 @@ def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
             raise ConfigError(
                 f'{source}: "{section}.{keys[0]}" + "{section}.{keys[1]}" = {total:g} '
                 f'> 1; they share one slot')
-    shapes = config['room']['shapes']
-    for shape, p in shapes.items():
-        if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0.0 <= p <= 1.0:
-            raise ConfigError(f'{source}: "room.shapes.{shape}" must be a probability in [0, 1], '
-                              f'got {p!r}')
-    if abs(sum(shapes.values()) - 1.0) > 1e-6:
-        raise ConfigError(
-            f'{source}: "room.shapes" probabilities sum to {sum(shapes.values()):g}, '
-            f'not 1')
+    _distribution(config, 'room', 'shapes', source)
     for key in ('width', 'depth', 'height'):
         _range(config, 'room', key, source)
         if config['room'][key][0] <= 0:
@@ -224,6 +244,7 @@ def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
     _range(config, 'layout', 'wall_gap', source)
     _range(config, 'layout', 'clutter', source, integer=True)
     _range(config, 'layout', 'clutter_size', source)
+    _distribution(config, 'layout', 'clutter_kinds', source)
     scanner = config['scanner']
     for key in ('path_coverage', 'sensor_height', 'dropout'):
         value = _number(config, 'scanner', key, source)

@@ -9,9 +9,13 @@ A layout decides what goes where; it knows nothing of Blender. The rules (paper,
 - yumis and 3D printers stand only on tables, at most one on each local side
   (left = -x, right = +x).
 
-Beyond the paper: L/U rooms, clutter objects (class ``clutter``) and door/window openings.
+Beyond the paper: L/U rooms, door/window openings and factory clutter (class ``clutter``,
+generator/clutter.py), placed after the detection objects: shelves, cabinets and machines with
+their back to a wall, pallets, crates, carts and bins on the floor (often touching an object),
+crates on pallets and on free table tops, pipe runs along the walls or under the ceiling.
 No two objects intersect: every placement is checked with oriented-box tests and dropped when no
-free position is found after a few tries.
+free position is found after a few tries. Clutter may touch what it stands next to (no
+clearance), the detection objects keep ``layout.clearance`` among themselves.
 
 Frames: metres, z up, yaw in radians counter-clockwise from +x. An object's local frame has xy
 centred on its bounding box, z = 0 at its lowest point, and its front towards local -y.
@@ -22,6 +26,8 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from generator.clutter import (CLUTTER_KINDS, PRIMITIVE_KINDS, WALL_KINDS, sample_clutter,
+                               sample_pipe_run, sample_primitive)
 from synthdet.classes import GENERATED_CLASSES
 from synthdet.geometry import (box_corners_xy, edges_cross, points_in_polygon, rotation2d,
                                signed_area)
@@ -257,34 +263,52 @@ def sample_room(rng: np.random.Generator, room_cfg: Mapping[str,
 
 
 class _Placer:
-    """Keeps the placed objects and answers 'is this box free?'."""
+    """Keeps the placed objects and answers 'is this box free?'.
 
-    def __init__(self, polygon: np.ndarray, top_limit: float, clearance: float):
+    An object's top stays under ``top_limit``, unless the whole object hangs above
+    ``overhead_from`` (over the sensor) and under ``ceiling`` (pipes under the ceiling).
+    """
+
+    def __init__(self,
+                 polygon: np.ndarray,
+                 top_limit: float,
+                 clearance: float,
+                 ceiling: float = -np.inf,
+                 overhead_from: float = np.inf):
         self.polygon = polygon
         self.top_limit = top_limit
         self.clearance = clearance
+        self.ceiling = ceiling
+        self.overhead_from = overhead_from
         self.objects: list[PlacedObject] = []
         self.blockers: list[PlacedObject] = []  # keep-out volumes (door swings), not written
         self.counters: dict[str, int] = {}
 
     def within(self, region: np.ndarray) -> '_Placer':
         """A placer for the part ``region`` of this one's polygon, sharing its objects."""
-        part = _Placer(region, self.top_limit, self.clearance)
+        part = _Placer(region, self.top_limit, self.clearance, self.ceiling, self.overhead_from)
         part.objects, part.blockers, part.counters = self.objects, self.blockers, self.counters
         return part
 
-    def is_free(self, candidate: PlacedObject, ignore: str | None = None) -> bool:
-        if candidate.center[2] + candidate.size[2] / 2 > self.top_limit:
+    def is_free(self,
+                candidate: PlacedObject,
+                ignore: str | None = None,
+                clearance: float | None = None) -> bool:
+        """Inside the room and its height limits, ``clearance`` (default: the placer's) away
+        from every object but ``ignore``."""
+        bottom = candidate.center[2] - candidate.size[2] / 2
+        top = candidate.center[2] + candidate.size[2] / 2
+        overhead = bottom >= self.overhead_from and top <= self.ceiling + EPS
+        if top > self.top_limit and not overhead:
             return False
-        quad = box_corners_xy(candidate.center, candidate.size, candidate.yaw)
-        if not quad_inside_polygon(quad, self.polygon):
-            return False
+        clearance = self.clearance if clearance is None else clearance
         for other in self.objects + self.blockers:
             if other.instance == ignore:
                 continue
-            if boxes_intersect(candidate, other, self.clearance):
+            if boxes_intersect(candidate, other, clearance):
                 return False
-        return True
+        quad = box_corners_xy(candidate.center, candidate.size, candidate.yaw)
+        return quad_inside_polygon(quad, self.polygon)
 
     def add(self,
             spec: AssetSpec,
@@ -300,12 +324,13 @@ class _Placer:
                          spec: AssetSpec,
                          propose: Callable[[int], tuple[np.ndarray, float]],
                          tries: int,
-                         on: str | None = None) -> PlacedObject | None:
+                         on: str | None = None,
+                         clearance: float | None = None) -> PlacedObject | None:
         """Place ``spec`` at the first free pose ``propose(attempt) -> (center, yaw)`` of
         ``tries`` attempts (an object standing ``on`` another may touch it); None if none is."""
         for attempt in range(tries):
             center, yaw = propose(attempt)
-            if self.is_free(PlacedObject('', spec, center, yaw), ignore=on):
+            if self.is_free(PlacedObject('', spec, center, yaw), ignore=on, clearance=clearance):
                 return self.add(spec, center, yaw, on)
         return None
 
@@ -346,21 +371,30 @@ def _turns_for(item: AssetSpec, table: AssetSpec) -> list[int]:
     return turns
 
 
+def _wall_frame(polygon: np.ndarray,
+                wall: int) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+    """Start, unit direction, length and inward unit normal of edge ``wall`` of ``polygon``."""
+    p0, p1 = polygon[wall], polygon[(wall + 1) % len(polygon)]
+    length = float(np.linalg.norm(p1 - p0))
+    return p0, (p1 - p0) / length, length, inward_normals(polygon)[wall]
+
+
+def _facing_yaw(normal: np.ndarray) -> float:
+    """Yaw of an object whose front (local -y) faces ``normal``."""
+    return _wrap_angle(float(np.arctan2(normal[0], -normal[1])))
+
+
 def _place_wall_item(rng,
                      placer: _Placer,
                      spec: AssetSpec,
                      wall: int,
                      gap_range,
                      tries: int = 12) -> PlacedObject | None:
-    polygon = placer.polygon
-    p0, p1 = polygon[wall], polygon[(wall + 1) % len(polygon)]
-    length = float(np.linalg.norm(p1 - p0))
-    direction = (p1 - p0) / length
-    normal = inward_normals(polygon)[wall]
+    p0, direction, length, normal = _wall_frame(placer.polygon, wall)
     width, depth = spec.size[0], spec.size[1]
     if width > length - 0.2:
         return None
-    yaw = _wrap_angle(float(np.arctan2(normal[0], -normal[1])))
+    yaw = _facing_yaw(normal)
 
     def propose(_attempt: int) -> tuple[np.ndarray, float]:
         u = rng.uniform(0.1 + width / 2, length - 0.1 - width / 2)
@@ -431,26 +465,204 @@ def _place_openings(rng, placer: _Placer, room_cfg, layout: RoomLayout) -> None:
             break
 
 
+CONTACT = 0.0  # clutter may touch what it stands next to, never enter its box
+
+
 def _place_clutter(rng, placer: _Placer, layout_cfg) -> None:
+    """``layout.clutter`` objects of kinds drawn from ``layout.clutter_kinds``, after the
+    detection objects so that they never take their place."""
     low, high = layout_cfg['clutter']
-    lo_xy, hi_xy = placer.polygon.min(axis=0), placer.polygon.max(axis=0)
     for _ in range(int(rng.integers(low, high + 1))):
-        kind = 'box' if rng.random() < 0.6 else 'cylinder'
-        sx = round(float(rng.uniform(*layout_cfg['clutter_size'])), 3)
-        sy = sx if kind == 'cylinder' else round(
-            float(rng.uniform(*layout_cfg['clutter_size'])), 3)
-        sz = round(float(rng.uniform(0.2, 1.2)), 3)
-        colour = [int(v) for v in rng.integers(40, 220, size=3)]
-        spec = AssetSpec('clutter', f'clutter/{kind}', f'clutter/{kind}', {
-            'kind': kind,
-            'color': colour
-        }, (sx, sy, sz))
+        kind = _pick(rng, layout_cfg['clutter_kinds'], CLUTTER_KINDS)
+        if kind is None:  # rounding left the probabilities a hair below 1
+            continue
+        if kind in PRIMITIVE_KINDS:
+            _place_primitive(rng, placer, kind, layout_cfg['clutter_size'])
+        elif kind in WALL_KINDS:
+            spec = sample_clutter(rng, kind, placer.top_limit)
+            _place_against_wall(rng, placer, spec, layout_cfg['wall_gap'])
+        elif kind == 'pipe':
+            _place_pipe_run(rng, placer, layout_cfg['wall_gap'])
+        else:
+            if kind == 'crate' and rng.random() < 0.5 and _place_crate_on_top(rng, placer):
+                continue
+            _place_on_floor(rng, placer, sample_clutter(rng, kind, placer.top_limit))
 
-        def propose(_attempt: int) -> tuple[np.ndarray, float]:
-            xy = rng.uniform(lo_xy, hi_xy)
-            return np.array([xy[0], xy[1], sz / 2]), float(rng.uniform(-np.pi, np.pi))
 
-        placer.place_first_free(spec, propose, 20)
+def _place_primitive(rng, placer: _Placer, kind: str, size_range) -> None:
+    """A plain box or cylinder anywhere on the floor, keeping the clearance (the light clutter
+    of earlier versions, drawn exactly as they did)."""
+    spec = sample_primitive(rng, kind, size_range)
+    lo_xy, hi_xy = placer.polygon.min(axis=0), placer.polygon.max(axis=0)
+
+    def propose(_attempt: int) -> tuple[np.ndarray, float]:
+        xy = rng.uniform(lo_xy, hi_xy)
+        return np.array([xy[0], xy[1], spec.size[2] / 2]), float(rng.uniform(-np.pi, np.pi))
+
+    placer.place_first_free(spec, propose, 20)
+
+
+def _wall_lengths(polygon: np.ndarray) -> np.ndarray:
+    return np.linalg.norm(np.roll(polygon, -1, axis=0) - polygon, axis=1)
+
+
+def _draw_wall(rng, lengths: np.ndarray, min_length: float) -> int | None:
+    """A wall at least ``min_length`` long, drawn with probability proportional to length."""
+    walls = np.flatnonzero(lengths >= min_length)
+    if len(walls) == 0:
+        return None
+    return int(rng.choice(walls, p=lengths[walls] / lengths[walls].sum()))
+
+
+def _spans_at_wall(placer: _Placer, p0: np.ndarray, direction: np.ndarray,
+                   normal: np.ndarray) -> list[tuple[float, float]]:
+    """Spans (u0, u1) along a wall of the floor objects standing within 0.3 m of it."""
+    spans = []
+    for obj in placer.objects:
+        if obj.on is not None:
+            continue
+        quad = box_corners_xy(obj.center, obj.size, obj.yaw)
+        if ((quad - p0) @ normal).min() <= 0.3:
+            along = (quad - p0) @ direction
+            spans.append((float(along.min()), float(along.max())))
+    return spans
+
+
+def _place_against_wall(rng,
+                        placer: _Placer,
+                        spec: AssetSpec,
+                        gap_range,
+                        tries: int = 12) -> PlacedObject | None:
+    """Back to a wall (a gap in ``gap_range``), often side by side with what stands there."""
+    width, depth = spec.size[0], spec.size[1]
+    lengths = _wall_lengths(placer.polygon)
+    if _draw_wall(rng, lengths, width + 0.2) is None:
+        return None
+    spans_of: dict[int, list[tuple[float, float]]] = {}
+
+    def propose(_attempt: int) -> tuple[np.ndarray, float]:
+        wall = _draw_wall(rng, lengths, width + 0.2)
+        p0, direction, length, normal = _wall_frame(placer.polygon, wall)
+        low, high = 0.1 + width / 2, length - 0.1 - width / 2
+        u = rng.uniform(low, high)
+        if wall not in spans_of:
+            spans_of[wall] = _spans_at_wall(placer, p0, direction, normal)
+        spans = spans_of[wall]
+        if spans and rng.random() < 0.6:
+            u0, u1 = spans[int(rng.integers(len(spans)))]
+            gap = rng.uniform(0.0, 0.02)
+            u = min(
+                max(u1 + gap + width / 2 if rng.random() < 0.5 else u0 - gap - width / 2, low),
+                high)
+        xy = p0 + direction * u + normal * (rng.uniform(*gap_range) + depth / 2)
+        return np.array([xy[0], xy[1], spec.size[2] / 2]), _facing_yaw(normal)
+
+    return placer.place_first_free(spec, propose, tries, clearance=CONTACT)
+
+
+def _place_pipe_run(rng, placer: _Placer, gap_range, tries: int = 12) -> PlacedObject | None:
+    """A pipe run along a wall: on the wall (low, or high over the sensor) or hung from the
+    ceiling 0.1-1.5 m in front of it."""
+    wall = _draw_wall(rng, _wall_lengths(placer.polygon), 1.5)
+    if wall is None:
+        return None
+    p0, direction, length, normal = _wall_frame(placer.polygon, wall)
+    overhead = placer.ceiling - placer.overhead_from  # free height over the sensor
+    mount = 'ceiling' if overhead > 0.3 and rng.random() < 0.5 else 'wall'
+    run = rng.uniform(0.4, 1.0) * (length - 0.2)
+    spec = sample_pipe_run(rng, run, mount, overhead)
+    width, depth, height = spec.size
+
+    def propose(_attempt: int) -> tuple[np.ndarray, float]:
+        u = rng.uniform(0.1 + width / 2, length - 0.1 - width / 2)
+        if mount == 'ceiling':
+            offset, z = rng.uniform(0.1, 1.5), placer.ceiling - height / 2
+        else:
+            offset = rng.uniform(*gap_range)
+            high = overhead > height + 0.02 and rng.random() < 0.5
+            low, top = ((placer.overhead_from, placer.ceiling - 0.02) if high else
+                        (0.1, placer.top_limit))
+            z = rng.uniform(low, max(low, top - height)) + height / 2
+        xy = p0 + direction * u + normal * (offset + depth / 2)
+        return np.array([xy[0], xy[1], z]), _facing_yaw(normal)
+
+    return placer.place_first_free(spec, propose, tries, clearance=CONTACT)
+
+
+def _floor_objects(placer: _Placer) -> list[PlacedObject]:
+    """Objects standing on the floor of ``placer``'s region."""
+    objects = [o for o in placer.objects if o.on is None]
+    if not objects:
+        return []
+    inside = points_in_polygon(np.array([o.center[:2] for o in objects]), placer.polygon)
+    return [o for o, keep in zip(objects, inside) if keep]
+
+
+def _beside(rng, anchor: PlacedObject, spec: AssetSpec) -> tuple[np.ndarray, float]:
+    """A floor pose for ``spec`` against a random side of ``anchor``'s box, 0-3 cm away, turned
+    like the anchor or a quarter turn more."""
+    turn = int(rng.integers(2))
+    half = np.asarray(spec.size[:2], dtype=float) / 2
+    if turn:
+        half = half[::-1]
+    axis = int(rng.integers(2))
+    sign = 1.0 if rng.random() < 0.5 else -1.0
+    local = np.zeros(2)
+    local[axis] = sign * (anchor.size[axis] / 2 + half[axis] + rng.uniform(0.0, 0.03))
+    local[1 - axis] = rng.uniform(-0.8, 0.8) * (anchor.size[1 - axis] / 2 + half[1 - axis])
+    xy = anchor.center[:2] + rotation2d(anchor.yaw) @ local
+    return np.array([xy[0], xy[1], spec.size[2] / 2]), _wrap_angle(anchor.yaw + turn * np.pi / 2)
+
+
+def _place_on_floor(rng, placer: _Placer, spec: AssetSpec, tries: int = 16) -> None:
+    """Every other try against an object on the floor (a detection object 3 times in 4), else
+    anywhere with a random yaw."""
+    standing = _floor_objects(placer)
+    detection = [o for o in standing if o.cls != 'clutter']
+    lo_xy, hi_xy = placer.polygon.min(axis=0), placer.polygon.max(axis=0)
+
+    def propose(attempt: int) -> tuple[np.ndarray, float]:
+        if standing and attempt % 2 == 0:
+            pool = detection if detection and rng.random() < 0.75 else standing
+            return _beside(rng, pool[int(rng.integers(len(pool)))], spec)
+        xy = rng.uniform(lo_xy, hi_xy)
+        return np.array([xy[0], xy[1], spec.size[2] / 2]), float(rng.uniform(-np.pi, np.pi))
+
+    placer.place_first_free(spec, propose, tries, clearance=CONTACT)
+
+
+def _place_crate_on_top(rng, placer: _Placer, tries: int = 8) -> bool:
+    """A crate on an empty pallet or on a free part of a table top (there as big as a 3D
+    printer); False when none takes it."""
+    supports = [
+        o for o in _floor_objects(placer)
+        if o.cls in ('table',
+                     'clutter') and o.spec.top_z is not None and o.size[2] <= o.spec.top_z + 0.01
+    ]
+    if not supports:
+        return False
+    support = supports[int(rng.integers(len(supports)))]
+    top_z = support.base[2] + support.spec.top_z
+    if placer.top_limit - top_z < 0.25:
+        return False
+    spec = sample_clutter(rng, 'crate', placer.top_limit - top_z, small=support.cls == 'table')
+    top_w, top_d = support.spec.top_size
+    turns = [
+        k for k in range(4)
+        if spec.size[k % 2] <= top_w - 0.02 and spec.size[1 - k % 2] <= top_d - 0.02
+    ]
+    if not turns:
+        return False
+
+    def propose(_attempt: int) -> tuple[np.ndarray, float]:
+        k = turns[int(rng.integers(len(turns)))]
+        slack = np.array([top_w - spec.size[k % 2], top_d - spec.size[1 - k % 2]]) / 2 - 0.01
+        xy = support.center[:2] + rotation2d(support.yaw) @ rng.uniform(-slack, slack)
+        return (np.array([xy[0], xy[1],
+                          top_z + spec.size[2] / 2]), _wrap_angle(support.yaw + k * np.pi / 2))
+
+    placed = placer.place_first_free(spec, propose, tries, on=support.instance, clearance=CONTACT)
+    return placed is not None
 
 
 def _furnish(rng: np.random.Generator, placer: '_Placer', catalog: Catalog,
@@ -523,6 +735,11 @@ def _furnish(rng: np.random.Generator, placer: '_Placer', catalog: Catalog,
     _place_clutter(rng, placer, layout_cfg)
 
 
+def _overhead_from(config: Mapping[str, Any], height: float) -> float:
+    """Lowest z of an object hung over the sensor path (10 cm above it)."""
+    return float(config['scanner']['sensor_height']) * height + 0.1
+
+
 def generate_layout(rng: np.random.Generator, catalog: Catalog,
                     config: Mapping[str, Any]) -> RoomLayout:
     """Sample one room (or a hall, when ``config`` has a ``hall`` section) and its objects
@@ -534,7 +751,8 @@ def generate_layout(rng: np.random.Generator, catalog: Catalog,
     layout = RoomLayout(shape, polygon, height)
     # objects stay below the sensor (and the ceiling), so the sensor path never runs through one
     top_limit = min(height - 0.05, float(config['scanner']['sensor_height']) * height - 0.1)
-    placer = _Placer(polygon, top_limit, float(layout_cfg['clearance']))
+    placer = _Placer(polygon, top_limit, float(layout_cfg['clearance']), height,
+                     _overhead_from(config, height))
     _place_openings(rng, placer, room_cfg, layout)
 
     _furnish(rng, placer, catalog, probs, layout_cfg)
@@ -588,7 +806,8 @@ def generate_hall_layout(rng: np.random.Generator, catalog: Catalog,
     layout = RoomLayout(
         'hall', polygon, height, bays=bays, partitions=_hall_partitions(xs, ys, rng, hall_cfg))
     top_limit = min(height - 0.05, float(config['scanner']['sensor_height']) * height - 0.1)
-    placer = _Placer(polygon, top_limit, float(layout_cfg['clearance']))
+    placer = _Placer(polygon, top_limit, float(layout_cfg['clearance']), height,
+                     _overhead_from(config, height))
     _place_openings(rng, placer, hall_cfg, layout)
     for bay in bays:
         _furnish(rng, placer.within(bay), catalog, probs, layout_cfg)

@@ -16,7 +16,8 @@ import numpy as np
 
 from generator.layout import RoomLayout
 from generator.scanner import TriangleScene
-from generator.structure import clutter_mesh, structure_parts
+from generator.clutter import clutter_mesh
+from generator.structure import structure_parts
 
 COLLECTION = 'synthdet_room'
 MeshSource = Callable[[str, str], tuple[np.ndarray, np.ndarray, np.ndarray]]

@@ -1,4 +1,4 @@
-"""Triangle meshes of the room structure (floor, ceiling, walls, doors, windows) and of clutter.
+"""Triangle meshes of the room structure: floor, ceiling, walls, doors and windows.
 
 Pure numpy. Each structural part is one annotated element in the S3DIS output (``floor_1``,
 ``ceiling_1``, ``wall_<i>`` for polygon edge i, ``door_<k>``, ``window_<k>``). Openings are cut
@@ -9,13 +9,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from generator.layout import AssetSpec, RoomLayout, partition_names
+from generator.layout import RoomLayout, partition_names
 from synthdet.geometry import grid_cells
 
 
 @dataclass
 class PartMesh:
-    """Triangles of one annotated element, in world coordinates (structure) or local (clutter)."""
+    """Triangles of one annotated element of the structure, in world coordinates."""
 
     instance: str
     cls: str
@@ -124,34 +124,3 @@ def _partition_mesh(partition, height: float) -> tuple[np.ndarray, np.ndarray]:
         quads.append([[a[0], a[1], 0.0], [b[0], b[1], 0.0], [b[0], b[1], height],
                       [a[0], a[1], height]])
     return _quads_to_mesh(np.array(quads, dtype=float))
-
-
-def clutter_mesh(spec: AssetSpec, segments: int = 16) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Closed box or cylinder for a clutter spec, in the asset local frame (z = 0 at bottom)."""
-    sx, sy, sz = spec.size
-    if spec.params['kind'] == 'box':
-        x, y = sx / 2, sy / 2
-        vertices = np.array([[-x, -y, 0], [x, -y, 0], [x, y, 0], [-x, y, 0], [-x, -y, sz],
-                             [x, -y, sz], [x, y, sz], [-x, y, sz]],
-                            dtype=float)
-        triangles = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4],
-                              [1, 2, 6], [1, 6, 5], [2, 3, 7], [2, 7, 6], [3, 0, 4], [3, 4, 7]],
-                             dtype=np.int32)
-    else:
-        # vertices at the angles that touch the box faces, so the bbox is exactly sx x sy
-        angles = np.arange(segments) * 2 * np.pi / segments
-        ring = np.stack([np.cos(angles) * sx / 2, np.sin(angles) * sy / 2], axis=1)
-        bottom = np.concatenate([ring, np.zeros((segments, 1))], axis=1)
-        top = np.concatenate([ring, np.full((segments, 1), sz)], axis=1)
-        vertices = np.concatenate([bottom, top, [[0, 0, 0], [0, 0, sz]]])
-        i = np.arange(segments)
-        j = (i + 1) % segments
-        cb, ct = 2 * segments, 2 * segments + 1
-        triangles = np.concatenate([
-            np.stack([i, j, j + segments], 1),
-            np.stack([i, j + segments, i + segments], 1),
-            np.stack([np.full(segments, cb), j, i], 1),
-            np.stack([np.full(segments, ct), i + segments, j + segments], 1)
-        ]).astype(np.int32)
-    colours = np.tile(np.asarray(spec.params['color'], dtype=np.uint8), (len(triangles), 1))
-    return vertices, triangles, colours

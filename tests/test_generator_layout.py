@@ -278,7 +278,7 @@ def test_items_stand_on_one_side_of_a_table_top(rooms):
     for room in rooms:
         by_name = {obj['instance']: obj for obj in room.objects()}
         sides_used: dict[str, list[int]] = {}
-        for obj in room.objects():
+        for obj in room.objects(*GENERATED_CLASSES):
             if obj['class'] not in ('yumi', '3dprinter'):
                 assert obj['on'] is None, f"{room.name}: {obj['instance']} stands on something"
                 continue
@@ -326,11 +326,12 @@ def test_yumis_face_the_front_of_their_table_printers_turn_by_quarter_turns(room
 
 def test_objects_keep_the_clearance_apart(rooms):
     """docs: no two objects intersect, and every placement keeps ``layout.clearance`` (5 cm)
-    from the others (an item and the table it stands on excepted)."""
+    from the others (an item and the table it stands on excepted). Clutter may touch; that it
+    never enters another box is tested in tests/test_generator_clutter.py."""
     closest = np.inf
     for room in rooms:
         clearance = room.config['layout']['clearance']
-        objects = room.objects()
+        objects = room.objects(*GENERATED_CLASSES)
         quads = [footprint(obj) for obj in objects]
         for i, a in enumerate(objects):
             for j in range(i + 1, len(objects)):
@@ -373,16 +374,22 @@ def test_door_swings_stay_free(rooms):
 
 def test_objects_stay_below_the_sensor(rooms):
     """docs: objects stay 10 cm below the sensor height (2/3 of the room height) and below the
-    ceiling; in the low rooms this limit drops items that would be too tall on their table."""
-    near_limit = 0
+    ceiling; in the low rooms this limit drops items that would be too tall on their table.
+    Only pipe runs may hang over the sensor: 10 cm above it or more, under the ceiling."""
+    near_limit = overhead = 0
     for room in rooms:
         height = room.meta['room']['height']
-        limit = min(height - 0.05, room.config['scanner']['sensor_height'] * height - 0.1)
+        sensor = room.config['scanner']['sensor_height'] * height
+        limit = min(height - 0.05, sensor - 0.1)
         for obj in room.objects():
-            top = z_range(obj)[1]
+            bottom, top = z_range(obj)
+            if obj['class'] == 'clutter' and obj['params']['kind'] == 'pipe' and top > limit:
+                assert bottom >= sensor + 0.1 - TOL and top <= height + TOL, obj['instance']
+                overhead += 1
+                continue
             assert top <= limit + TOL, f"{room.name}: {obj['instance']} reaches {top:.3f} m"
             near_limit += top > limit - 0.15
-    assert near_limit > 0  # the limit binds somewhere
+    assert near_limit > 0 and overhead > 0  # the limit binds somewhere; pipes hang over it
 
 
 def test_default_run_reproduces_table1_counts(catalog):
