@@ -164,7 +164,9 @@ def _stool(mb: MeshBuilder, params: dict, frame: int, seat: int) -> None:
         for k in range(3):
             angle = 2 * math.pi * k / 3 - math.pi / 2
             mb.rod((0, 0, ring_z), (ring_r * math.cos(angle), ring_r * math.sin(angle), ring_z),
-                   0.01, frame, segments=8)
+                   0.01,
+                   frame,
+                   segments=8)
     else:
         foot_r, head_r = params['base_radius'] * 0.8, radius * 0.75
         ring_r = head_r + (foot_r - head_r) * (bottom - ring_z) / bottom
@@ -172,7 +174,9 @@ def _stool(mb: MeshBuilder, params: dict, frame: int, seat: int) -> None:
         for k in range(4):
             angle = 2 * math.pi * k / 4 + math.pi / 4
             c, s = math.cos(angle), math.sin(angle)
-            mb.rod((foot_r * c, foot_r * s, lift), (head_r * c, head_r * s, bottom), 0.014, frame,
+            mb.rod((foot_r * c, foot_r * s, lift), (head_r * c, head_r * s, bottom),
+                   0.014,
+                   frame,
                    segments=8)
     ring = [(ring_r * math.cos(a), ring_r * math.sin(a)) for a in np.linspace(0, 2 * math.pi, 17)]
     for (x0, y0), (x1, y1) in zip(ring, ring[1:]):
@@ -197,8 +201,8 @@ def _cantilever(mb: MeshBuilder, params: dict, frame: int) -> None:
         mb.rod((x, back, radius), (x, front - 0.04, radius), radius, frame)
         mb.rod((x, front - 0.04, radius), (x, front, top - radius), radius, frame)
         mb.rod((x, front, top - radius), (x, depth / 2 - 0.02, top - radius), radius, frame)
-    mb.rod((-width / 2 + 0.01, depth / 2 + 0.04, radius), (width / 2 - 0.01, depth / 2 + 0.04,
-                                                            radius), radius, frame)
+    mb.rod((-width / 2 + 0.01, depth / 2 + 0.04, radius),
+           (width / 2 - 0.01, depth / 2 + 0.04, radius), radius, frame)
 
 
 def _pedestal(mb: MeshBuilder, params: dict, frame: int) -> None:

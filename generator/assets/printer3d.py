@@ -352,8 +352,8 @@ def _corexy(mb: MeshBuilder, params: dict) -> None:
                    body)
     bed_side = min(w, d) - 0.12
     bed_z = 0.08 + params['bed_level'] * (h - 0.25)
-    mb.box_between((-bed_side / 2, -bed_side / 2, bed_z), (bed_side / 2, bed_side / 2,
-                                                           bed_z + 0.012), bed)
+    mb.box_between((-bed_side / 2, -bed_side / 2, bed_z),
+                   (bed_side / 2, bed_side / 2, bed_z + 0.012), bed)
     for sx in (-1, 1):  # bed carriers on the back z rails
         mb.box_between((sx * bed_side / 3 - 0.01, -bed_side / 2, bed_z - 0.025),
                        (sx * bed_side / 3 + 0.01, d / 2 - 2 * e, bed_z), frame)
@@ -364,8 +364,8 @@ def _corexy(mb: MeshBuilder, params: dict) -> None:
     for sx in (-1, 1):
         mb.box_between((sx * (w / 2 - 0.035) - 0.01, -d / 2 + 2 * e, gantry_z),
                        (sx * (w / 2 - 0.035) + 0.01, d / 2 - 2 * e, gantry_z + 0.02), frame)
-    mb.box_between((-w / 2 + 0.045, head_y - 0.01, gantry_z), (w / 2 - 0.045, head_y + 0.01,
-                                                               gantry_z + 0.02), frame)
+    mb.box_between((-w / 2 + 0.045, head_y - 0.01, gantry_z),
+                   (w / 2 - 0.045, head_y + 0.01, gantry_z + 0.02), frame)
     _head(mb, head_x, head_y - 0.03, gantry_z - 0.07, body, frame)
     mb.box_between((-0.06, -d / 2 - 0.015, 0.01), (0.06, -d / 2, 0.045), body)  # display
     _spool(mb, (0.0, d / 2 + 0.045, h * 0.55), filament, frame, axis='y')
@@ -418,8 +418,8 @@ def _cantilever(mb: MeshBuilder, params: dict) -> None:
     _head(mb, head_x, -0.045, arm_z - 0.04, body, frame)
     # display box at the front corner of the base, spool holder on top of the column
     x_display = -side * (w / 2 - 0.08)
-    mb.box_between((x_display - 0.05, -d / 2 - 0.01, 0.025), (x_display + 0.05, -d / 2 + 0.05,
-                                                             0.07), body)
+    mb.box_between((x_display - 0.05, -d / 2 - 0.01, 0.025),
+                   (x_display + 0.05, -d / 2 + 0.05, 0.07), body)
     _spool(mb, (x_col, 0.005, h - 0.09), filament, frame, axis='x')
 
 
@@ -445,14 +445,16 @@ def _boxframe(mb: MeshBuilder, params: dict) -> None:
     bed_z = base_h + 0.03 + params['bed_level'] * (h - base_h - 0.2)
     mb.box_between((-bed_w / 2, -bed_d / 2, bed_z), (bed_w / 2, bed_d / 2, bed_z + 0.01), bed)
     for sx in (-1, 1):
-        mb.cylinder(0.006, h - base_h - 0.03, frame, translate(sx * 0.08, d / 2 - 0.04, base_h),
-                    segments=8)
+        mb.cylinder(
+            0.006,
+            h - base_h - 0.03,
+            frame,
+            translate(sx * 0.08, d / 2 - 0.04, base_h),
+            segments=8)
     mb.box_between((-0.1, -bed_d / 2, bed_z - 0.02), (0.1, d / 2 - wall, bed_z), frame)
     rod_z = h - 0.08
     head_x, head_y = (params['head'][0] * (w / 2 - 0.07), params['head'][1] * (d / 2 - 0.07))
-    mb.rod((-w / 2 + wall, head_y, rod_z), (w / 2 - wall, head_y, rod_z), 0.004, frame,
-           segments=8)
-    mb.rod((head_x, -d / 2 + 0.02, rod_z), (head_x, d / 2 - wall, rod_z), 0.004, frame,
-           segments=8)
+    mb.rod((-w / 2 + wall, head_y, rod_z), (w / 2 - wall, head_y, rod_z), 0.004, frame, segments=8)
+    mb.rod((head_x, -d / 2 + 0.02, rod_z), (head_x, d / 2 - wall, rod_z), 0.004, frame, segments=8)
     _head(mb, head_x, head_y, rod_z - 0.07, body, frame)
     _spool(mb, (0.0, d / 2 + 0.045, h * 0.55), filament, frame, axis='y')

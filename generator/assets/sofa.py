@@ -9,8 +9,14 @@ from generator.assets import palette
 from generator.assets.builder import MeshBuilder, pick, rot_x, rounded_rect, translate, uniform
 
 VARIANTS = ('1seat', '2seat', '3seat', 'chaise', 'modular', 'bench')
-SEATS = {'1seat': (1, 1), '2seat': (2, 2), '3seat': (3, 3), 'chaise': (2, 3), 'modular': (2, 4),
-         'bench': (2, 3)}
+SEATS = {
+    '1seat': (1, 1),
+    '2seat': (2, 2),
+    '3seat': (3, 3),
+    'chaise': (2, 3),
+    'modular': (2, 4),
+    'bench': (2, 3)
+}
 
 
 def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
@@ -84,8 +90,8 @@ def build(variant: str, params: dict) -> MeshBuilder:
     if variant == 'modular':
         for k in range(seats):
             x0 = -inner / 2 + k * seat_w
-            mb.box_between((x0 + 0.003, -depth / 2, lift), (x0 + seat_w - 0.003, depth / 2,
-                                                             frame_top), body)
+            mb.box_between((x0 + 0.003, -depth / 2, lift),
+                           (x0 + seat_w - 0.003, depth / 2, frame_top), body)
     else:
         mb.box_between((-width / 2, -depth / 2, lift), (width / 2, depth / 2, frame_top), body)
     if variant == 'chaise':
@@ -158,8 +164,8 @@ def _bench(mb: MeshBuilder, params: dict, cushion: int, feet: int) -> None:
     mb.box_between((-width / 2, -depth / 2, under - 0.04), (width / 2, depth / 2, under), feet)
     for k in range(seats):
         x_centre = -width / 2 + (k + 0.5) * seat_w
-        mb.prism(rounded_rect(seat_w - 0.01, depth, 0.04), pad, cushion, translate(x_centre, 0,
-                                                                                   under))
+        mb.prism(
+            rounded_rect(seat_w - 0.01, depth, 0.04), pad, cushion, translate(x_centre, 0, under))
     for sx in (-1, 1):
         x = sx * (width / 2 - 0.08)
         if params['base'] == 'feet':
@@ -167,8 +173,8 @@ def _bench(mb: MeshBuilder, params: dict, cushion: int, feet: int) -> None:
                 mb.box_between((x - 0.02, sy * (depth / 2 - 0.06) - 0.02, 0.0),
                                (x + 0.02, sy * (depth / 2 - 0.06) + 0.02, under - 0.04), feet)
         else:
-            mb.box_between((x - 0.015, -depth / 2 + 0.03, 0.0), (x + 0.015, depth / 2 - 0.03,
-                                                                 0.03), feet)
+            mb.box_between((x - 0.015, -depth / 2 + 0.03, 0.0),
+                           (x + 0.015, depth / 2 - 0.03, 0.03), feet)
             for sy in (-1, 1):
                 mb.box_between((x - 0.015, sy * (depth / 2 - 0.045) - 0.015, 0.03),
                                (x + 0.015, sy * (depth / 2 - 0.045) + 0.015, under - 0.04), feet)

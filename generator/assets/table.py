@@ -248,13 +248,17 @@ def _folding(mb: MeshBuilder, params: dict, frame: int, under: float) -> None:
         for sy in (-1, 1):
             y = sy * (depth / 2 - 0.07)
             mb.rod((x, y, 0.0), (x, y, under - 0.03), radius, frame, segments=8)
-        mb.rod((x, -depth / 2 + 0.07, radius), (x, depth / 2 - 0.07, radius), radius, frame,
+        mb.rod((x, -depth / 2 + 0.07, radius), (x, depth / 2 - 0.07, radius),
+               radius,
+               frame,
                segments=8)
         # brace from the leg frame to the centre rail under the top
-        mb.rod((x, 0.0, radius), (sx * (width / 2 - 0.45), 0.0, under - 0.03), 0.009, frame,
+        mb.rod((x, 0.0, radius), (sx * (width / 2 - 0.45), 0.0, under - 0.03),
+               0.009,
+               frame,
                segments=8)
-    mb.box_between((-width / 2 + 0.12, -0.015, under - 0.05), (width / 2 - 0.12, 0.015,
-                                                                 under - 0.03), frame)
+    mb.box_between((-width / 2 + 0.12, -0.015, under - 0.05),
+                   (width / 2 - 0.12, 0.015, under - 0.03), frame)
 
 
 def _steelbench(mb: MeshBuilder, params: dict, frame: int, under: float) -> None:
@@ -286,8 +290,8 @@ def _panel_ends(mb: MeshBuilder, params: dict, frame: int, under: float) -> None
     thick = params['panel_thickness']
     for sx in (-1, 1):
         x = sx * (width / 2 - 0.02)
-        mb.box_between((x - thick / 2, -depth / 2 + 0.02, 0.0), (x + thick / 2, depth / 2 - 0.02,
-                                                                 under), side)
+        mb.box_between((x - thick / 2, -depth / 2 + 0.02, 0.0),
+                       (x + thick / 2, depth / 2 - 0.02, under), side)
     low = under - (0.45 if params['modesty_panel'] else 0.06)  # a modesty panel or a rail
     mb.box_between((-width / 2 + 0.02 + thick / 2, depth / 2 - 0.08, low),
                    (width / 2 - 0.02 - thick / 2, depth / 2 - 0.06, under), frame)
@@ -305,5 +309,5 @@ def _c_legs(mb: MeshBuilder, params: dict, frame: int, under: float) -> None:
                        frame)
         mb.box_between((x - 0.025, -depth / 2 + 0.06, under - 0.04),
                        (x + 0.025, depth / 2 - 0.11, under), frame)
-    mb.box_between((-x_leg, depth / 2 - 0.10, under - 0.09), (x_leg, depth / 2 - 0.04, under - 0.01),
-                   frame)
+    mb.box_between((-x_leg, depth / 2 - 0.10, under - 0.09),
+                   (x_leg, depth / 2 - 0.04, under - 0.01), frame)

@@ -214,8 +214,11 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
         'joint_colour': list(pick(rng, palette.ROBOT_JOINT))
     }
     if variant == 'irb14000_plate':  # robot x (depth) by y (width) by thickness, metres
-        params['plate'] = [uniform(rng, 0.55, 0.65), uniform(rng, 0.45, 0.60),
-                           uniform(rng, 0.012, 0.025)]
+        params['plate'] = [
+            uniform(rng, 0.55, 0.65),
+            uniform(rng, 0.45, 0.60),
+            uniform(rng, 0.012, 0.025)
+        ]
     return variant, params
 
 
