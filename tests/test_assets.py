@@ -23,7 +23,7 @@ MODULES = {'table': table, 'chair': chair, 'sofa': sofa, 'yumi': yumi, '3dprinte
 SIZE_RANGES = {
     'table': ((1.2, 2.5), (0.70, 1.55), (0.70, 1.06)),  # standing desks up to 1.05 m
     'chair': ((0.33, 0.75), (0.33, 0.75), (0.55, 1.35)),  # stools from 0.55 m
-    'sofa': ((0.55, 2.90), (0.45, 1.75), (0.42, 1.00)),  # benches 0.45 deep, chaises 1.7
+    'sofa': ((0.55, 2.60), (0.45, 1.75), (0.42, 1.00)),  # benches 0.45 deep, chaises 1.7
     'yumi': ((0.39, 1.20), (0.39, 1.20), (0.570, 0.92)),
     '3dprinter': ((0.22, 1.00), (0.22, 1.00), (0.34, 1.20)),
 }

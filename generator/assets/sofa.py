@@ -9,12 +9,14 @@ from generator.assets import palette
 from generator.assets.builder import MeshBuilder, pick, rot_x, rounded_rect, translate, uniform
 
 VARIANTS = ('1seat', '2seat', '3seat', 'chaise', 'modular', 'bench')
+# Seats per variant (inclusive range). Chaise and modular sofas stay within the 3-seat sofa's
+# footprint diagonal (at most 2.75 m): the largest object sets the inference window overlap.
 SEATS = {
     '1seat': (1, 1),
     '2seat': (2, 2),
     '3seat': (3, 3),
-    'chaise': (2, 3),
-    'modular': (2, 4),
+    'chaise': (2, 2),
+    'modular': (2, 3),
     'bench': (2, 3)
 }
 
