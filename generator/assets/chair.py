@@ -197,7 +197,7 @@ def _cantilever(mb: MeshBuilder, params: dict, frame: int) -> None:
     radius = 0.0125
     for sx in (-1, 1):
         x = sx * (width / 2 - 0.01)
-        front, back = -depth / 2 + 0.0, depth / 2 + 0.04
+        front, back = -depth / 2, depth / 2 + 0.04
         mb.rod((x, back, radius), (x, front - 0.04, radius), radius, frame)
         mb.rod((x, front - 0.04, radius), (x, front, top - radius), radius, frame)
         mb.rod((x, front, top - radius), (x, depth / 2 - 0.02, top - radius), radius, frame)

@@ -106,26 +106,20 @@ def build(variant: str, params: dict) -> MeshBuilder:
         return mb
     width, depth = params['width'], params['depth']
     mb.prism(rounded_rect(width, depth, 0.01), thick, top, translate(0, 0, under))
-    if variant == 'legs':
-        _four_legs(mb, params, frame, under)
-    elif variant == 'pedestal':
-        _pedestal(mb, params, frame, under)
-    elif variant == 'trestle':
-        _trestle(mb, params, frame, under)
-    elif variant == 'workbench':
-        _workbench(mb, params, frame, under)
-    elif variant == 'standing':
-        _standing(mb, params, frame, under)
-    elif variant == 'folding':
-        _folding(mb, params, frame, under)
-    elif variant == 'steelbench':
-        _steelbench(mb, params, frame, under)
-    elif variant == 'panel':
-        _panel_ends(mb, params, frame, under)
-    elif variant == 'cleg':
-        _c_legs(mb, params, frame, under)
-    else:
+    bases = {
+        'legs': _four_legs,
+        'pedestal': _pedestal,
+        'trestle': _trestle,
+        'workbench': _workbench,
+        'standing': _standing,
+        'folding': _folding,
+        'steelbench': _steelbench,
+        'panel': _panel_ends,
+        'cleg': _c_legs
+    }
+    if variant not in bases:
         raise ValueError(f'unknown table variant {variant!r}')
+    bases[variant](mb, params, frame, under)
     return mb
 
 
