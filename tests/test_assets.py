@@ -1,5 +1,6 @@
 """Tests of the procedural asset library (generator/assets) with real bpy and real .blend files."""
 import hashlib
+import itertools
 import json
 import math
 import subprocess
@@ -20,12 +21,16 @@ REPO = Path(__file__).resolve().parents[1]
 MODULES = {'table': table, 'chair': chair, 'sofa': sofa, 'yumi': yumi, '3dprinter': printer3d}
 # plausible bounding boxes in metres: (min x, max x), (min y, max y), (min z, max z)
 SIZE_RANGES = {
-    'table': ((1.2, 2.5), (0.75, 1.55), (0.70, 0.96)),
-    'chair': ((0.38, 0.75), (0.38, 0.75), (0.70, 1.35)),
-    'sofa': ((0.60, 2.60), (0.78, 1.00), (0.65, 1.00)),
-    'yumi': ((0.39, 1.20), (0.39, 1.20), (0.570, 0.90)),
-    '3dprinter': ((0.30, 1.00), (0.30, 1.00), (0.40, 1.20)),
+    'table': ((1.2, 2.5), (0.70, 1.55), (0.70, 1.06)),  # standing desks up to 1.05 m
+    'chair': ((0.33, 0.75), (0.33, 0.75), (0.55, 1.35)),  # stools from 0.55 m
+    'sofa': ((0.55, 2.60), (0.45, 1.75), (0.42, 1.00)),  # benches 0.45 deep, chaises 1.7
+    'yumi': ((0.39, 1.20), (0.39, 1.20), (0.570, 0.92)),
+    '3dprinter': ((0.22, 1.00), (0.22, 1.00), (0.34, 1.20)),
 }
+# distinct variants per class in the default library: at least twice the first library's
+# (table 5, chair 3, sofa 3, yumi 1, 3dprinter 4)
+MIN_VARIANTS = {'table': 10, 'chair': 6, 'sofa': 6, 'yumi': 2, '3dprinter': 8}
+DEFAULT_INSTANCES = 24
 
 
 def mesh_digest(instance) -> str:
@@ -38,7 +43,7 @@ def mesh_digest(instance) -> str:
 @pytest.fixture(scope='module')
 def library_dir(tmp_path_factory) -> Path:
     directory = tmp_path_factory.mktemp('library')
-    paths = build_library(directory, instances_per_class=12, seed=0)
+    paths = build_library(directory, seed=0)  # the default size, as the generator uses it
     assert sorted(p.name for p in paths) == sorted(f'{c}.blend' for c in ASSET_CLASSES)
     return directory
 
@@ -58,7 +63,8 @@ def test_each_class_has_distinct_instances_covering_all_variants(library):
     assert len(names) == len(set(names))
     for cls in ASSET_CLASSES:
         instances = library.instances(cls)
-        assert 6 <= len(instances) <= 15
+        assert len(instances) == DEFAULT_INSTANCES
+        assert len(MODULES[cls].VARIANTS) >= MIN_VARIANTS[cls]
         assert len({mesh_digest(inst) for inst in instances}) == len(instances)
         assert all(inst.cls == cls and inst.asset.startswith(cls + '/') for inst in instances)
         variants = {inst.asset.split('/', 1)[1] for inst in instances}
@@ -178,6 +184,97 @@ def test_yumi_footprint_and_home_height():
     assert np.allclose(tips[0] * [1, -1, 1], tips[1], atol=2e-3)  # the arms mirror each other
 
 
+def test_boxes_follow_the_real_product_dimensions(library):
+    """The annotation box is the model's real extent: a table is exactly its top and height
+    (nothing sticks out), benches and chaise sofas their parameters, box-shaped printers at least
+    their frame (plus door, spool or display)."""
+    for inst in library.instances('table'):
+        p, variant = inst.params, inst.asset.split('/')[1]
+        top = (p['diameter'], p['diameter']) if variant == 'round' else (p['width'], p['depth'])
+        assert np.allclose(inst.size, (*top, p['height']), atol=1e-5), inst.name
+    for inst in library.instances('sofa'):
+        p, variant = inst.params, inst.asset.split('/')[1]
+        if variant == 'bench':
+            expected = (p['seats'] * p['seat_width'], p['depth'], p['seat_height'])
+            assert np.allclose(inst.size, expected, atol=1e-5), inst.name
+        elif variant == 'chaise':
+            assert inst.size[1] == pytest.approx(p['chaise_depth'], abs=1e-5), inst.name
+        else:
+            assert inst.size[1] == pytest.approx(p['depth'], abs=1e-5), inst.name
+    for inst in library.instances('3dprinter'):
+        p = inst.params
+        if inst.asset.split('/')[1] in ('enclosed', 'largeformat', 'corexy', 'resin', 'boxframe'):
+            frame = np.array([p['width'], p['depth'], p['height']])
+            assert np.all(np.asarray(inst.size) >= frame - 1e-5), inst.name
+        if p.get('door') == 'swung':  # the open door stands out in front by its width
+            assert inst.size[1] >= p['depth'] + p['width'] - 0.07, inst.name
+    stools = [i for i in library.instances('chair') if i.asset == 'chair/stool']
+    for inst in stools:
+        if inst.params['backrest'] == 'none':
+            assert inst.size[2] == pytest.approx(inst.params['seat_height'], abs=1e-5)
+
+
+def test_every_variant_and_option_builds_as_a_closed_solid_of_real_size():
+    """Other seeds draw the options the default library may miss (door swung open, lid style,
+    stool base, chaise side, ...): every instance builds, is closed and has a plausible size."""
+    seen: dict[str, set] = {cls: set() for cls in ASSET_CLASSES}
+    for seed in (1, 2):
+        for cls in ASSET_CLASSES:
+            for index in range(DEFAULT_INSTANCES):
+                variant, params = procedural_params(cls, index, seed)
+                inst = instance_from_params(cls, variant, params)
+                triangles = inst.mesh_arrays()[1]
+                edges = np.sort(
+                    np.concatenate(
+                        [triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]),
+                    axis=1)
+                assert np.all(np.unique(edges, axis=0, return_counts=True)[1] == 2), inst.name
+                for axis, (low, high) in enumerate(SIZE_RANGES[cls]):
+                    assert low <= inst.size[axis] <= high, (seed, inst.name, axis, inst.size)
+                seen[cls].add(
+                    (variant,
+                     *(str(params.get(key))
+                       for key in ('door', 'lid_style', 'stool_base', 'chaise_side', 'pose'))))
+    assert {v for v, *_ in seen['3dprinter']} == set(printer3d.VARIANTS)
+    assert {door for v, door, *_ in seen['3dprinter'] if v == 'enclosed'} >= {'glass', 'swung'}
+    assert {lid for v, _, lid, *_ in seen['3dprinter'] if v == 'resin'} == {'box', 'hinged'}
+    assert {base for v, _, _, base, *_ in seen['chair'] if v == 'stool'} == {'star', 'legs'}
+    assert {side for v, *_, side, _ in seen['sofa'] if v == 'chaise'} == {'-1', '1'}
+    yumi_kinds = {(v, pose) for v, *_, pose in seen['yumi']}
+    assert yumi_kinds == set(itertools.product(yumi.VARIANTS, yumi.POSES))
+
+
+def test_yumi_poses_span_the_joint_ranges_and_mountings(library):
+    instances = library.instances('yumi')
+    for joint, (low, high) in yumi.JOINT_LIMITS.items():
+        values = [inst.params['joints'][side][joint] for inst in instances for side in yumi.SIDES]
+        assert max(values) - min(values) >= 0.75 * (high - low), joint
+    for inst in instances:
+        vertices, triangles, colours = inst.mesh_arrays()
+        heights = vertices[triangles][:, :, 2]
+        floor = {tuple(c) for c in colours[np.all(heights < 1e-6, axis=1)]}
+        body = np.all(colours == inst.params['body_colour'], axis=1)
+        if inst.asset == 'yumi/irb14000_plate':
+            plate_depth, plate_width, thickness = inst.params['plate']
+            assert inst.size[0] >= plate_width - 1e-5 and inst.size[1] >= plate_depth - 1e-5
+            assert inst.size[2] >= yumi.HEIGHT + thickness - 1e-5
+            assert floor == {yumi.PLATE_COLOUR}  # the robot stands on its plate
+            assert heights[body].min() == pytest.approx(thickness, abs=1e-5)
+        else:
+            assert inst.asset == 'yumi/irb14000' and 'plate' not in inst.params
+            assert floor == {tuple(inst.params['body_colour'])}
+        if inst.params['pose'] == 'onearm':  # one arm folded at rest, the other working
+            rest_like = []
+            for side in yumi.SIDES:
+                rest = {
+                    j: math.radians(v) * (-1 if side == 'left' and j in yumi.MIRRORED else 1)
+                    for j, v in yumi.REST_DEG.items()
+                }
+                offsets = [abs(inst.params['joints'][side][j] - rest[j]) for j in yumi.JOINTS]
+                rest_like.append(max(offsets) < math.radians(20))
+            assert rest_like.count(True) == 1, inst.name
+
+
 def test_build_load_round_trip_is_exact(library):
     for inst in all_instances(library):
         index = int(inst.name.rsplit('_', 1)[1])
@@ -190,10 +287,9 @@ def test_build_load_round_trip_is_exact(library):
 
 
 def test_same_seed_same_bytes_other_seed_differs(library, tmp_path):
-    again = load_library(
-        build_library(tmp_path / 'a', 12, seed=0, classes=['yumi', 'chair'])[0].parent)
+    again = load_library(build_library(tmp_path / 'a', seed=0)[0].parent)
     other = load_library(build_library(tmp_path / 'b', 12, seed=1, classes=['yumi'])[0].parent)
-    for cls in ('yumi', 'chair'):
+    for cls in ASSET_CLASSES:
         assert ([mesh_digest(i) for i in again.instances(cls)
                  ] == [mesh_digest(i) for i in library.instances(cls)])
     assert other.classes() == ('yumi', )

@@ -89,7 +89,7 @@ def test_helpers_copy_and_refuse_a_pipeline_without_point_sample():
 @pytest.mark.parametrize('name', sorted(EXPECTED))
 def test_training_density_is_the_sampled_points_over_the_median_floor_area(name):
     cfg = load(name)
-    assert cfg.inference_window == dict(size=8.0, overlap=2.7)
+    assert cfg.inference_window == dict(size=8.0, overlap=2.6)
     assert cfg.inference_density == dict(floor_area=59.0)
     assert density_from_config(cfg) == pytest.approx(EXPECTED[name][3] / 59.0)
     with pytest.raises(ValueError, match='no inference_density'):

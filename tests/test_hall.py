@@ -133,7 +133,7 @@ def test_window_rule_gives_the_configured_windows(asset_cache):
         [np.ptp(sample_room(rng, DEFAULTS['room'])[1], axis=0) for _ in range(4000)])
     library = default_library(asset_cache, seed=0)
     sizes = np.array([i.size for c in library.classes() for i in library.instances(c)])
-    assert window_spec_from_training(extents, sizes) == SPEC == WindowSpec(8.0, 2.7)
+    assert window_spec_from_training(extents, sizes) == SPEC == WindowSpec(8.0, 2.6)
 
 
 def test_windows_overlap_by_the_largest_object_and_cores_tile_the_plane(hall):

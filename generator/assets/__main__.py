@@ -1,6 +1,6 @@
 """CLI: build the procedural asset library as one `<class>.blend` per class.
 
-    python -m generator.assets --out DIR [--instances 12] [--seed 0] [--classes chair table]
+    python -m generator.assets --out DIR [--instances 24] [--seed 0] [--classes chair table]
                                [--preview PNG_DIR]
 """
 from __future__ import annotations
@@ -19,7 +19,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument(
         '--out', type=Path, required=True, help='folder for the <class>.blend files')
-    parser.add_argument('--instances', type=int, default=12, help='instances per class')
+    parser.add_argument('--instances', type=int, default=24, help='instances per class')
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument(
         '--classes',

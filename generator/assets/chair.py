@@ -1,5 +1,6 @@
-"""Procedural chairs: four legs, an office pedestal with a star base, or a cantilever sled base;
-with or without armrests; panel, slatted, open-frame or rounded backrests. Front faces -y."""
+"""Procedural chairs: four legs, an office pedestal with a star base, a sled base, industrial /
+lab stools, cantilever (Cesca / S 32 style) chairs and stacking chairs with arms; with or without
+armrests; panel, slatted, open-frame or rounded backrests. Front faces -y."""
 from __future__ import annotations
 
 import math
@@ -10,7 +11,7 @@ from generator.assets import palette
 from generator.assets.builder import (MeshBuilder, pick, rot_x, rot_z, rounded_rect, translate,
                                       uniform)
 
-VARIANTS = ('fourleg', 'pedestal', 'sled')
+VARIANTS = ('fourleg', 'pedestal', 'sled', 'stool', 'cantilever', 'stacking')
 BACKRESTS = ('panel', 'slats', 'frame', 'rounded')
 
 
@@ -49,6 +50,29 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
     elif variant == 'pedestal':
         params['base_radius'] = uniform(rng, 0.28, 0.34)
         params['spokes'] = 5
+    elif variant == 'stool':  # industrial / lab stool: seat 0.33-0.40 m, 0.55-0.80 m high
+        params.update(
+            seat_height=uniform(rng, 0.55, 0.80),
+            seat_width=uniform(rng, 0.33, 0.40),
+            seat_thickness=uniform(rng, 0.04, 0.08),
+            stool_base=pick(rng, ('star', 'legs')),
+            base_radius=uniform(rng, 0.26, 0.32),
+            backrest=pick(rng, ('none', 'pad')),
+            back_height=uniform(rng, 0.20, 0.32),
+            armrests=False)
+        params['seat_depth'] = params['seat_width']
+    elif variant == 'cantilever':  # Thonet S 32 / Breuer Cesca: seat 0.46 high, 0.46 wide
+        params.update(backrest=pick(rng, ('panel', 'rounded', 'frame')))
+    elif variant == 'stacking':  # stacking chair with arms: about 0.55 wide, 0.80 high
+        params.update(
+            backrest=pick(rng, ('panel', 'rounded')),
+            armrests=True,
+            seat_width=uniform(rng, 0.44, 0.50),
+            seat_thickness=uniform(rng, 0.02, 0.04),
+            seat_colour=list(pick(rng, palette.PLASTIC)),
+            leg_profile='round',
+            leg_splay=uniform(rng, 0.01, 0.03),
+            stretchers=False)
     return variant, params
 
 
@@ -60,9 +84,14 @@ def build(variant: str, params: dict) -> MeshBuilder:
     width, depth = params['seat_width'], params['seat_depth']
     seat_top, thickness = params['seat_height'], params['seat_thickness']
     seat_bottom = seat_top - thickness
+    if variant == 'stool':
+        _stool(mb, params, frame, seat)
+        return mb
     mb.prism(rounded_rect(width, depth, 0.04), thickness, seat, translate(0, 0, seat_bottom))
-    if variant == 'fourleg':
+    if variant in ('fourleg', 'stacking'):
         _four_legs(mb, params, frame)
+    elif variant == 'cantilever':
+        _cantilever(mb, params, frame)
     elif variant == 'pedestal':
         _pedestal(mb, params, frame)
     elif variant == 'sled':
@@ -98,13 +127,15 @@ def _four_legs(mb: MeshBuilder, params: dict, frame: int) -> None:
             mb.rod((x, -depth / 2 + 0.03, z), (x, depth / 2 - 0.03, z), 0.01, frame)
 
 
-def _pedestal(mb: MeshBuilder, params: dict, frame: int) -> None:
-    top = params['seat_height'] - params['seat_thickness']
-    radius = params['base_radius']
-    for k in range(params['spokes']):
-        angle = 2 * math.pi * k / params['spokes'] - math.pi / 2
+def _star_base(mb: MeshBuilder, radius: float, frame: int, casters: bool, spokes: int = 5) -> None:
+    """Spokes from a hub; twin-wheel casters or glides at their tips."""
+    for k in range(spokes):
+        angle = 2 * math.pi * k / spokes - math.pi / 2
         tip = (radius * math.cos(angle), radius * math.sin(angle))
         mb.bar((0.0, 0.0, 0.10), (tip[0], tip[1], 0.07), 0.04, 0.035, frame)
+        if not casters:
+            mb.cylinder(0.022, 0.07, frame, translate(tip[0], tip[1], 0.0), segments=10)
+            continue
         # twin-wheel caster: a fork under the spoke tip and two wheels across it
         mb.box((0.03, 0.03, 0.03), frame, translate(tip[0], tip[1], 0.055) @ rot_z(angle))
         for side in (-1, 1):
@@ -116,6 +147,67 @@ def _pedestal(mb: MeshBuilder, params: dict, frame: int) -> None:
                 @ rot_x(side * math.pi / 2),
                 segments=12)
     mb.cylinder(0.05, 0.08, frame, translate(0, 0, 0.06))
+
+
+def _stool(mb: MeshBuilder, params: dict, frame: int, seat: int) -> None:
+    """Round seat on a gas column over a star base, or on four splayed legs; a foot ring and an
+    optional small back pad."""
+    seat_top, thickness = params['seat_height'], params['seat_thickness']
+    radius = params['seat_width'] / 2
+    bottom = seat_top - thickness
+    mb.cylinder(radius, thickness, seat, translate(0, 0, bottom), segments=24)
+    ring_z = max(0.25, seat_top - 0.42)
+    if params['stool_base'] == 'star':
+        _star_base(mb, params['base_radius'], frame, casters=False)
+        mb.cylinder(0.028, bottom - 0.14, frame, translate(0, 0, 0.14), segments=12)
+        ring_r = 0.19
+        for k in range(3):
+            angle = 2 * math.pi * k / 3 - math.pi / 2
+            mb.rod((0, 0, ring_z), (ring_r * math.cos(angle), ring_r * math.sin(angle), ring_z),
+                   0.01,
+                   frame,
+                   segments=8)
+    else:
+        foot_r, head_r = params['base_radius'] * 0.8, radius * 0.75
+        ring_r = head_r + (foot_r - head_r) * (bottom - ring_z) / bottom
+        lift = 0.014 * math.sin(math.atan2(foot_r - head_r, bottom))  # the end disc's dip
+        for k in range(4):
+            angle = 2 * math.pi * k / 4 + math.pi / 4
+            c, s = math.cos(angle), math.sin(angle)
+            mb.rod((foot_r * c, foot_r * s, lift), (head_r * c, head_r * s, bottom),
+                   0.014,
+                   frame,
+                   segments=8)
+    ring = [(ring_r * math.cos(a), ring_r * math.sin(a)) for a in np.linspace(0, 2 * math.pi, 17)]
+    for (x0, y0), (x1, y1) in zip(ring, ring[1:]):
+        mb.rod((x0, y0, ring_z), (x1, y1, ring_z), 0.009, frame, segments=6)
+    if params['backrest'] == 'pad':
+        post_y = radius - 0.03
+        mb.bar((0, post_y, bottom - 0.02), (0, post_y + 0.04, seat_top + params['back_height']),
+               0.04, 0.02, frame)
+        mb.prism(
+            rounded_rect(0.32, 0.04, 0.015), 0.12, seat,
+            translate(0, post_y + 0.05, seat_top + params['back_height'] - 0.12))
+
+
+def _cantilever(mb: MeshBuilder, params: dict, frame: int) -> None:
+    """One bent tube per side: floor runner, front upright and seat rail, no back legs."""
+    width, depth = params['seat_width'], params['seat_depth']
+    top = params['seat_height'] - params['seat_thickness']
+    radius = 0.0125
+    for sx in (-1, 1):
+        x = sx * (width / 2 - 0.01)
+        front, back = -depth / 2, depth / 2 + 0.04
+        mb.rod((x, back, radius), (x, front - 0.04, radius), radius, frame)
+        mb.rod((x, front - 0.04, radius), (x, front, top - radius), radius, frame)
+        mb.rod((x, front, top - radius), (x, depth / 2 - 0.02, top - radius), radius, frame)
+    mb.rod((-width / 2 + 0.01, depth / 2 + 0.04, radius),
+           (width / 2 - 0.01, depth / 2 + 0.04, radius), radius, frame)
+
+
+def _pedestal(mb: MeshBuilder, params: dict, frame: int) -> None:
+    top = params['seat_height'] - params['seat_thickness']
+    _star_base(mb, params['base_radius'], frame, casters=True, spokes=params['spokes'])
     mb.cylinder(0.028, top - 0.2, frame, translate(0, 0, 0.14), segments=12)
     mb.box_between((-0.11, -0.12, top - 0.06), (0.11, 0.12, top), frame)
 
@@ -199,7 +291,14 @@ def _armrests(mb: MeshBuilder, variant: str, params: dict, frame: int, seat: int
             mb.bar((x, 0.02, seat_top - params['seat_thickness'] - 0.02), (x, 0.02, arm_z), 0.04,
                    0.025, frame)
             mb.box_between((x - 0.04, -0.12, arm_z), (x + 0.04, 0.14, arm_z + 0.03), seat)
-        elif variant == 'sled':
+        elif variant == 'stacking':
+            radius = 0.011
+            front = (x - sx * 0.01, -depth / 2 + 0.03)
+            mb.rod((*front, seat_top - params['seat_thickness']), (*front, arm_z), radius, frame)
+            mb.rod((*front, arm_z), (x - sx * 0.01, depth / 2 - 0.03, arm_z), radius, frame)
+            mb.box_between((x - sx * 0.01 - 0.022, -depth / 2 + 0.05, arm_z),
+                           (x - sx * 0.01 + 0.022, depth / 2 - 0.08, arm_z + 0.02), seat)
+        elif variant in ('sled', 'cantilever'):
             radius = 0.011
             mb.rod((x, -depth / 2 + 0.06, seat_top - params['seat_thickness']),
                    (x, -depth / 2 + 0.06, arm_z), radius, frame)

@@ -99,7 +99,7 @@ def procedural_params(cls: str, index: int, seed: int) -> tuple[str, dict]:
 
 
 def build_library(out_dir: Path,
-                  instances_per_class: int = 12,
+                  instances_per_class: int = 24,
                   seed: int = 0,
                   classes: Sequence[str] = ASSET_CLASSES) -> list[Path]:
     """Build the procedural instances in bpy and save one `<class>.blend` per class in out_dir."""

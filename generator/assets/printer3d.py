@@ -1,6 +1,8 @@
-"""Procedural 3D printers (class `3dprinter`), strongly varied: enclosed box printers,
-bed-slingers, deltas and large-format machines, each with frame, bed, gantry / print head and a
-filament spool. The door or display faces -y."""
+"""Procedural 3D printers (class `3dprinter`), strongly varied: enclosed box printers (door
+closed, absent or swung open), bed-slingers, deltas, large-format machines, open-frame CoreXY
+cubes, resin (MSLA / SLA) printers with a coloured lid, compact cantilever bed-slingers and
+Ultimaker-style box frames. Filament printers have frame, bed, gantry / print head and a spool.
+The door or display faces -y."""
 from __future__ import annotations
 
 import math
@@ -10,7 +12,10 @@ import numpy as np
 from generator.assets import palette
 from generator.assets.builder import (MeshBuilder, pick, rot_x, rot_y, rot_z, translate, uniform)
 
-VARIANTS = ('enclosed', 'bedslinger', 'delta', 'largeformat')
+VARIANTS = ('enclosed', 'bedslinger', 'delta', 'largeformat', 'corexy', 'resin', 'cantilever',
+            'boxframe')
+# translucent UV-blocking lids of resin printers: orange, yellow, red, green, smoke
+RESIN_LIDS = ((245, 120, 20), (240, 200, 30), (200, 40, 40), (60, 160, 70), (90, 80, 70))
 
 
 def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
@@ -28,7 +33,7 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
             width=uniform(rng, 0.38, 0.55),
             depth=uniform(rng, 0.40, 0.60),
             height=uniform(rng, 0.45, 0.80),
-            door=pick(rng, ('glass', 'open')),
+            door=pick(rng, ('glass', 'open', 'swung')),
             bed_level=uniform(rng, 0.2, 0.8))
     elif variant == 'bedslinger':
         params.update(
@@ -54,6 +59,38 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
             frame=pick(rng, ('open', 'cabinet')),
             bed_level=uniform(rng, 0.1, 0.8),
             head_travel=uniform(rng, -1.0, 1.0))
+    elif variant == 'corexy':  # open-frame CoreXY cube (Voron 2.4 / RatRig V-Core without panels)
+        params.update(
+            width=uniform(rng, 0.42, 0.58),
+            depth=uniform(rng, 0.42, 0.58),
+            height=uniform(rng, 0.48, 0.68),
+            bed_level=uniform(rng, 0.1, 0.9),
+            head=[uniform(rng, -1.0, 1.0), uniform(rng, -1.0, 1.0)])
+    elif variant == 'resin':  # MSLA 0.23 x 0.23 x 0.40 (Elegoo Mars) to SLA 0.41 x 0.38 x 0.53
+        params.update(
+            width=uniform(rng, 0.22, 0.42),
+            depth=uniform(rng, 0.22, 0.40),
+            height=uniform(rng, 0.38, 0.55),
+            base_fraction=uniform(rng, 0.25, 0.40),
+            lid_style=pick(rng, ('box', 'hinged')),
+            lid_colour=list(pick(rng, RESIN_LIDS)))
+    elif variant == 'cantilever':  # Prusa MINI+ 0.33 x 0.34 x 0.38, Bambu Lab A1 mini
+        params.update(
+            width=uniform(rng, 0.30, 0.36),
+            depth=uniform(rng, 0.30, 0.36),
+            height=uniform(rng, 0.34, 0.40),
+            bed_travel=uniform(rng, -1.0, 1.0),
+            gantry_level=uniform(rng, 0.1, 0.9),
+            head_travel=uniform(rng, -1.0, 1.0),
+            column_side=pick(rng, (-1, 1)))
+    elif variant == 'boxframe':  # Ultimaker 2+ 0.34 x 0.36 x 0.39 to S5 0.50 x 0.59 x 0.78
+        params.update(
+            width=uniform(rng, 0.34, 0.50),
+            depth=uniform(rng, 0.36, 0.59),
+            height=uniform(rng, 0.39, 0.78),
+            door=pick(rng, ('none', 'glass')),
+            bed_level=uniform(rng, 0.1, 0.9),
+            head=[uniform(rng, -1.0, 1.0), uniform(rng, -1.0, 1.0)])
     return variant, params
 
 
@@ -64,7 +101,11 @@ def build(variant: str, params: dict) -> MeshBuilder:
         'enclosed': _enclosed,
         'bedslinger': _bedslinger,
         'delta': _delta,
-        'largeformat': _largeformat
+        'largeformat': _largeformat,
+        'corexy': _corexy,
+        'resin': _resin,
+        'cantilever': _cantilever,
+        'boxframe': _boxframe
     }
     if variant not in builders:
         raise ValueError(f'unknown 3dprinter variant {variant!r}')
@@ -114,6 +155,10 @@ def _enclosed(mb: MeshBuilder, params: dict) -> None:
                        glass)
         mb.box_between((w / 2 - 0.06, -d / 2 - 0.02, (base_h + h) / 2 - 0.05),
                        (w / 2 - 0.045, -d / 2, (base_h + h) / 2 + 0.05), frame)
+    elif params['door'] == 'swung':  # hinged at the left front edge, opened by 90 degrees
+        door_w = w - 0.06
+        mb.box_between((-w / 2 + 0.03 - wall, -d / 2 - door_w, base_h),
+                       (-w / 2 + 0.03, -d / 2, h - top_h), glass)
     # display on the base front
     mb.box_between((-0.06, -d / 2 - 0.012, 0.015), (0.06, -d / 2, base_h - 0.015), glass)
     # bed on a z-stage, CoreXY gantry under the roof
@@ -241,16 +286,8 @@ def _largeformat(mb: MeshBuilder, params: dict) -> None:
     if base_h:
         mb.box_between((-w / 2, -d / 2, 0.0), (w / 2, d / 2, base_h), body)
         mb.box_between((-0.1, -d / 2 - 0.015, 0.03), (0.1, -d / 2, base_h - 0.03), frame)
-    # the 12 edges of the frame
-    xs, ys, zs = (-w / 2 + e, w / 2 - e), (-d / 2 + e, d / 2 - e), (base_h + e, h - e)
-    for x in xs:
-        for y in ys:
-            mb.box_between((x - e, y - e, base_h), (x + e, y + e, h), frame)
-    for z in zs:
-        for y in ys:
-            mb.box_between((xs[0], y - e, z - e), (xs[1], y + e, z + e), frame)
-        for x in xs:
-            mb.box_between((x - e, ys[0], z - e), (x + e, ys[1], z + e), frame)
+    _extrusion_cube(mb, w, d, base_h, h, e, frame)
+    xs, ys = (-w / 2 + e, w / 2 - e), (-d / 2 + e, d / 2 - e)
     if params['frame'] == 'cabinet':
         glass = mb.material('panel', (60, 66, 72))
         for sx in (-1, 1):
@@ -288,3 +325,136 @@ def _largeformat(mb: MeshBuilder, params: dict) -> None:
             _spool(mb, (-w / 2 - 0.045, (k - 0.5) * 0.25, h * 0.65), filament, frame, axis='x')
         else:
             _spool(mb, ((k - 0.5) * 0.25, d / 2 + 0.045, h * 0.65), filament, frame, axis='y')
+
+
+def _extrusion_cube(mb: MeshBuilder, w: float, d: float, z0: float, h: float, e: float,
+                    frame: int) -> None:
+    """The 12 edges of a box frame of square extrusions (half width e) from z0 to h."""
+    xs, ys = (-w / 2 + e, w / 2 - e), (-d / 2 + e, d / 2 - e)
+    for x in xs:
+        for y in ys:
+            mb.box_between((x - e, y - e, z0), (x + e, y + e, h), frame)
+    for z in (z0 + e, h - e):
+        for y in ys:
+            mb.box_between((xs[0], y - e, z - e), (xs[1], y + e, z + e), frame)
+        for x in xs:
+            mb.box_between((x - e, ys[0], z - e), (x + e, ys[1], z + e), frame)
+
+
+def _corexy(mb: MeshBuilder, params: dict) -> None:
+    """Open 2020-extrusion cube: bed on a z stage, XY gantry under the top frame, electronics
+    under a bottom panel, spool on the back."""
+    body, frame, bed, filament = _materials(mb, params)
+    w, d, h = params['width'], params['depth'], params['height']
+    e = 0.01
+    _extrusion_cube(mb, w, d, 0.0, h, e, frame)
+    mb.box_between((-w / 2 + 2 * e, -d / 2 + 2 * e, 0.05), (w / 2 - 2 * e, d / 2 - 2 * e, 0.056),
+                   body)
+    bed_side = min(w, d) - 0.12
+    bed_z = 0.08 + params['bed_level'] * (h - 0.25)
+    mb.box_between((-bed_side / 2, -bed_side / 2, bed_z),
+                   (bed_side / 2, bed_side / 2, bed_z + 0.012), bed)
+    for sx in (-1, 1):  # bed carriers on the back z rails
+        mb.box_between((sx * bed_side / 3 - 0.01, -bed_side / 2, bed_z - 0.025),
+                       (sx * bed_side / 3 + 0.01, d / 2 - 2 * e, bed_z), frame)
+        mb.box_between((sx * bed_side / 3 - 0.008, d / 2 - 2 * e - 0.016, 2 * e),
+                       (sx * bed_side / 3 + 0.008, d / 2 - 2 * e, h - 2 * e), frame)
+    gantry_z = h - 0.07
+    head_x, head_y = (params['head'][0] * (w / 2 - 0.08), params['head'][1] * (d / 2 - 0.08))
+    for sx in (-1, 1):
+        mb.box_between((sx * (w / 2 - 0.035) - 0.01, -d / 2 + 2 * e, gantry_z),
+                       (sx * (w / 2 - 0.035) + 0.01, d / 2 - 2 * e, gantry_z + 0.02), frame)
+    mb.box_between((-w / 2 + 0.045, head_y - 0.01, gantry_z),
+                   (w / 2 - 0.045, head_y + 0.01, gantry_z + 0.02), frame)
+    _head(mb, head_x, head_y - 0.03, gantry_z - 0.07, body, frame)
+    mb.box_between((-0.06, -d / 2 - 0.015, 0.01), (0.06, -d / 2, 0.045), body)  # display
+    _spool(mb, (0.0, d / 2 + 0.045, h * 0.55), filament, frame, axis='y')
+
+
+def _resin(mb: MeshBuilder, params: dict) -> None:
+    """Base with the light engine and a display, a translucent coloured lid over the vat: a
+    box (MSLA) or a sloped hinged lid (SLA), the z tower inside."""
+    body, frame, _, _ = _materials(mb, params)
+    lid = mb.material('lid', params['lid_colour'])
+    w, d, h = params['width'], params['depth'], params['height']
+    base_h = round(params['base_fraction'] * h, 4)
+    mb.box_between((-w / 2, -d / 2, 0.0), (w / 2, d / 2, base_h), body)
+    mb.box_between((-0.045, -d / 2 - 0.01, base_h * 0.3), (0.045, -d / 2, base_h * 0.8), frame)
+    mb.box_between((-w / 4, -d / 4, base_h), (w / 4, d / 4, base_h + 0.03), frame)  # vat
+    if params['lid_style'] == 'box':
+        mb.box_between((-w / 2 + 0.01, -d / 2 + 0.01, base_h), (w / 2 - 0.01, d / 2 - 0.01, h),
+                       lid)
+        return
+    # hinged lid: full height at the back, sloping down towards the front
+    front_h = base_h + 0.55 * (h - base_h)
+    outline = [(-d / 2 + 0.01, base_h), (d / 2 - 0.01, base_h), (d / 2 - 0.01, h),
+               (d / 2 - 0.12, h), (-d / 2 + 0.01, front_h)]
+    # the outline lies in the y/z plane: this frame maps local x, y, z to world y, z, x
+    from_side = translate(-w / 2 + 0.01, 0, 0) @ rot_y(math.pi / 2) @ rot_z(math.pi / 2)
+    mb.prism(outline, w - 0.02, lid, from_side)
+
+
+def _cantilever(mb: MeshBuilder, params: dict) -> None:
+    """Compact bed-slinger: a y rail with the sliding bed, one z column at the side and an x arm
+    carrying the head over the bed."""
+    body, frame, bed, filament = _materials(mb, params)
+    w, d, h = params['width'], params['depth'], params['height']
+    side = params['column_side']
+    bed_size = 0.18
+    mb.box_between((-w / 2 + 0.02, -d / 2, 0.0), (w / 2 - 0.02, d / 2 - 0.03, 0.025), body)
+    mb.box_between((-0.05, -d / 2, 0.025), (0.05, d / 2, 0.05), frame)
+    travel = 0.5 * (d - bed_size - 0.02)
+    bed_y = params['bed_travel'] * travel
+    mb.box_between((-bed_size / 2, bed_y - bed_size / 2, 0.06),
+                   (bed_size / 2, bed_y + bed_size / 2, 0.07), bed)
+    mb.box_between((-0.04, bed_y - 0.04, 0.05), (0.04, bed_y + 0.04, 0.06), frame)
+    x_col = side * (w / 2 - 0.03)
+    mb.box_between((x_col - 0.03, -0.05, 0.025), (x_col + 0.03, 0.06, 0.06), body)  # foot
+    mb.box_between((x_col - 0.02, -0.02, 0.06), (x_col + 0.02, 0.03, h), frame)
+    arm_z = 0.12 + params['gantry_level'] * (h - 0.2)
+    mb.box_between((min(x_col, -side * (bed_size / 2 + 0.04)), -0.02, arm_z),
+                   (max(x_col, -side * (bed_size / 2 + 0.04)), 0.0, arm_z + 0.03), frame)
+    head_x = params['head_travel'] * (bed_size / 2 - 0.01)
+    _head(mb, head_x, -0.045, arm_z - 0.04, body, frame)
+    # display box at the front corner of the base, spool holder on top of the column
+    x_display = -side * (w / 2 - 0.08)
+    mb.box_between((x_display - 0.05, -d / 2 - 0.01, 0.025),
+                   (x_display + 0.05, -d / 2 + 0.05, 0.07), body)
+    _spool(mb, (x_col, 0.005, h - 0.09), filament, frame, axis='x')
+
+
+def _boxframe(mb: MeshBuilder, params: dict) -> None:
+    """Ultimaker-style box: closed sides, back and roof, open (or glass) front, a bed on a z
+    stage, cross-rod gantry, spool holder on the back, display in the base."""
+    body, frame, bed, filament = _materials(mb, params)
+    glass = mb.material('glass', (70, 80, 85))
+    w, d, h = params['width'], params['depth'], params['height']
+    base_h, wall = 0.06, 0.01
+    mb.box_between((-w / 2, -d / 2, 0.0), (w / 2, d / 2, base_h), body)
+    for sx in (-1, 1):
+        mb.box_between((sx * w / 2 - wall / 2 - sx * wall / 2, -d / 2, base_h),
+                       (sx * w / 2 + wall / 2 - sx * wall / 2, d / 2, h), body)
+    mb.box_between((-w / 2 + wall, d / 2 - wall, base_h), (w / 2 - wall, d / 2, h), body)
+    mb.box_between((-w / 2 + wall, -d / 2, h - 0.03), (w / 2 - wall, d / 2 - wall, h - 0.02),
+                   frame)
+    mb.box_between((-0.05, -d / 2 - 0.008, 0.01), (0.05, -d / 2, base_h - 0.01), glass)
+    if params['door'] == 'glass':
+        mb.box_between((-w / 2 + wall, -d / 2, base_h), (w / 2 - wall, -d / 2 + 0.005, h - 0.03),
+                       glass)
+    bed_w, bed_d = w - 0.1, d - 0.14
+    bed_z = base_h + 0.03 + params['bed_level'] * (h - base_h - 0.2)
+    mb.box_between((-bed_w / 2, -bed_d / 2, bed_z), (bed_w / 2, bed_d / 2, bed_z + 0.01), bed)
+    for sx in (-1, 1):
+        mb.cylinder(
+            0.006,
+            h - base_h - 0.03,
+            frame,
+            translate(sx * 0.08, d / 2 - 0.04, base_h),
+            segments=8)
+    mb.box_between((-0.1, -bed_d / 2, bed_z - 0.02), (0.1, d / 2 - wall, bed_z), frame)
+    rod_z = h - 0.08
+    head_x, head_y = (params['head'][0] * (w / 2 - 0.07), params['head'][1] * (d / 2 - 0.07))
+    mb.rod((-w / 2 + wall, head_y, rod_z), (w / 2 - wall, head_y, rod_z), 0.004, frame, segments=8)
+    mb.rod((head_x, -d / 2 + 0.02, rod_z), (head_x, d / 2 - wall, rod_z), 0.004, frame, segments=8)
+    _head(mb, head_x, head_y, rod_z - 0.07, body, frame)
+    _spool(mb, (0.0, d / 2 + 0.045, h * 0.55), filament, frame, axis='y')

@@ -16,8 +16,8 @@ from generator.assets import palette
 from generator.assets.builder import (MeshBuilder, matrix_from_array, pick, rot_z, rounded_rect,
                                       translate, uniform)
 
-VARIANTS = ('irb14000', )
-POSES = ('rest', 'work', 'free')
+VARIANTS = ('irb14000', 'irb14000_plate')  # on the table itself, or on an aluminium mounting plate
+POSES = ('rest', 'work', 'free', 'onearm')
 SIDES = ('right', 'left')
 JOINTS = ('j1', 'j2', 'j7', 'j3', 'j4', 'j5', 'j6')
 JOINT_LIMITS_DEG = {
@@ -70,6 +70,7 @@ MAX_ARM_Z = 0.8  # working poses: no arm raised far above the head
 MAX_REACH_XY = 0.55
 MAX_HALF_WIDTH = 0.36  # arms stay within 0.36 m of the robot's mid-plane
 MAX_TRIES = 2000
+PLATE_COLOUR = (182, 184, 188)  # plain aluminium
 
 
 def _rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
@@ -185,18 +186,25 @@ def _draw_valid_arm(rng: np.random.Generator, side: str, style: str):
 
 def draw_pose(rng: np.random.Generator, style: str) -> dict[str, dict[str, float]]:
     """Joint angles (radians) of both arms: each arm drawn until valid on its own, the pair
-    redrawn until the arms keep apart."""
+    redrawn until the arms keep apart. Style `onearm`: one arm (either side) anywhere within its
+    limits, the other folded at rest."""
+    styles = {side: style for side in SIDES}
+    if style == 'onearm':
+        working = pick(rng, SIDES)
+        styles = {side: 'free' if side == working else 'rest' for side in SIDES}
     for _ in range(MAX_TRIES):
         (right, right_check), (left, left_check) = (
-            _draw_valid_arm(rng, side, style) for side in SIDES)
+            _draw_valid_arm(rng, side, styles[side]) for side in SIDES)
         if _arms_apart(right_check, left_check):
             return {'right': right, 'left': left}
     raise RuntimeError(f'no valid YuMi pose of style {style!r} in {MAX_TRIES} draws')
 
 
 def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
-    """Draw joint angles (radians, within the joint limits) for a valid, collision-free pose."""
+    """Draw joint angles (radians, within the joint limits) for a valid, collision-free pose;
+    pose styles cycle by index, the mounting (variant) every len(POSES) instances."""
     style = POSES[index % len(POSES)]
+    variant = VARIANTS[(index // len(POSES)) % len(VARIANTS)]
     angles = draw_pose(rng, style)
     params = {
         'pose': style,
@@ -205,18 +213,30 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
         'body_colour': list(pick(rng, palette.ROBOT_BODY)),
         'joint_colour': list(pick(rng, palette.ROBOT_JOINT))
     }
-    return 'irb14000', params
+    if variant == 'irb14000_plate':  # robot x (depth) by y (width) by thickness, metres
+        params['plate'] = [
+            uniform(rng, 0.55, 0.65),
+            uniform(rng, 0.45, 0.60),
+            uniform(rng, 0.012, 0.025)
+        ]
+    return variant, params
 
 
 def build(variant: str, params: dict) -> MeshBuilder:
     """Build the robot's mesh from its joint angles."""
-    if variant != 'irb14000':
+    if variant not in VARIANTS:
         raise ValueError(f'unknown yumi variant {variant!r}')
     mb = MeshBuilder()
     body = mb.material('body', params['body_colour'])
     joint = mb.material('joint', params['joint_colour'])
     gripper = mb.material('gripper', (45, 45, 48))
     face = rot_z(-math.pi / 2)  # robot x (forward) -> -y
+    if variant == 'irb14000_plate':
+        plate_depth, plate_width, thickness = params['plate']
+        mb.box_between((-plate_depth / 2, -plate_width / 2, 0.0),
+                       (plate_depth / 2, plate_width / 2, thickness),
+                       mb.material('plate', PLATE_COLOUR), face)
+        face = translate(0, 0, thickness) @ face
     depth, width, plate = BASE_SIZE
     mb.prism(rounded_rect(depth, width, 0.05), plate, body, face)
     rings = []

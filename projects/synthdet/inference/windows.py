@@ -22,8 +22,8 @@ A scan whose x and y extents both fit in one window is one window, detected as a
 filtering or NMS (the model's own output, unchanged).
 
 ``configs/tr3d/_base_/s3dis-synthdet.py`` holds ``inference_window = dict(size=8.0,
-overlap=2.7)``: :func:`window_spec_from_training` applied to the generator's default rooms (6-11 m
-by 5-9 m) and to the largest object of its procedural library (a sofa, 2.64 m diagonal). Its
+overlap=2.6)``: :func:`window_spec_from_training` applied to the generator's default rooms (6-11 m
+by 5-9 m) and to the largest object of its procedural library (a sofa, 2.54 m diagonal). Its
 ``inference_density = dict(floor_area=59.0)`` is that median floor area: the training density is
 the test pipeline's ``PointSample`` ``num_points`` over it (:func:`density_from_config`), the
 points per m^2 of floor a median training room was sampled to.
