@@ -103,8 +103,11 @@ class RoomGenerator:
     def generate(self, task: RoomTask) -> tuple[RoomTask, str, float]:
         """Generate and write one room unless it exists; return (task, status, seconds)."""
         from generator.layout import generate_layout, layout_meta
-        from generator.scanner import Scanner, sensor_path
+        from generator.assets.palette import METAL
+        from generator.scanner import Scanner
         from generator.scene import export_triangles
+        from generator.sensors import RoomGeometry, choose_sensor, obstacle_bounds, scan_room
+        from synthdet.geometry import grid_cells
         from generator.writer import TMP_PREFIX, clean_stale, write_room
         from synthdet.contracts import ROOM_FORMAT
         start = time.perf_counter()
@@ -125,14 +128,17 @@ class RoomGenerator:
             extra[f'{task.name}.blend'] = blend
         triangles, names, classes = export_triangles()
         scan_cfg = options.config['scanner']
-        # a hall gets a cross per bay, with as many sensor positions per bay as a room
-        path, segments = sensor_path(layout.polygon, layout.height, rng_scan,
-                                     scan_cfg['path_coverage'], scan_cfg['sensor_height'],
-                                     scan_cfg['path_steps'] * max(1, len(layout.bays)),
-                                     layout.bays or None)
-        scan = Scanner(
-            triangles, threads=options.threads).scan(path, options.points, options.object_ratio,
-                                                     rng_scan, scan_cfg)
+        # the sensor model is drawn from its own stream: the scan stream stays the paper's
+        model = choose_sensor(scan_cfg['sensors'], np.random.default_rng([task.seed, 3]))
+        room = RoomGeometry(layout.polygon, layout.height, layout.bays or
+                            grid_cells(layout.polygon), obstacle_bounds(triangles, classes))
+        scan, sensor = scan_room(
+            Scanner(triangles, threads=options.threads), room, model, options.points,
+            options.object_ratio, rng_scan, scan_cfg, shiny_colours=METAL)
+        paper = {} if model != 'paper' else {
+            'sensor_path': sensor.pop('path'),
+            'sensor_height': sensor.pop('height')
+        }
         meta = {
             'format': ROOM_FORMAT,
             'seed': task.seed,
@@ -147,8 +153,8 @@ class RoomGenerator:
                 'version': META_VERSION,
                 'object_points': int(scan.object_points),
                 'rays': int(scan.rays_cast),
-                'sensor_path': np.round(segments, 6).tolist(),
-                'sensor_height': round(scan_cfg['sensor_height'] * layout.height, 6),
+                'sensor': sensor,
+                **paper,
                 'config': options.config
             },
             **layout_meta(layout)

@@ -45,6 +45,7 @@ class ScanResult:
     part: np.ndarray  # (N,) int32
     rays_cast: int
     object_points: int
+    triangle: np.ndarray  # (N,) int64, the hit triangle of every point
 
 
 def _chord(polygon: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> tuple[float, float]:
@@ -247,4 +248,5 @@ class Scanner:
             rgb=np.take(self.scene.colors, tri, axis=0),
             part=self.scene.part[tri].astype(np.int32),
             rays_cast=state['rays'],
-            object_points=got_objects)
+            object_points=got_objects,
+            triangle=tri.astype(np.int64))
