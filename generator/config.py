@@ -80,7 +80,7 @@ DEFAULTS: dict[str, Any] = {
             'max_range': 60.0,
             'range_noise': [0.002, 0.0005],  # std a + b * d of the range error, metres
             'mixed_pixels': 0.5,  # share of the returns at depth edges that land in between
-            'edge_jump': 0.1,  # range jump between neighbouring beams that makes an edge, metres
+            'edge_jump': 0.1,  # depth step between neighbouring beams that makes an edge, metres
         },
         'tablet': {  # handheld / tablet LiDAR (generator/sensors.py)
             'poses': 512,  # device poses along the walk

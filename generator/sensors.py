@@ -10,8 +10,8 @@ is what the geometry gives.
 - TLS: stations on a tripod (one or more per grid cell or hall bay, away from objects), beams on a
   regular azimuth x elevation grid of ``angular_step_deg`` (chosen from the point budget when not
   set), a range window, range noise of std ``a + b * d`` and mixed pixels at depth edges (where
-  the ranges of neighbouring beams jump by more than ``edge_jump``, a share of the returns lands
-  between the foreground and the background).
+  a neighbouring beam's hit lies more than ``edge_jump`` off the plane of a beam's hit, a share
+  of the returns lands between the foreground and the background).
 - Tablet: a smooth walk around every cell at hand height, a forward-looking field of view that
   turns with the walk (and sways left and right), returns only between ``min_range`` and
   ``max_range``, range noise, fewer returns far away and dropouts on dark triangles (luminance of
@@ -28,7 +28,7 @@ from generator.scanner import ScanResult, Scanner, TriangleScene, row_norms, sen
 from synthdet.geometry import points_in_polygon
 
 SENSOR_MODELS = ('paper', 'tls', 'tablet')
-# classes a station or a walker keeps away from (everything but the room's structure)
+# the room's structure; every other part is an object (kept clear of, edges for mixed pixels)
 ROOM_STRUCTURE = ('floor', 'ceiling', 'wall', 'door', 'window')
 
 
@@ -40,18 +40,21 @@ class RoomGeometry:
     height: float
     cells: list[np.ndarray]  # rectangles (4, 2): grid cells of the room or bays of a hall
     obstacles: np.ndarray  # (M, 2, 2) xy bounds [low, high] of every object
+    object_parts: np.ndarray  # (P,) bool per part of the scene: an object, not room structure
 
 
-def obstacle_bounds(scene: TriangleScene, classes: Sequence[str]) -> np.ndarray:
-    """xy bounds (M, 2, 2) of the parts of ``scene`` that are not room structure."""
+def room_geometry(polygon: np.ndarray, height: float, cells: list[np.ndarray],
+                  scene: TriangleScene, classes: Sequence[str]) -> RoomGeometry:
+    """The :class:`RoomGeometry` of a scene whose parts have ``classes``."""
+    object_parts = np.array([cls not in ROOM_STRUCTURE for cls in classes], dtype=bool)
     tri_xy = scene.vertices[scene.triangles][..., :2]  # (T, 3, 2)
     bounds = []
-    for part, cls in enumerate(classes):
-        if cls not in ROOM_STRUCTURE:
-            xy = tri_xy[scene.part == part].reshape(-1, 2)
-            if len(xy):
-                bounds.append([xy.min(axis=0), xy.max(axis=0)])
-    return np.array(bounds, dtype=np.float64).reshape(-1, 2, 2)
+    for part in np.flatnonzero(object_parts):
+        xy = tri_xy[scene.part == part].reshape(-1, 2)
+        if len(xy):
+            bounds.append([xy.min(axis=0), xy.max(axis=0)])
+    return RoomGeometry(polygon, height, cells,
+                        np.array(bounds, dtype=np.float64).reshape(-1, 2, 2), object_parts)
 
 
 def choose_sensor(probabilities: Mapping[str, float], rng: np.random.Generator) -> str:
@@ -90,7 +93,8 @@ def scan_room(scanner: Scanner,
     if model == 'tls':
         cfg = scanner_config['tls']
         stations = tls_stations(room, rng, cfg)
-        scan, step = scan_tls(scanner, stations, n_points, rng, cfg, scanner_config['batch_rays'])
+        scan, step = scan_tls(scanner, stations, n_points, rng, cfg, scanner_config['batch_rays'],
+                              room.object_parts[scanner.scene.part])
         return scan, {
             'model': 'tls',
             'stations': np.round(stations, 6).tolist(),
@@ -177,37 +181,44 @@ def _cast_all(scanner: Scanner, origins: np.ndarray, directions: np.ndarray,
     return t_hit, triangle
 
 
-def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.ndarray,
-                  share: float, jump: float) -> tuple[np.ndarray, np.ndarray]:
-    """Ranges and triangles (E, A) of one station's grid after mixing at depth edges.
+def _shifted(values: np.ndarray, axis: int, step: int, wrap: bool, fill) -> np.ndarray:
+    """``values`` of the grid neighbour ``step`` away along ``axis`` (``fill`` past the border)."""
+    out = np.roll(values, step, axis=axis)
+    if not wrap:
+        border = [slice(None)] * values.ndim
+        border[axis] = slice(0, step) if step > 0 else slice(step, None)
+        out[tuple(border)] = fill
+    return out
 
-    A beam is at an edge when the range of a grid neighbour (azimuth wraps around) differs by more
-    than ``jump``; with probability ``share`` its range moves a uniform fraction of the way to
-    that neighbour's (the largest jump), and it takes the neighbour's triangle past half way.
+
+def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.ndarray,
+                  on_object: np.ndarray, part: np.ndarray, share: float,
+                  jump: float) -> tuple[np.ndarray, np.ndarray]:
+    """Ranges and triangles of one station's grid (E, A) after mixing at depth edges.
+
+    Two grid neighbours (azimuth wraps around) straddle a depth edge when their ranges differ by
+    more than ``jump``, they hit different parts and one of them is an object (``on_object`` per
+    triangle, ``part`` per triangle): the room's floor, walls and ceiling meet only in concave
+    corners, and a surface seen at a grazing angle (a floor, a table top) has large range steps
+    without an edge; edges of an object in front of itself are not modelled. A beam at an edge, with probability ``share``,
+    returns a range a uniform fraction of the way to the neighbour's across the largest step,
+    with the neighbour's triangle past half way.
     """
-    other = np.full_like(ranges, np.nan)
-    other_tri = triangle.copy()
-    largest = np.zeros_like(ranges)
-    neighbours = [np.roll(ranges, s, axis=1) for s in (1, -1)]
-    neighbour_tri = [np.roll(triangle, s, axis=1) for s in (1, -1)]
-    for s in (1, -1):
-        shifted = np.full_like(ranges, np.inf)
-        shifted_tri = np.zeros_like(triangle)
-        if s == 1:
-            shifted[1:], shifted_tri[1:] = ranges[:-1], triangle[:-1]
-        else:
-            shifted[:-1], shifted_tri[:-1] = ranges[1:], triangle[1:]
-        neighbours.append(shifted)
-        neighbour_tri.append(shifted_tri)
-    for values, tris in zip(neighbours, neighbour_tri):
+    object_hit = on_object[triangle] & np.isfinite(ranges)
+    largest = np.zeros(ranges.shape)
+    other, other_tri = ranges.copy(), triangle.copy()
+    for axis, step, wrap in ((1, 1, True), (1, -1, True), (0, 1, False), (0, -1, False)):
+        n_range = _shifted(ranges, axis, step, wrap, np.inf)
+        n_tri = _shifted(triangle, axis, step, wrap, 0)
+        n_object = _shifted(object_hit, axis, step, wrap, False)
         with np.errstate(invalid='ignore'):
-            gap = np.abs(values - ranges)
-        bigger = np.isfinite(gap) & (gap > jump) & (gap > largest)
-        largest[bigger], other[bigger], other_tri[bigger] = gap[bigger], values[bigger], tris[
-            bigger]
+            gap = np.abs(n_range - ranges)
+        edge = ((object_hit | n_object) & (part[n_tri] != part[triangle]) & np.isfinite(ranges)
+                & np.isfinite(n_range) & (gap > jump) & (gap > largest))
+        largest[edge], other[edge], other_tri[edge] = gap[edge], n_range[edge], n_tri[edge]
     mixed = np.flatnonzero((largest > 0).ravel() & (rng.random(ranges.size) < share))
     fraction = rng.random(len(mixed))
-    ranges, triangle = ranges.copy().ravel(), triangle.copy().ravel()
+    ranges, triangle = ranges.ravel().copy(), triangle.ravel().copy()
     ranges[mixed] += fraction * (other.ravel()[mixed] - ranges[mixed])
     far = mixed[fraction > 0.5]
     triangle[far] = other_tri.ravel()[far]
@@ -215,9 +226,14 @@ def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.nda
 
 
 def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.random.Generator,
-             cfg: Mapping[str, Any], batch: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """All returns of the stations' grids: points (N, 3), triangles (N,), station index (N,)."""
+             cfg: Mapping[str, Any], batch: int,
+             on_object: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """All returns of the stations' grids: points (N, 3), triangles (N,), station index (N,).
+
+    ``on_object`` (T,) marks the triangles of objects, where depth edges can be.
+    """
     azimuth, elevation = tls_grid(step_deg, cfg['min_elevation_deg'])
+    grid = (len(elevation), len(azimuth))
     directions = _grid_directions(azimuth, elevation).reshape(-1, 3)
     a, b = cfg['range_noise']
     points, triangles, owner = [], [], []
@@ -226,10 +242,10 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
         t_hit, triangle = _cast_all(scanner, origins, directions, batch)
         ranges = t_hit.astype(np.float64)
         ranges[(ranges < cfg['min_range']) | (ranges > cfg['max_range'])] = np.inf
-        grid = (len(elevation), len(azimuth))
         if cfg['mixed_pixels'] > 0:
             ranges, triangle = _mixed_pixels(rng, ranges.reshape(grid), triangle.reshape(grid),
-                                             cfg['mixed_pixels'], cfg['edge_jump'])
+                                             on_object, scanner.scene.part, cfg['mixed_pixels'],
+                                             cfg['edge_jump'])
         rows = np.flatnonzero(np.isfinite(ranges))
         measured = ranges[rows]
         if a > 0 or b > 0:
@@ -241,7 +257,8 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
 
 
 def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int, rng: np.random.Generator,
-             cfg: Mapping[str, Any], batch: int) -> tuple[ScanResult, float]:
+             cfg: Mapping[str, Any], batch: int,
+             on_object: np.ndarray) -> tuple[ScanResult, float]:
     """A TLS scan of ``n_points`` and its angular step (degrees).
 
     Without a configured ``angular_step_deg`` the step is the one whose grids (over all stations)
@@ -255,7 +272,7 @@ def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int, rng: np.rand
     step = fixed or 360.0 / math.ceil(360.0 / math.sqrt(360.0 * span * len(stations) / beams))
     rays = 0
     for _ in range(8):
-        xyz, triangle, _ = cast_tls(scanner, stations, step, rng, cfg, batch)
+        xyz, triangle, _ = cast_tls(scanner, stations, step, rng, cfg, batch, on_object)
         azimuth, elevation = tls_grid(step, cfg['min_elevation_deg'])
         rays += len(stations) * len(azimuth) * len(elevation)
         if fixed or len(xyz) >= n_points:

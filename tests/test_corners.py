@@ -110,9 +110,9 @@ def generator_rooms(tmp_path_factory) -> list:
     rooms = []
     for noisy in (False, True):
         for shape in ('box', 'L', 'U'):
-            settings = {'room': {'shapes': {shape: 1.0}}}
+            settings = {'room': {'shapes': {shape: 1.0}}, 'scanner': {'sensors': {'paper': 1.0}}}
             if noisy:
-                settings['scanner'] = {'range_noise': 0.01, 'angular_jitter': 0.001, 'dropout': 0.1}
+                settings['scanner'].update(range_noise=0.01, angular_jitter=0.001, dropout=0.1)
             config = work / f'{shape}_{noisy}.json'
             config.write_text(json.dumps(settings))
             out = work / config.stem
