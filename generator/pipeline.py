@@ -107,7 +107,6 @@ class RoomGenerator:
         from generator.scanner import Scanner
         from generator.scene import export_triangles
         from generator.sensors import choose_sensor, room_geometry, scan_room
-        from synthdet.geometry import grid_cells
         from generator.writer import TMP_PREFIX, clean_stale, write_room
         from synthdet.contracts import ROOM_FORMAT
         start = time.perf_counter()
@@ -130,8 +129,7 @@ class RoomGenerator:
         scan_cfg = options.config['scanner']
         # the sensor model is drawn from its own stream: the scan stream stays the paper's
         model = choose_sensor(scan_cfg['sensors'], np.random.default_rng([task.seed, 3]))
-        room = room_geometry(layout.polygon, layout.height, layout.bays or
-                             grid_cells(layout.polygon), triangles, classes)
+        room = room_geometry(layout.polygon, layout.height, layout.bays, triangles, classes)
         scan, sensor = scan_room(
             Scanner(triangles, threads=options.threads), room, model, options.points,
             options.object_ratio, rng_scan, scan_cfg, shiny_colours=METAL)

@@ -25,7 +25,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from generator.scanner import ScanResult, Scanner, TriangleScene, row_norms, sensor_path
-from synthdet.geometry import points_in_polygon
+from synthdet.geometry import grid_cells, points_in_polygon
 
 SENSOR_MODELS = ('paper', 'tls', 'tablet')
 # the room's structure; every other part is an object (kept clear of, edges for mixed pixels)
@@ -38,12 +38,17 @@ class RoomGeometry:
 
     polygon: np.ndarray  # (K, 2) clockwise
     height: float
-    cells: list[np.ndarray]  # rectangles (4, 2): grid cells of the room or bays of a hall
+    bays: list[np.ndarray]  # rectangles (4, 2) of a hall's bays; empty for a room
     obstacles: np.ndarray  # (M, 2, 2) xy bounds [low, high] of every object
     object_parts: np.ndarray  # (P,) bool per part of the scene: an object, not room structure
 
+    @property
+    def cells(self) -> list[np.ndarray]:
+        """The bays of a hall, else the grid cells of the room (one for a box room)."""
+        return self.bays or grid_cells(self.polygon)
 
-def room_geometry(polygon: np.ndarray, height: float, cells: list[np.ndarray],
+
+def room_geometry(polygon: np.ndarray, height: float, bays: list[np.ndarray],
                   scene: TriangleScene, classes: Sequence[str]) -> RoomGeometry:
     """The :class:`RoomGeometry` of a scene whose parts have ``classes``."""
     object_parts = np.array([cls not in ROOM_STRUCTURE for cls in classes], dtype=bool)
@@ -53,7 +58,7 @@ def room_geometry(polygon: np.ndarray, height: float, cells: list[np.ndarray],
         xy = tri_xy[scene.part == part].reshape(-1, 2)
         if len(xy):
             bounds.append([xy.min(axis=0), xy.max(axis=0)])
-    return RoomGeometry(polygon, height, cells,
+    return RoomGeometry(polygon, height, bays,
                         np.array(bounds, dtype=np.float64).reshape(-1, 2, 2), object_parts)
 
 
@@ -80,8 +85,8 @@ def scan_room(scanner: Scanner,
         cfg = scanner_config
         # a hall gets a cross per bay, with as many sensor positions per bay as a room
         path, segments = sensor_path(room.polygon, room.height, rng, cfg['path_coverage'],
-                                     cfg['sensor_height'], cfg['path_steps'] * len(room.cells),
-                                     room.cells)
+                                     cfg['sensor_height'],
+                                     cfg['path_steps'] * max(1, len(room.bays)), room.cells)
         scan = scanner.scan(path, n_points, object_ratio, rng, cfg)
         return scan, {
             'model': 'paper',

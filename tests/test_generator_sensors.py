@@ -207,9 +207,8 @@ def test_paper_profile_casts_uniform_directions():
     profile = load_config(REPO / 'generator' / 'profiles' / 'paper.json')['scanner']
     assert profile['sensors'] == {'paper': 1.0, 'tls': 0.0, 'tablet': 0.0}
     scene = room_scene((6, 4, 3), [((2, 1, 0), (3, 2, 1), (255, 0, 0))])
-    room = RoomGeometry(np.array([[0, 0], [0, 4], [6, 4], [6, 0]], float), 3.0,
-                        [np.array([[0, 0], [0, 4], [6, 4], [6, 0]], float)], np.zeros((0, 2, 2)),
-                        np.array([False, True]))
+    room = RoomGeometry(np.array([[0, 0], [0, 4], [6, 4], [6, 0]], float), 3.0, [],
+                        np.zeros((0, 2, 2)), np.array([False, True]))
     z_histograms = {}
     for aim in (False, True):
         scanner = RecordingScanner(scene)
