@@ -299,7 +299,7 @@ def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
 
     The walker goes once around every cell, ``wall_distance`` from its sides (starting corner and
     sense random), the loops joined in cell order; the polyline is resampled to ``poses`` points
-    and smoothed (rounded corners). The device is held at a height drawn from ``height``, looks
+    (per bay in a hall) and smoothed (rounded corners). The device is held at a height drawn from ``height``, looks
     along the walk, sways ``sway_deg`` left and right and tilts through ``pitch_deg``. Poses
     outside the room or over an object (within 0.3 m) are dropped: the walker steps around.
     """
@@ -314,7 +314,7 @@ def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
         waypoints += [*loop, loop[0]]
     waypoints = np.array(waypoints)
     along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(waypoints, axis=0), axis=1))])
-    s = np.linspace(0.0, along[-1], int(cfg['poses']))
+    s = np.linspace(0.0, along[-1], int(cfg['poses']) * max(1, len(room.bays)))
     xy = np.stack([np.interp(s, along, waypoints[:, i]) for i in range(2)], axis=1)
     window = max(1, int(round(0.6 / max(s[1] - s[0], 1e-6)))) if len(s) > 1 else 1
     kernel = np.ones(2 * window + 1) / (2 * window + 1)
