@@ -127,8 +127,9 @@ class RoomGenerator:
             extra[f'{task.name}.blend'] = blend
         triangles, names, classes = export_triangles()
         scan_cfg = options.config['scanner']
-        # the sensor model is drawn from its own stream: the scan stream stays the paper's
-        model = choose_sensor(scan_cfg['sensors'], np.random.default_rng([task.seed, 3]))
+        # the sensor model is drawn from its own stream (4; 3 is the appearance's): the scan
+        # stream stays the paper sensor's
+        model = choose_sensor(scan_cfg['sensors'], np.random.default_rng([task.seed, 4]))
         room = room_geometry(layout.polygon, layout.height, layout.bays, triangles, classes)
         scan, sensor = scan_room(
             Scanner(triangles, threads=options.threads), room, model, options.points,

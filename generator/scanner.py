@@ -43,9 +43,10 @@ class ScanResult:
     xyz: np.ndarray  # (N, 3) float64
     rgb: np.ndarray  # (N, 3) uint8
     part: np.ndarray  # (N,) int32
+    triangle: np.ndarray  # (N,) int64, index of the hit triangle in the TriangleScene
+    origin: np.ndarray  # (N, 3) float32, the sensor position each point was seen from
     rays_cast: int
     object_points: int
-    triangle: np.ndarray  # (N,) int64, the hit triangle of every point
 
 
 def _chord(polygon: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> tuple[float, float]:
@@ -171,7 +172,7 @@ class Scanner:
         batch = int(config['batch_rays'])
         target_objects = int(round(object_ratio *
                                    n_points)) if self.object_scene is not None else 0
-        chunks: list[tuple[np.ndarray, np.ndarray]] = []
+        chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         state = {'rays': 0, 'step': 0}
 
         aim = bool(config['aim_at_objects'])
@@ -218,7 +219,7 @@ class Scanner:
                     distance = distance + rng.normal(0.0, config['range_noise'], len(rows))
                 hit_origins = np.take(origins, rows, axis=0)
                 xyz = hit_origins + np.take(nominal, rows, axis=0) * distance[:, None]
-                chunks.append((xyz, tri))
+                chunks.append((xyz, tri, hit_origins.astype(np.float32)))
                 got += len(rows)
             return got
 
@@ -243,10 +244,12 @@ class Scanner:
                           f'scene (is the room closed?)')
         xyz = np.concatenate([c[0] for c in chunks]) if chunks else np.zeros((0, 3))
         tri = np.concatenate([c[1] for c in chunks]) if chunks else np.zeros(0, np.int64)
+        origin = np.concatenate([c[2] for c in chunks]) if chunks else np.zeros((0, 3), np.float32)
         return ScanResult(
             xyz=xyz,
             rgb=np.take(self.scene.colors, tri, axis=0),
             part=self.scene.part[tri].astype(np.int32),
+            triangle=tri.astype(np.int64),
+            origin=origin,
             rays_cast=state['rays'],
-            object_points=got_objects,
-            triangle=tri.astype(np.int64))
+            object_points=got_objects)

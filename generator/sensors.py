@@ -277,7 +277,7 @@ def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int, rng: np.rand
     step = fixed or 360.0 / math.ceil(360.0 / math.sqrt(360.0 * span * len(stations) / beams))
     rays = 0
     for _ in range(8):
-        xyz, triangle, _ = cast_tls(scanner, stations, step, rng, cfg, batch, on_object)
+        xyz, triangle, owner = cast_tls(scanner, stations, step, rng, cfg, batch, on_object)
         azimuth, elevation = tls_grid(step, cfg['min_elevation_deg'])
         rays += len(stations) * len(azimuth) * len(elevation)
         if fixed or len(xyz) >= n_points:
@@ -286,11 +286,11 @@ def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int, rng: np.rand
         step = 360.0 / max(finer, int(round(360.0 / step)) + 1)
     if len(xyz) > n_points:
         keep = np.sort(rng.choice(len(xyz), n_points, replace=False))
-        xyz, triangle = xyz[keep], triangle[keep]
+        xyz, triangle, owner = xyz[keep], triangle[keep], owner[keep]
     elif len(xyz) < n_points:
         warnings.warn(f'TLS: only {len(xyz)} of {n_points} points at an angular step of '
                       f'{step:.4g} deg')
-    return _result(scanner, xyz, triangle, rays), step
+    return _result(scanner, xyz, triangle, stations[owner], rays), step
 
 
 def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
@@ -383,17 +383,20 @@ def cast_tablet(scanner: Scanner, positions: np.ndarray, look: np.ndarray, n_poi
         got += len(rows)
     if got < n_points:
         warnings.warn(f'tablet: only {got} of {n_points} points after {rays} rays')
-    return _result(scanner, np.concatenate(points), np.concatenate(triangles),
-                   rays), np.concatenate(owners)
+    pose = np.concatenate(owners)
+    return _result(scanner, np.concatenate(points), np.concatenate(triangles), positions[pose],
+                   rays), pose
 
 
-def _result(scanner: Scanner, xyz: np.ndarray, triangle: np.ndarray, rays: int) -> ScanResult:
-    """Label the returns by their triangles."""
+def _result(scanner: Scanner, xyz: np.ndarray, triangle: np.ndarray, origin: np.ndarray,
+            rays: int) -> ScanResult:
+    """Label the returns by their triangles; ``origin`` (N, 3): where each was seen from."""
     scene = scanner.scene
     return ScanResult(
         xyz=xyz.astype(np.float64),
         rgb=np.take(scene.colors, triangle, axis=0),
         part=scene.part[triangle].astype(np.int32),
+        triangle=triangle.astype(np.int64),
+        origin=origin.astype(np.float32),
         rays_cast=int(rays),
-        object_points=int(scanner.movable_tri[triangle].sum()),
-        triangle=triangle.astype(np.int64))
+        object_points=int(scanner.movable_tri[triangle].sum()))

@@ -80,6 +80,7 @@ def test_tls_directions_lie_on_the_angular_grid_of_its_step():
     assert np.abs(position - np.round(position)).max() < 1e-6
     assert position[:, 1].min() >= cfg['min_elevation_deg'] / step - 1e-6
     assert (scan.part == 1).sum() > 100 and len(np.unique(scan.triangle)) > 12
+    assert np.array_equal(scan.origin, np.repeat(station, 50000, 0).astype(np.float32))
     # a coarser fixed step: every beam of the grid that hits is there, once
     xyz, _, _ = cast_tls(scanner, station, 2.0, np.random.default_rng(0), TLS, BATCH,
                          objects(scanner))
@@ -153,6 +154,7 @@ def test_tablet_returns_lie_within_its_range_window():
                              BATCH)
     distance = np.linalg.norm(scan.xyz - positions[pose], axis=1)
     assert len(scan.xyz) == 30000
+    assert np.array_equal(scan.origin, positions[pose].astype(np.float32))
     assert distance.min() >= TABLET['min_range'] and distance.max() <= TABLET['max_range']
     assert distance.max() > 0.95 * TABLET['max_range']  # the window, not the room, bounds it
     # without the window the same walk sees the far end of the 20 m room
