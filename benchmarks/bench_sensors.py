@@ -26,7 +26,9 @@ from generator.config import load_config  # noqa: E402
 from generator.pipeline import RoomGenerator, RunOptions, plan_tasks  # noqa: E402
 
 PROFILES = {
-    'paper': ('paper.json', {'aim_at_objects': True}),
+    'paper': ('paper.json', {
+        'aim_at_objects': True
+    }),
     'paper-uniform': ('paper.json', {}),
     'tls': ('tls.json', {}),
     'tablet': ('tablet.json', {}),
@@ -44,9 +46,14 @@ def main() -> None:
         for label, (profile, override) in PROFILES.items():
             config = load_config(REPO / 'generator' / 'profiles' / profile)
             config['scanner'].update(override)
-            options[label] = RunOptions(out='', points=args.points, object_ratio=0.5, seed=0,
-                                        config=config, asset_cache=str(Path(work) / 'assets'),
-                                        threads=1)
+            options[label] = RunOptions(
+                out='',
+                points=args.points,
+                object_ratio=0.5,
+                seed=0,
+                config=config,
+                asset_cache=str(Path(work) / 'assets'),
+                threads=1)
         generator = RoomGenerator(options['paper'])  # one bpy scene; the options change per model
         tasks = plan_tasks([7], args.rooms, 0)
         seconds: dict[str, list[float]] = {label: [] for label in options}

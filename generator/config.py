@@ -283,7 +283,7 @@ def _validate_sensors(scanner: dict[str, Any], source: str) -> None:
     """The sensor mix and the TLS and tablet parameters."""
     _choice(scanner['sensors'], 'scanner.sensors', source)
     for sensor, ranges, probabilities, lengths in (
-        ('tls', ('height', 'stations_per_cell'), ('mixed_pixels',),
+        ('tls', ('height', 'stations_per_cell'), ('mixed_pixels', ),
          ('wall_clearance', 'object_clearance', 'min_range', 'max_range', 'edge_jump')),
         ('tablet', ('height', ), ('far_keep', 'dark_dropout', 'shiny_dropout'),
          ('wall_distance', 'min_range', 'max_range', 'range_noise', 'sway_deg', 'dark_luminance')),

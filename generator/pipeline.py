@@ -131,9 +131,9 @@ class RoomGenerator:
         # stream stays the paper sensor's
         model = choose_sensor(scan_cfg['sensors'], np.random.default_rng([task.seed, 4]))
         room = room_geometry(layout.polygon, layout.height, layout.bays, triangles, classes)
-        scan, sensor = scan_room(
-            Scanner(triangles, threads=options.threads), room, model, options.points,
-            options.object_ratio, rng_scan, scan_cfg, shiny_colours=METAL)
+        scanner = Scanner(triangles, threads=options.threads)
+        scan, sensor = scan_room(scanner, room, model, options.points, options.object_ratio,
+                                 rng_scan, scan_cfg, METAL)
         paper = {} if model != 'paper' else {
             'sensor_path': sensor.pop('path'),
             'sensor_height': sensor.pop('height')

@@ -48,8 +48,8 @@ class RoomGeometry:
         return self.bays or grid_cells(self.polygon)
 
 
-def room_geometry(polygon: np.ndarray, height: float, bays: list[np.ndarray],
-                  scene: TriangleScene, classes: Sequence[str]) -> RoomGeometry:
+def room_geometry(polygon: np.ndarray, height: float, bays: list[np.ndarray], scene: TriangleScene,
+                  classes: Sequence[str]) -> RoomGeometry:
     """The :class:`RoomGeometry` of a scene whose parts have ``classes``."""
     object_parts = np.array([cls not in ROOM_STRUCTURE for cls in classes], dtype=bool)
     tri_xy = scene.vertices[scene.triangles][..., :2]  # (T, 3, 2)
@@ -68,14 +68,16 @@ def choose_sensor(probabilities: Mapping[str, float], rng: np.random.Generator) 
     return SENSOR_MODELS[int(rng.choice(len(SENSOR_MODELS), p=weights / weights.sum()))]
 
 
-def scan_room(scanner: Scanner,
-              room: RoomGeometry,
-              model: str,
-              n_points: int,
-              object_ratio: float,
-              rng: np.random.Generator,
-              scanner_config: Mapping[str, Any],
-              shiny_colours: Sequence[Sequence[int]] = ()) -> tuple[ScanResult, dict[str, Any]]:
+def scan_room(
+    scanner: Scanner,
+    room: RoomGeometry,
+    model: str,
+    n_points: int,
+    object_ratio: float,
+    rng: np.random.Generator,
+    scanner_config: Mapping[str, Any],
+    shiny_colours: Sequence[Sequence[int]] = ()
+) -> tuple[ScanResult, dict[str, Any]]:
     """Scan ``room`` with sensor ``model``; return the points and the sensor's meta.json record.
 
     ``object_ratio`` applies to the paper model only; ``shiny_colours`` (RGB triples) mark the
@@ -92,8 +94,10 @@ def scan_room(scanner: Scanner,
             'model': 'paper',
             'path': np.round(segments, 6).tolist(),
             'height': round(cfg['sensor_height'] * room.height, 6),
-            **{k: cfg[k]
-               for k in ('aim_at_objects', 'range_noise', 'angular_jitter', 'dropout')}
+            **{
+                k: cfg[k]
+                for k in ('aim_at_objects', 'range_noise', 'angular_jitter', 'dropout')
+            }
         }
     if model == 'tls':
         cfg = scanner_config['tls']
@@ -104,9 +108,10 @@ def scan_room(scanner: Scanner,
             'model': 'tls',
             'stations': np.round(stations, 6).tolist(),
             'angular_step_deg': step,
-            **{k: cfg[k]
-               for k in ('min_elevation_deg', 'min_range', 'max_range', 'range_noise',
-                         'mixed_pixels', 'edge_jump')}
+            **{
+                k: cfg[k]
+                for k in ('min_elevation_deg', 'min_range', 'max_range', 'range_noise', 'mixed_pixels', 'edge_jump')
+            }
         }
     if model == 'tablet':
         cfg = scanner_config['tablet']
@@ -116,9 +121,10 @@ def scan_room(scanner: Scanner,
         return scan, {
             'model': 'tablet',
             'trajectory': np.round(positions, 3).tolist(),
-            **{k: cfg[k]
-               for k in ('fov_deg', 'min_range', 'max_range', 'range_noise', 'far_keep',
-                         'dark_luminance', 'dark_dropout', 'shiny_dropout')}
+            **{
+                k: cfg[k]
+                for k in ('fov_deg', 'min_range', 'max_range', 'range_noise', 'far_keep', 'dark_luminance', 'dark_dropout', 'shiny_dropout')
+            }
         }
     raise ValueError(f'unknown sensor model {model!r} (known: {", ".join(SENSOR_MODELS)})')
 
@@ -140,16 +146,16 @@ def _inset(cell: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
     return low + margin, high - margin
 
 
-def tls_stations(room: RoomGeometry, rng: np.random.Generator,
-                 cfg: Mapping[str, Any]) -> np.ndarray:
+def tls_stations(room: RoomGeometry, rng: np.random.Generator, cfg: Mapping[str,
+                                                                            Any]) -> np.ndarray:
     """Tripod positions (S, 3): ``stations_per_cell`` per cell, ``object_clearance`` from objects
     when possible (else the clearest of the candidates), ``wall_clearance`` from the cell's
     sides, at a height drawn from ``height``."""
     stations = []
     for cell in room.cells:
         low, high = _inset(cell, cfg['wall_clearance'])
-        for _ in range(int(rng.integers(cfg['stations_per_cell'][0],
-                                        cfg['stations_per_cell'][1] + 1))):
+        for _ in range(
+                int(rng.integers(cfg['stations_per_cell'][0], cfg['stations_per_cell'][1] + 1))):
             candidates = low + rng.random((64, 2)) * (high - low)
             clearance = _clearance(candidates, room.obstacles)
             free = np.flatnonzero(clearance >= cfg['object_clearance'])
@@ -262,8 +268,8 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
 
 
 def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int, rng: np.random.Generator,
-             cfg: Mapping[str, Any], batch: int,
-             on_object: np.ndarray) -> tuple[ScanResult, float]:
+             cfg: Mapping[str,
+                          Any], batch: int, on_object: np.ndarray) -> tuple[ScanResult, float]:
     """A TLS scan of ``n_points`` and its angular step (degrees).
 
     Without a configured ``angular_step_deg`` the step is the one whose grids (over all stations)
@@ -324,8 +330,8 @@ def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
     phase = rng.uniform(0, 2 * np.pi, 2)
     yaw = heading + np.radians(cfg['sway_deg']) * np.sin(2 * np.pi * s / 4.0 + phase[0])
     low_pitch, high_pitch = np.radians(cfg['pitch_deg'])
-    pitch = low_pitch + (high_pitch - low_pitch) * (0.5 + 0.5 * np.sin(2 * np.pi * s / 2.5 +
-                                                                       phase[1]))
+    pitch = low_pitch + (high_pitch - low_pitch) * (0.5 +
+                                                    0.5 * np.sin(2 * np.pi * s / 2.5 + phase[1]))
     look = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], 1)
     positions = np.column_stack([xy, np.full(len(xy), rng.uniform(*cfg['height']))])
     keep = points_in_polygon(xy, room.polygon) & (_clearance(xy, room.obstacles) > 0.3)
@@ -334,9 +340,15 @@ def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
     return positions[keep], look[keep]
 
 
-def cast_tablet(scanner: Scanner, positions: np.ndarray, look: np.ndarray, n_points: int,
-                rng: np.random.Generator, cfg: Mapping[str, Any], batch: int,
-                shiny_colours: Sequence[Sequence[int]] = ()) -> tuple[ScanResult, np.ndarray]:
+def cast_tablet(
+    scanner: Scanner,
+    positions: np.ndarray,
+    look: np.ndarray,
+    n_points: int,
+    rng: np.random.Generator,
+    cfg: Mapping[str, Any],
+    batch: int,
+    shiny_colours: Sequence[Sequence[int]] = ()) -> tuple[ScanResult, np.ndarray]:
     """Up to ``n_points`` tablet returns and the pose index (N,) of each.
 
     Each ray takes a random pose and a uniform random pixel of the image plane (``fov_deg``
@@ -350,8 +362,8 @@ def cast_tablet(scanner: Scanner, positions: np.ndarray, look: np.ndarray, n_poi
     loss = np.where(luminance < cfg['dark_luminance'], cfg['dark_dropout'], 0.0)
     if len(shiny_colours):
         shiny = (scanner.scene.colors[:, None, :] == np.asarray(shiny_colours, np.uint8)[None])
-        loss = np.where(shiny.all(axis=2).any(axis=1), np.maximum(loss, cfg['shiny_dropout']),
-                        loss)
+        loss = np.where(
+            shiny.all(axis=2).any(axis=1), np.maximum(loss, cfg['shiny_dropout']), loss)
     right = np.stack([look[:, 1], -look[:, 0], np.zeros(len(look))], axis=1)
     right /= row_norms(right) + 1e-12
     up = np.cross(right, look)
@@ -365,8 +377,9 @@ def cast_tablet(scanner: Scanner, positions: np.ndarray, look: np.ndarray, n_poi
             break
         pose = rng.integers(len(positions), size=batch)
         pixel = (rng.random((batch, 2)) * 2 - 1) * half
-        directions = (np.take(look, pose, axis=0) + pixel[:, :1] * np.take(right, pose, axis=0) +
-                      pixel[:, 1:] * np.take(up, pose, axis=0))
+        directions = (
+            np.take(look, pose, axis=0) + pixel[:, :1] * np.take(right, pose, axis=0) +
+            pixel[:, 1:] * np.take(up, pose, axis=0))
         directions /= row_norms(directions)
         origins = np.take(positions, pose, axis=0)
         t_hit, prim = scanner.cast(scanner.full_scene, origins, directions)

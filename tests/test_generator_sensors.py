@@ -64,8 +64,12 @@ def grid_position(points: np.ndarray, station: np.ndarray, step: float) -> np.nd
 def unit(degrees: np.ndarray) -> np.ndarray:
     """Unit vectors (N, 3) float32 of (azimuth, elevation) pairs in degrees."""
     azimuth, elevation = np.radians(degrees).T
-    return np.stack([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth),
-                     np.sin(elevation)], axis=1).astype(np.float32)
+    return np.stack([
+        np.cos(elevation) * np.cos(azimuth),
+        np.cos(elevation) * np.sin(azimuth),
+        np.sin(elevation)
+    ],
+                    axis=1).astype(np.float32)
 
 
 def test_tls_directions_lie_on_the_angular_grid_of_its_step():
@@ -121,8 +125,8 @@ def test_tls_mixed_pixels_appear_only_at_depth_edges():
                              objects(scanner))
         measured = np.linalg.norm(xyz - station, axis=1)
         directions = (xyz - station) / measured[:, None]
-        off = np.abs(measured - true_ranges(scanner, np.repeat(station, len(xyz), 0),
-                                            directions)) > 1e-3
+        off = np.abs(measured -
+                     true_ranges(scanner, np.repeat(station, len(xyz), 0), directions)) > 1e-3
         if not cubes:  # walls, floor (even at grazing angles) and corners: no depth edge
             assert not off.any()
             continue
@@ -130,8 +134,9 @@ def test_tls_mixed_pixels_appear_only_at_depth_edges():
         # every mixed return: a grid neighbour of its beam hits the other surface (cube vs room)
         # and the return lies between the two surfaces along its beam
         for cell, r in zip(np.round(grid_position(xyz[off], station[0], step)), measured[off]):
-            beams = unit(np.array([cell, cell + [1, 0], cell - [1, 0], cell + [0, 1],
-                                   cell - [0, 1]]) * step)
+            beams = unit(
+                np.array([cell, cell + [1, 0], cell - [1, 0], cell + [0, 1], cell - [0, 1]]) *
+                step)
             t_hit, prim = scanner.cast(scanner.full_scene, np.repeat(station, 5, 0), beams)
             part = scanner.scene.part[prim]
             other = part[1:] != part[0]
@@ -172,16 +177,23 @@ def test_tablet_returns_lie_within_its_range_window():
 def test_tablet_drops_returns_on_dark_and_shiny_triangles():
     dark, shiny, plain = (20, 20, 24), METAL[1], (200, 60, 40)
     scanner = Scanner(
-        room_scene((8, 6, 3), [((5, 0.5, 0), (6, 1.5, 1.2), dark), ((5, 2.5, 0), (6, 3.5, 1.2),
-                                                                      shiny),
+        room_scene((8, 6, 3), [((5, 0.5, 0), (6, 1.5, 1.2), dark),
+                               ((5, 2.5, 0), (6, 3.5, 1.2), shiny),
                                ((5, 4.5, 0), (6, 5.5, 1.2), plain)]))
     positions, look = walk((1.0, 1.0, 1.4), (1.0, 5.0, 1.4))
     look = np.tile([0.95, 0.0, -0.3], (len(look), 1))  # towards the three boxes
 
     def shares(dark_dropout: float, shiny_dropout: float) -> np.ndarray:
         cfg = dict(TABLET, dark_dropout=dark_dropout, shiny_dropout=shiny_dropout)
-        scan, _ = cast_tablet(scanner, positions, look, 40000, np.random.default_rng(4), cfg,
-                              BATCH, shiny_colours=METAL)
+        scan, _ = cast_tablet(
+            scanner,
+            positions,
+            look,
+            40000,
+            np.random.default_rng(4),
+            cfg,
+            BATCH,
+            shiny_colours=METAL)
         return np.array([np.mean(scan.part == p) for p in (1, 2, 3)])
 
     clean = shares(0.0, 0.0)
@@ -209,8 +221,9 @@ def test_paper_profile_casts_uniform_directions():
     profile = load_config(REPO / 'generator' / 'profiles' / 'paper.json')['scanner']
     assert profile['sensors'] == {'paper': 1.0, 'tls': 0.0, 'tablet': 0.0}
     scene = room_scene((6, 4, 3), [((2, 1, 0), (3, 2, 1), (255, 0, 0))])
-    room = RoomGeometry(np.array([[0, 0], [0, 4], [6, 4], [6, 0]], float), 3.0, [],
-                        np.zeros((0, 2, 2)), np.array([False, True]))
+    room = RoomGeometry(
+        np.array([[0, 0], [0, 4], [6, 4], [6, 0]], float), 3.0, [], np.zeros((0, 2, 2)),
+        np.array([False, True]))
     z_histograms = {}
     for aim in (False, True):
         scanner = RecordingScanner(scene)
@@ -219,8 +232,8 @@ def test_paper_profile_casts_uniform_directions():
         assert sensor['model'] == 'paper' and sensor['aim_at_objects'] == aim
         assert (scan.part == 1).sum() == 2000
         directions = np.concatenate(scanner.directions)
-        z_histograms[aim] = np.histogram(directions[:, 2], bins=10, range=(-1, 1))[0] / len(
-            directions)
+        z_histograms[aim] = np.histogram(
+            directions[:, 2], bins=10, range=(-1, 1))[0] / len(directions)
         assert np.abs(directions.mean(axis=0)).max() < (0.02 if not aim else 1.0)
     # uniform on the sphere: z uniform in [-1, 1]; aimed rays mostly go down to the cube
     assert np.abs(z_histograms[False] - 0.1).max() < 0.01
@@ -228,8 +241,10 @@ def test_paper_profile_casts_uniform_directions():
 
 
 def test_choose_sensor_follows_the_probabilities():
-    draws = [choose_sensor(DEFAULTS['scanner']['sensors'], np.random.default_rng([9, i]))
-             for i in range(3000)]
+    draws = [
+        choose_sensor(DEFAULTS['scanner']['sensors'], np.random.default_rng([9, i]))
+        for i in range(3000)
+    ]
     for model in SENSOR_MODELS:
         assert abs(draws.count(model) / 3000 - DEFAULTS['scanner']['sensors'][model]) < 0.03
     only = {'paper': 0.0, 'tls': 1.0, 'tablet': 0.0}
@@ -239,13 +254,55 @@ def test_choose_sensor_follows_the_probabilities():
 def test_sensor_configuration_errors_name_the_file_and_key(tmp_path):
     config = tmp_path / 'bad.json'
     for settings, message in (
-        ({'scanner': {'sensors': {'paper': 0.5}}}, 'scanner.sensors" probabilities sum to 0.5'),
-        ({'scanner': {'sensors': {'lidar': 1.0}}}, 'unknown sensor model "lidar"'),
-        ({'scanner': {'tls': {'range_noise': [0.1]}}}, 'scanner.tls.range_noise'),
-        ({'scanner': {'tls': {'angular_step_deg': 0}}}, 'scanner.tls.angular_step_deg'),
-        ({'scanner': {'tls': {'stations': 2}}}, 'unknown key "scanner.tls.stations"'),
-        ({'scanner': {'tablet': {'min_range': 6.0}}}, 'scanner.tablet.min_range" must be below'),
-        ({'scanner': {'tablet': {'dark_dropout': 1.5}}}, 'scanner.tablet.dark_dropout'),
+        ({
+            'scanner': {
+                'sensors': {
+                    'paper': 0.5
+                }
+            }
+        }, 'scanner.sensors" probabilities sum to 0.5'),
+        ({
+            'scanner': {
+                'sensors': {
+                    'lidar': 1.0
+                }
+            }
+        }, 'unknown sensor model "lidar"'),
+        ({
+            'scanner': {
+                'tls': {
+                    'range_noise': [0.1]
+                }
+            }
+        }, 'scanner.tls.range_noise'),
+        ({
+            'scanner': {
+                'tls': {
+                    'angular_step_deg': 0
+                }
+            }
+        }, 'scanner.tls.angular_step_deg'),
+        ({
+            'scanner': {
+                'tls': {
+                    'stations': 2
+                }
+            }
+        }, 'unknown key "scanner.tls.stations"'),
+        ({
+            'scanner': {
+                'tablet': {
+                    'min_range': 6.0
+                }
+            }
+        }, 'scanner.tablet.min_range" must be below'),
+        ({
+            'scanner': {
+                'tablet': {
+                    'dark_dropout': 1.5
+                }
+            }
+        }, 'scanner.tablet.dark_dropout'),
     ):
         config.write_text(json.dumps(settings))
         with pytest.raises(ConfigError, match=f'{config}: .*{message}'.replace('[', r'\[')):
@@ -256,8 +313,11 @@ def test_sensor_configuration_errors_name_the_file_and_key(tmp_path):
 def mixed_run(tmp_path_factory):
     """Three small rooms with the default sensor mix; seed 1 draws paper, TLS and tablet."""
     work = tmp_path_factory.mktemp('mix')
-    args = ['--areas', '7', '--rooms-per-area', '3', '--points', '20000', '--seed', '1',
-            '--asset-cache', str(work / 'assets'), '--quiet']
+    args = [
+        '--areas', '7', '--rooms-per-area', '3', '--points', '20000', '--seed', '1',
+        '--asset-cache',
+        str(work / 'assets'), '--quiet'
+    ]
     assert main(['--out', str(work / 'out'), *args]) == 0
     return work, args
 
