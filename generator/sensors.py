@@ -267,9 +267,9 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
     return np.concatenate(points), np.concatenate(triangles), np.concatenate(owner)
 
 
-def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int, rng: np.random.Generator,
-             cfg: Mapping[str,
-                          Any], batch: int, on_object: np.ndarray) -> tuple[ScanResult, float]:
+def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int,
+             rng: np.random.Generator, cfg: Mapping[str, Any], batch: int,
+             on_object: np.ndarray) -> tuple[ScanResult, float]:
     """A TLS scan of ``n_points`` and its angular step (degrees).
 
     Without a configured ``angular_step_deg`` the step is the one whose grids (over all stations)
