@@ -146,8 +146,8 @@ def _inset(cell: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
     return low + margin, high - margin
 
 
-def tls_stations(room: RoomGeometry, rng: np.random.Generator, cfg: Mapping[str,
-                                                                            Any]) -> np.ndarray:
+def tls_stations(room: RoomGeometry, rng: np.random.Generator,
+                 cfg: Mapping[str, Any]) -> np.ndarray:
     """Tripod positions (S, 3): ``stations_per_cell`` per cell, ``object_clearance`` from objects
     when possible (else the clearest of the candidates), ``wall_clearance`` from the cell's
     sides, at a height drawn from ``height``."""
