@@ -7,6 +7,14 @@ import time
 from pathlib import Path
 
 
+PROFILES = Path(__file__).resolve().parent / 'profiles'
+
+
+def profile_names() -> list[str]:
+    """Names of the packaged configuration profiles (generator/profiles/<name>.json)."""
+    return sorted(path.stem for path in PROFILES.glob('*.json'))
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='python -m generator',
@@ -39,11 +47,17 @@ def build_parser() -> argparse.ArgumentParser:
         '--shard',
         default='1/1',
         help='K/N: generate only every N-th room starting at the K-th (1-based)')
-    parser.add_argument(
+    settings = parser.add_mutually_exclusive_group()
+    settings.add_argument(
         '--config',
         type=Path,
         help='JSON or YAML file overriding the defaults '
-        '(probabilities, sizes, scanner noise)')
+        '(probabilities, sizes, sensors, appearance, clutter)')
+    settings.add_argument(
+        '--profile',
+        choices=profile_names(),
+        help='a profile of generator/profiles/ instead of the default mix of sensors, '
+        'appearance and clutter (paper = the paper-faithful scans)')
     parser.add_argument(
         '--library',
         type=Path,
@@ -102,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
     shard = check_arguments(args, parser)
     from generator.config import ConfigError, load_config
     try:
-        config = load_config(args.config)
+        config = load_config(PROFILES / f'{args.profile}.json' if args.profile else args.config)
     except ConfigError as err:
         parser.error(str(err))
     from generator.pipeline import RunOptions, plan_tasks, run

@@ -76,6 +76,40 @@ DEFAULTS: dict[str, Any] = {
         'range_noise': 0.0,  # std of the range error, metres (0 = paper-faithful)
         'angular_jitter': 0.0,  # std of the beam direction error, radians
         'dropout': 0.0,  # probability that a return is lost
+        # the keys above belong to the paper sensor; the model is drawn per room (sum 1)
+        'sensors': {
+            'paper': 0.34,
+            'tls': 0.33,
+            'tablet': 0.33
+        },
+        'tls': {  # terrestrial laser scanner (generator/sensors.py)
+            'stations_per_cell': [1, 2],  # inclusive range of stations per grid cell / bay
+            'height': [1.4, 1.7],  # tripod height, metres
+            'wall_clearance': 0.5,  # station distance from its cell's sides, metres
+            'object_clearance': 0.5,  # station distance from any object's bounds, metres
+            'angular_step_deg': None,  # beam grid step; null: from the point budget
+            'min_elevation_deg': -60.0,  # the tripod hides the cone below
+            'min_range': 0.6,
+            'max_range': 60.0,
+            'range_noise': [0.002, 0.0005],  # std a + b * d of the range error, metres
+            'mixed_pixels': 0.5,  # share of the returns at depth edges that land in between
+            'edge_jump': 0.1,  # depth step between neighbouring beams that makes an edge, metres
+        },
+        'tablet': {  # handheld / tablet LiDAR (generator/sensors.py)
+            'poses': 512,  # device poses along the walk
+            'height': [1.2, 1.6],  # hand height, metres
+            'wall_distance': 1.0,  # walk this far from the cell's sides, metres
+            'fov_deg': [60.0, 48.0],  # horizontal, vertical field of view
+            'sway_deg': 50.0,  # the view swings this far left and right of the walk
+            'pitch_deg': [-45.0, 15.0],  # and tilts through this range
+            'min_range': 0.3,
+            'max_range': 5.0,
+            'range_noise': 0.01,  # std of the range error, metres
+            'far_keep': 0.3,  # share of the returns kept at max_range (1 at min_range)
+            'dark_luminance': 40.0,  # a triangle colour darker than this (0-255) is dark
+            'dark_dropout': 0.7,  # probability that a return on a dark triangle is lost
+            'shiny_dropout': 0.5,  # the same on shiny (metal palette) triangles
+        },
     },
     'appearance': {  # drawn per room (generator/appearance.py); all 0 = the paper's flat colours
         'shading': 0.5,  # probability that colours are shaded by the angle to a light
@@ -99,8 +133,8 @@ HALL_DEFAULTS: dict[str, Any] = {
     'windows': [0, 6],  # inclusive range of windows in the outer walls
 }
 
-# mappings a user file replaces as a whole, named by what they map
-_DISTRIBUTIONS = {'shapes': 'room shape', 'clutter_kinds': 'clutter kind'}
+# mappings a user file replaces as a whole, named by what they map (missing keys are 0)
+_DISTRIBUTIONS = {'shapes': 'room shape', 'clutter_kinds': 'clutter kind', 'sensors': 'sensor model'}
 _SUM_GROUPS = (('probabilities', ('table', 'sofa')), ('probabilities', ('yumi', '3dprinter')))
 
 
@@ -258,6 +292,7 @@ def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
         if _number(config, 'scanner', key, source) < 0:
             raise ConfigError(f'{source}: "scanner.{key}" must not be negative')
     _validate_appearance(config, source)
+    _validate_sensors(scanner, source)
     if 'hall' in config:
         _validate_hall(config, source)
     for key in ('path_steps', 'batch_rays', 'max_object_rays'):
@@ -277,6 +312,59 @@ def _validate_appearance(config: dict[str, Any], source: str) -> None:
     _range(config, 'appearance', 'light_tilt', source)
     if config['appearance']['light_tilt'][1] > 90:
         raise ConfigError(f'{source}: "appearance.light_tilt" must stay within [0, 90] degrees')
+
+
+def _validate_sensors(scanner: dict[str, Any], source: str) -> None:
+    """The sensor mix and the TLS and tablet parameters."""
+    _distribution({'scanner': scanner}, 'scanner', 'sensors', source)
+    for sensor, ranges, probabilities, lengths in (
+        ('tls', ('height', 'stations_per_cell'), ('mixed_pixels', ),
+         ('wall_clearance', 'object_clearance', 'min_range', 'max_range', 'edge_jump')),
+        ('tablet', ('height', ), ('far_keep', 'dark_dropout', 'shiny_dropout'),
+         ('wall_distance', 'min_range', 'max_range', 'range_noise', 'sway_deg', 'dark_luminance')),
+    ):
+        where = f'scanner.{sensor}'
+        view = {where: scanner[sensor]}  # _number and _range name the key by its full path
+        for key in ranges:
+            _range(view, where, key, source, integer=key == 'stations_per_cell')
+        for key in probabilities:
+            if not 0.0 <= _number(view, where, key, source) <= 1.0:
+                raise ConfigError(f'{source}: "{where}.{key}" is outside [0, 1]')
+        for key in lengths:
+            if _number(view, where, key, source) < 0:
+                raise ConfigError(f'{source}: "{where}.{key}" must not be negative')
+        if scanner[sensor]['min_range'] >= scanner[sensor]['max_range']:
+            raise ConfigError(f'{source}: "{where}.min_range" must be below "{where}.max_range"')
+    tls, tablet = scanner['tls'], scanner['tablet']
+    if tls['stations_per_cell'][0] < 1:
+        raise ConfigError(f'{source}: "scanner.tls.stations_per_cell" must be at least 1')
+    step = tls['angular_step_deg']
+    if step is not None and (isinstance(step, bool) or not isinstance(step, (int, float))
+                             or not 0.0 < step <= 10.0):
+        raise ConfigError(f'{source}: "scanner.tls.angular_step_deg" must be null or a number '
+                          f'in (0, 10], got {step!r}')
+    elevation = _number({'scanner.tls': tls}, 'scanner.tls', 'min_elevation_deg', source)
+    if not -90.0 <= elevation < 90.0:
+        raise ConfigError(f'{source}: "scanner.tls.min_elevation_deg" must be in [-90, 90)')
+    noise = tls['range_noise']
+    if (not isinstance(noise, (list, tuple)) or len(noise) != 2
+            or any(isinstance(v, bool) or not isinstance(v, (int, float)) or v < 0
+                   for v in noise)):
+        raise ConfigError(f'{source}: "scanner.tls.range_noise" must be [a, b], two non-negative '
+                          f'numbers (std a + b * distance), got {noise!r}')
+    for key, low, high in (('fov_deg', 1.0, 170.0), ('pitch_deg', -90.0, 90.0)):
+        value = tablet[key]
+        if (not isinstance(value, (list, tuple)) or len(value) != 2
+                or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)
+                or not all(low <= v <= high for v in value)):
+            raise ConfigError(f'{source}: "scanner.tablet.{key}" must be two numbers in '
+                              f'[{low:g}, {high:g}] degrees, got {value!r}')
+    if tablet['pitch_deg'][0] > tablet['pitch_deg'][1]:
+        raise ConfigError(f'{source}: "scanner.tablet.pitch_deg" has min > max')
+    poses = tablet['poses']
+    if isinstance(poses, bool) or not isinstance(poses, int) or poses < 2:
+        raise ConfigError(f'{source}: "scanner.tablet.poses" must be an integer >= 2, '
+                          f'got {poses!r}')
 
 
 def _validate_hall(config: dict[str, Any], source: str) -> None:

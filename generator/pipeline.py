@@ -104,8 +104,10 @@ class RoomGenerator:
         """Generate and write one room unless it exists; return (task, status, seconds)."""
         from generator.appearance import apply_appearance, draw_appearance
         from generator.layout import generate_layout, layout_meta
-        from generator.scanner import Scanner, sensor_path
+        from generator.assets.palette import METAL
+        from generator.scanner import Scanner
         from generator.scene import export_triangles
+        from generator.sensors import choose_sensor, room_geometry, scan_room
         from generator.writer import TMP_PREFIX, clean_stale, write_room
         from synthdet.contracts import ROOM_FORMAT
         start = time.perf_counter()
@@ -126,14 +128,17 @@ class RoomGenerator:
             extra[f'{task.name}.blend'] = blend
         triangles, names, classes = export_triangles()
         scan_cfg = options.config['scanner']
-        # a hall gets a cross per bay, with as many sensor positions per bay as a room
-        path, segments = sensor_path(layout.polygon, layout.height, rng_scan,
-                                     scan_cfg['path_coverage'], scan_cfg['sensor_height'],
-                                     scan_cfg['path_steps'] * max(1, len(layout.bays)),
-                                     layout.bays or None)
-        scan = Scanner(
-            triangles, threads=options.threads).scan(path, options.points, options.object_ratio,
-                                                     rng_scan, scan_cfg)
+        # the sensor model is drawn from its own stream (4; 3 is the appearance's): the scan
+        # stream stays the paper sensor's
+        model = choose_sensor(scan_cfg['sensors'], np.random.default_rng([task.seed, 4]))
+        room = room_geometry(layout.polygon, layout.height, layout.bays, triangles, classes)
+        scanner = Scanner(triangles, threads=options.threads)
+        scan, sensor = scan_room(scanner, room, model, options.points, options.object_ratio,
+                                 rng_scan, scan_cfg, METAL)
+        paper = {} if model != 'paper' else {
+            'sensor_path': sensor.pop('path'),
+            'sensor_height': sensor.pop('height')
+        }
         # a stream of its own: appearance settings change neither the layout nor the scan
         appearance = draw_appearance(
             np.random.default_rng([task.seed, 3]), options.config['appearance'], len(names))
@@ -152,8 +157,8 @@ class RoomGenerator:
                 'version': META_VERSION,
                 'object_points': int(scan.object_points),
                 'rays': int(scan.rays_cast),
-                'sensor_path': np.round(segments, 6).tolist(),
-                'sensor_height': round(scan_cfg['sensor_height'] * layout.height, 6),
+                'sensor': sensor,
+                **paper,
                 'appearance': appearance.meta(),
                 'config': options.config
             },

@@ -114,9 +114,13 @@ def generator_rooms(tmp_path_factory) -> list:
     light_clutter = {'clutter': [0, 4], 'clutter_kinds': {'box': 0.6, 'cylinder': 0.4}}
     for noisy in (False, True):
         for shape in ('box', 'L', 'U'):
-            settings = {'room': {'shapes': {shape: 1.0}}, 'layout': light_clutter}
+            settings = {
+                'room': {'shapes': {shape: 1.0}},
+                'layout': light_clutter,
+                'scanner': {'sensors': {'paper': 1.0}}
+            }
             if noisy:
-                settings['scanner'] = {'range_noise': 0.01, 'angular_jitter': 0.001, 'dropout': 0.1}
+                settings['scanner'].update(range_noise=0.01, angular_jitter=0.001, dropout=0.1)
             config = work / f'{shape}_{noisy}.json'
             config.write_text(json.dumps(settings))
             out = work / config.stem

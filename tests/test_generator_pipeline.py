@@ -45,11 +45,15 @@ def asset_cache(tmp_path_factory):
 @pytest.fixture(scope='module')
 def reference_run(tmp_path_factory, asset_cache):
     out = tmp_path_factory.mktemp('run') / 'out'
+    # the paper sensor: exact geometry and object ratio (tests/test_generator_sensors.py: others)
+    config = out.parent / 'paper.json'
+    config.write_text(json.dumps({'scanner': {'sensors': {'paper': 1.0}}}))
     args = [
         '--out',
         str(out), '--areas', '7', '8', '--rooms-per-area', '2', '--points',
         str(POINTS), '--seed', '5', '--asset-cache',
-        str(asset_cache), '--quiet'
+        str(asset_cache), '--config',
+        str(config), '--quiet'
     ]
     assert main(args + ['--workers', '1']) == 0
     return out, args
@@ -215,7 +219,8 @@ def test_resume_after_a_killed_run(reference_run, tmp_path):
 def test_optional_outputs_in_l_and_u_rooms(asset_cache, tmp_path):
     out = tmp_path / 'extras'
     config = tmp_path / 'shapes.yaml'
-    config.write_text('room:\n  shapes: {L: 0.5, U: 0.5}\n  windows: [2, 3]\n')
+    config.write_text('room:\n  shapes: {L: 0.5, U: 0.5}\n  windows: [2, 3]\n'
+                      'scanner:\n  sensors: {paper: 1.0}\n')
     assert main([
         '--out',
         str(out), '--areas', '9', '--rooms-per-area', '2', '--points', '5000', '--asset-cache',
@@ -286,7 +291,7 @@ def test_sensor_path_crosses_every_cell_of_the_room(polygon):
 def test_every_wall_of_generated_u_rooms_is_scanned(asset_cache, tmp_path):
     # A single cross through the base of a U left an arm's inner wall without a point.
     config = tmp_path / 'u.yaml'
-    config.write_text('room:\n  shapes: {U: 1.0}\n')
+    config.write_text('room:\n  shapes: {U: 1.0}\nscanner:\n  sensors: {paper: 1.0}\n')
     out = tmp_path / 'u'
     assert main([
         '--out',
@@ -306,18 +311,20 @@ def test_every_wall_of_generated_u_rooms_is_scanned(asset_cache, tmp_path):
         assert min(counts) >= 20, (room.name, counts)
 
 
+def box(lo, hi, inward: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (8, 3) and triangles (12, 3) of an axis-aligned box, the first two triangles its
+    bottom; faces towards the inside when ``inward``."""
+    x0, y0, z0 = lo
+    x1, y1, z1 = hi
+    v = np.array([[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0], [x0, y0, z1],
+                  [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]], float)
+    f = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4], [1, 2, 6],
+                  [1, 6, 5], [2, 3, 7], [2, 7, 6], [3, 0, 4], [3, 4, 7]])
+    return v, (f[:, ::-1] if inward else f)
+
+
 def _box_room_scene() -> tuple[TriangleScene, np.ndarray]:
     """A 6 x 4 x 3 m box room (2 parts) with a 1 m cube (movable part 2) on the floor."""
-
-    def box(lo, hi, inward):
-        x0, y0, z0 = lo
-        x1, y1, z1 = hi
-        v = np.array([[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0], [x0, y0, z1],
-                      [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]], float)
-        f = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4], [1, 2, 6],
-                      [1, 6, 5], [2, 3, 7], [2, 7, 6], [3, 0, 4], [3, 4, 7]])
-        return v, (f[:, ::-1] if inward else f)
-
     room_v, room_f = box((0, 0, 0), (6, 4, 3), True)
     cube_v, cube_f = box((2, 1, 0), (3, 2, 1), False)
     vertices = np.concatenate([room_v, cube_v])

@@ -28,7 +28,9 @@ from synthdet.point_text import read_point_file
 
 REPO = Path(__file__).resolve().parents[1]
 HALL_POINTS = 1_200_000
-HALL_CONFIG = 'hall:\n  width: [20.0, 20.0]\n  depth: [15.0, 15.0]\n  partitions: 0.6\n'
+# the paper sensor (a cross per bay): partition points exactly on their wall
+HALL_CONFIG = ('hall:\n  width: [20.0, 20.0]\n  depth: [15.0, 15.0]\n  partitions: 0.6\n'
+               'scanner:\n  sensors: {paper: 1.0}\n')
 SPEC = window_spec_from_config(Config.fromfile(str(REPO / 'configs/tr3d/exp2_cpu.py')))
 
 

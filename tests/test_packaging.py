@@ -67,10 +67,13 @@ def test_packages_import_from_the_install_not_the_source_tree(installed):
         assert Path(file).is_relative_to(installed['purelib']), file
 
 
-def test_macro_and_license_are_installed(installed):
+def test_macro_profiles_and_license_are_installed(installed):
     purelib = installed['purelib']
     macro = purelib / 'configurator' / 'freecad' / 'ImportSynthdet.FCMacro'
     assert macro.read_text() == (REPO / 'configurator/freecad/ImportSynthdet.FCMacro').read_text()
+    profiles = sorted(p.name for p in (purelib / 'generator' / 'profiles').glob('*.json'))
+    assert profiles == sorted(p.name for p in (REPO / 'generator' / 'profiles').glob('*.json'))
+    assert 'paper.json' in profiles
     licences = list(purelib.glob('synthdet-*.dist-info/**/LICENSE'))
     assert licences and 'Apache License' in licences[0].read_text()
 

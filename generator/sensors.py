@@ -1,0 +1,415 @@
+"""Sensor models on the Embree caster: the paper's crossing path, a terrestrial laser scanner
+(TLS) and a handheld tablet LiDAR, chosen per room.
+
+Every model builds ray batches (origins, directions) and casts them through
+:meth:`generator.scanner.Scanner.cast`, the one place rays are cast. The paper model is
+:meth:`Scanner.scan` on :func:`generator.scanner.sensor_path` (object-ratio phase, uniform or
+aimed directions). The TLS and the tablet have no object-ratio phase: the share of object points
+is what the geometry gives.
+
+- TLS: stations on a tripod (one or more per grid cell or hall bay, away from objects), beams on a
+  regular azimuth x elevation grid of ``angular_step_deg`` (chosen from the point budget when not
+  set), a range window, range noise of std ``a + b * d`` and mixed pixels at depth edges (where
+  a neighbouring beam's hit lies more than ``edge_jump`` off the plane of a beam's hit, a share
+  of the returns lands between the foreground and the background).
+- Tablet: a smooth walk around every cell at hand height, a forward-looking field of view that
+  turns with the walk (and sways left and right), returns only between ``min_range`` and
+  ``max_range``, range noise, fewer returns far away and dropouts on dark triangles (luminance of
+  the colour below ``dark_luminance``) and shiny ones (colours of the metal palette).
+"""
+import math
+import warnings
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from generator.scanner import ScanResult, Scanner, TriangleScene, row_norms, sensor_path
+from synthdet.geometry import grid_cells, points_in_polygon
+
+SENSOR_MODELS = ('paper', 'tls', 'tablet')
+# the room's structure; every other part is an object (kept clear of, edges for mixed pixels)
+ROOM_STRUCTURE = ('floor', 'ceiling', 'wall', 'door', 'window')
+
+
+@dataclass
+class RoomGeometry:
+    """What the sensors need of a room: its floor polygon, height, cells and obstacles."""
+
+    polygon: np.ndarray  # (K, 2) clockwise
+    height: float
+    bays: list[np.ndarray]  # rectangles (4, 2) of a hall's bays; empty for a room
+    obstacles: np.ndarray  # (M, 2, 2) xy bounds [low, high] of every object
+    object_parts: np.ndarray  # (P,) bool per part of the scene: an object, not room structure
+
+    @property
+    def cells(self) -> list[np.ndarray]:
+        """The bays of a hall, else the grid cells of the room (one for a box room)."""
+        return self.bays or grid_cells(self.polygon)
+
+
+def room_geometry(polygon: np.ndarray, height: float, bays: list[np.ndarray], scene: TriangleScene,
+                  classes: Sequence[str]) -> RoomGeometry:
+    """The :class:`RoomGeometry` of a scene whose parts have ``classes``."""
+    object_parts = np.array([cls not in ROOM_STRUCTURE for cls in classes], dtype=bool)
+    tri_xy = scene.vertices[scene.triangles][..., :2]  # (T, 3, 2)
+    bounds = []
+    for part in np.flatnonzero(object_parts):
+        xy = tri_xy[scene.part == part].reshape(-1, 2)
+        if len(xy):
+            bounds.append([xy.min(axis=0), xy.max(axis=0)])
+    return RoomGeometry(polygon, height, bays,
+                        np.array(bounds, dtype=np.float64).reshape(-1, 2, 2), object_parts)
+
+
+def choose_sensor(probabilities: Mapping[str, float], rng: np.random.Generator) -> str:
+    """Draw one sensor model from ``probabilities`` (model -> probability, summing to 1)."""
+    weights = np.array([float(probabilities.get(m, 0.0)) for m in SENSOR_MODELS])
+    return SENSOR_MODELS[int(rng.choice(len(SENSOR_MODELS), p=weights / weights.sum()))]
+
+
+def scan_room(
+    scanner: Scanner,
+    room: RoomGeometry,
+    model: str,
+    n_points: int,
+    object_ratio: float,
+    rng: np.random.Generator,
+    scanner_config: Mapping[str, Any],
+    shiny_colours: Sequence[Sequence[int]] = ()
+) -> tuple[ScanResult, dict[str, Any]]:
+    """Scan ``room`` with sensor ``model``; return the points and the sensor's meta.json record.
+
+    ``object_ratio`` applies to the paper model only; ``shiny_colours`` (RGB triples) mark the
+    triangles the tablet loses returns on as shiny.
+    """
+    if model == 'paper':
+        cfg = scanner_config
+        # a hall gets a cross per bay, with as many sensor positions per bay as a room
+        path, segments = sensor_path(room.polygon, room.height, rng, cfg['path_coverage'],
+                                     cfg['sensor_height'],
+                                     cfg['path_steps'] * max(1, len(room.bays)), room.cells)
+        scan = scanner.scan(path, n_points, object_ratio, rng, cfg)
+        return scan, {
+            'model': 'paper',
+            'path': np.round(segments, 6).tolist(),
+            'height': round(cfg['sensor_height'] * room.height, 6),
+            **{
+                k: cfg[k]
+                for k in ('aim_at_objects', 'range_noise', 'angular_jitter', 'dropout')
+            }
+        }
+    if model == 'tls':
+        cfg = scanner_config['tls']
+        stations = tls_stations(room, rng, cfg)
+        scan, step = scan_tls(scanner, stations, n_points, rng, cfg, scanner_config['batch_rays'],
+                              room.object_parts[scanner.scene.part])
+        return scan, {
+            'model': 'tls',
+            'stations': np.round(stations, 6).tolist(),
+            'angular_step_deg': step,
+            **{
+                k: cfg[k]
+                for k in ('min_elevation_deg', 'min_range', 'max_range', 'range_noise', 'mixed_pixels', 'edge_jump')
+            }
+        }
+    if model == 'tablet':
+        cfg = scanner_config['tablet']
+        positions, look = tablet_trajectory(room, rng, cfg)
+        scan, _ = cast_tablet(scanner, positions, look, n_points, rng, cfg,
+                              scanner_config['batch_rays'], shiny_colours)
+        return scan, {
+            'model': 'tablet',
+            'trajectory': np.round(positions, 3).tolist(),
+            **{
+                k: cfg[k]
+                for k in ('fov_deg', 'min_range', 'max_range', 'range_noise', 'far_keep', 'dark_luminance', 'dark_dropout', 'shiny_dropout')
+            }
+        }
+    raise ValueError(f'unknown sensor model {model!r} (known: {", ".join(SENSOR_MODELS)})')
+
+
+def _clearance(xy: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
+    """Distance (N,) from each point to the nearest obstacle box (inf without obstacles)."""
+    if len(obstacles) == 0:
+        return np.full(len(xy), np.inf)
+    below = obstacles[None, :, 0, :] - xy[:, None, :]
+    above = xy[:, None, :] - obstacles[None, :, 1, :]
+    gap = np.maximum(np.maximum(below, above), 0.0)
+    return np.sqrt((gap**2).sum(axis=2)).min(axis=1)
+
+
+def _inset(cell: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """Low and high corners of ``cell`` moved ``margin`` inwards (at most 30 % of a side)."""
+    low, high = cell.min(axis=0), cell.max(axis=0)
+    margin = np.minimum(margin, 0.3 * (high - low))
+    return low + margin, high - margin
+
+
+def tls_stations(room: RoomGeometry, rng: np.random.Generator,
+                 cfg: Mapping[str, Any]) -> np.ndarray:
+    """Tripod positions (S, 3): ``stations_per_cell`` per cell, ``object_clearance`` from objects
+    when possible (else the clearest of the candidates), ``wall_clearance`` from the cell's
+    sides, at a height drawn from ``height``."""
+    stations = []
+    for cell in room.cells:
+        low, high = _inset(cell, cfg['wall_clearance'])
+        for _ in range(
+                int(rng.integers(cfg['stations_per_cell'][0], cfg['stations_per_cell'][1] + 1))):
+            candidates = low + rng.random((64, 2)) * (high - low)
+            clearance = _clearance(candidates, room.obstacles)
+            free = np.flatnonzero(clearance >= cfg['object_clearance'])
+            xy = candidates[free[0] if len(free) else int(np.argmax(clearance))]
+            stations.append([xy[0], xy[1], rng.uniform(*cfg['height'])])
+    return np.array(stations, dtype=np.float64)
+
+
+def tls_grid(step_deg: float, min_elevation_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """Azimuths and elevations (radians) of the beam grid: multiples of the step, elevations from
+    ``min_elevation_deg`` up to below the zenith."""
+    n_azimuth = int(round(360.0 / step_deg))
+    azimuth = np.arange(n_azimuth) * step_deg
+    first, last = math.ceil(min_elevation_deg / step_deg - 1e-9), math.ceil(90.0 / step_deg) - 1
+    elevation = np.arange(first, last + 1) * step_deg
+    return np.radians(azimuth), np.radians(elevation)
+
+
+def _grid_directions(azimuth: np.ndarray, elevation: np.ndarray) -> np.ndarray:
+    """Unit directions (E, A, 3) of the grid, elevation-major."""
+    el, az = np.meshgrid(elevation, azimuth, indexing='ij')
+    return np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=-1)
+
+
+def _cast_all(scanner: Scanner, origins: np.ndarray, directions: np.ndarray,
+              batch: int) -> tuple[np.ndarray, np.ndarray]:
+    """First hits of many rays in batches: distance (inf for a miss) and triangle index."""
+    t_hit = np.empty(len(origins), np.float32)
+    triangle = np.empty(len(origins), np.int64)
+    for start in range(0, len(origins), batch):
+        stop = start + batch
+        t, prim = scanner.cast(scanner.full_scene, origins[start:stop], directions[start:stop])
+        t_hit[start:stop], triangle[start:stop] = t, prim
+    return t_hit, triangle
+
+
+def _shifted(values: np.ndarray, axis: int, step: int, wrap: bool, fill) -> np.ndarray:
+    """``values`` of the grid neighbour ``step`` away along ``axis`` (``fill`` past the border)."""
+    out = np.roll(values, step, axis=axis)
+    if not wrap:
+        border = [slice(None)] * values.ndim
+        border[axis] = slice(0, step) if step > 0 else slice(step, None)
+        out[tuple(border)] = fill
+    return out
+
+
+def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.ndarray,
+                  on_object: np.ndarray, part: np.ndarray, share: float,
+                  jump: float) -> tuple[np.ndarray, np.ndarray]:
+    """Ranges and triangles of one station's grid (E, A) after mixing at depth edges.
+
+    Two grid neighbours (azimuth wraps around) straddle a depth edge when their ranges differ by
+    more than ``jump``, they hit different parts and one of them is an object (``on_object`` per
+    triangle, ``part`` per triangle): the room's floor, walls and ceiling meet only in concave
+    corners, and a surface seen at a grazing angle (a floor, a table top) has large range steps
+    without an edge; edges of an object in front of itself are not modelled. A beam at an edge, with probability ``share``,
+    returns a range a uniform fraction of the way to the neighbour's across the largest step,
+    with the neighbour's triangle past half way.
+    """
+    object_hit = on_object[triangle] & np.isfinite(ranges)
+    largest = np.zeros(ranges.shape)
+    other, other_tri = ranges.copy(), triangle.copy()
+    for axis, step, wrap in ((1, 1, True), (1, -1, True), (0, 1, False), (0, -1, False)):
+        n_range = _shifted(ranges, axis, step, wrap, np.inf)
+        n_tri = _shifted(triangle, axis, step, wrap, 0)
+        n_object = _shifted(object_hit, axis, step, wrap, False)
+        with np.errstate(invalid='ignore'):
+            gap = np.abs(n_range - ranges)
+        edge = ((object_hit | n_object) & (part[n_tri] != part[triangle]) & np.isfinite(ranges)
+                & np.isfinite(n_range) & (gap > jump) & (gap > largest))
+        largest[edge], other[edge], other_tri[edge] = gap[edge], n_range[edge], n_tri[edge]
+    mixed = np.flatnonzero((largest > 0).ravel() & (rng.random(ranges.size) < share))
+    fraction = rng.random(len(mixed))
+    ranges, triangle = ranges.ravel().copy(), triangle.ravel().copy()
+    ranges[mixed] += fraction * (other.ravel()[mixed] - ranges[mixed])
+    far = mixed[fraction > 0.5]
+    triangle[far] = other_tri.ravel()[far]
+    return ranges, triangle
+
+
+def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.random.Generator,
+             cfg: Mapping[str, Any], batch: int,
+             on_object: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """All returns of the stations' grids: points (N, 3), triangles (N,), station index (N,).
+
+    ``on_object`` (T,) marks the triangles of objects, where depth edges can be.
+    """
+    azimuth, elevation = tls_grid(step_deg, cfg['min_elevation_deg'])
+    grid = (len(elevation), len(azimuth))
+    directions = _grid_directions(azimuth, elevation).reshape(-1, 3)
+    a, b = cfg['range_noise']
+    points, triangles, owner = [], [], []
+    for index, station in enumerate(stations):
+        origins = np.broadcast_to(station, directions.shape)
+        t_hit, triangle = _cast_all(scanner, origins, directions, batch)
+        ranges = t_hit.astype(np.float64)
+        ranges[(ranges < cfg['min_range']) | (ranges > cfg['max_range'])] = np.inf
+        if cfg['mixed_pixels'] > 0:
+            ranges, triangle = _mixed_pixels(rng, ranges.reshape(grid), triangle.reshape(grid),
+                                             on_object, scanner.scene.part, cfg['mixed_pixels'],
+                                             cfg['edge_jump'])
+        rows = np.flatnonzero(np.isfinite(ranges))
+        measured = ranges[rows]
+        if a > 0 or b > 0:
+            measured = measured + rng.standard_normal(len(rows)) * (a + b * measured)
+        points.append(station + directions[rows] * measured[:, None])
+        triangles.append(triangle[rows])
+        owner.append(np.full(len(rows), index))
+    return np.concatenate(points), np.concatenate(triangles), np.concatenate(owner)
+
+
+def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int,
+             rng: np.random.Generator, cfg: Mapping[str, Any], batch: int,
+             on_object: np.ndarray) -> tuple[ScanResult, float]:
+    """A TLS scan of ``n_points`` and its angular step (degrees).
+
+    Without a configured ``angular_step_deg`` the step is the one whose grids (over all stations)
+    give about ``n_points`` beams, refined (smaller) until the returns reach ``n_points``; a
+    uniform random subset of the returns meets the count exactly. A configured step is used as
+    is: fewer returns than requested are written with a warning.
+    """
+    fixed = cfg['angular_step_deg']
+    span = 90.0 - cfg['min_elevation_deg']
+    beams = 1.05 * n_points  # a closed room returns nearly every beam; refined below
+    step = fixed or 360.0 / math.ceil(360.0 / math.sqrt(360.0 * span * len(stations) / beams))
+    rays = 0
+    for _ in range(8):
+        xyz, triangle, owner = cast_tls(scanner, stations, step, rng, cfg, batch, on_object)
+        azimuth, elevation = tls_grid(step, cfg['min_elevation_deg'])
+        rays += len(stations) * len(azimuth) * len(elevation)
+        if fixed or len(xyz) >= n_points:
+            break
+        finer = math.ceil(360.0 / step * math.sqrt(n_points / max(len(xyz), 1)) * 1.02)
+        step = 360.0 / max(finer, int(round(360.0 / step)) + 1)
+    if len(xyz) > n_points:
+        keep = np.sort(rng.choice(len(xyz), n_points, replace=False))
+        xyz, triangle, owner = xyz[keep], triangle[keep], owner[keep]
+    elif len(xyz) < n_points:
+        warnings.warn(f'TLS: only {len(xyz)} of {n_points} points at an angular step of '
+                      f'{step:.4g} deg')
+    return _result(scanner, xyz, triangle, stations[owner], rays), step
+
+
+def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
+                      cfg: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+    """Poses of a walk through the room: positions (P, 3) and view directions (P, 3).
+
+    The walker goes once around every cell, ``wall_distance`` from its sides (starting corner and
+    sense random), the loops joined in cell order; the polyline is resampled to ``poses`` points
+    (per bay in a hall) and smoothed (rounded corners). The device is held at a height drawn from ``height``, looks
+    along the walk, sways ``sway_deg`` left and right and tilts through ``pitch_deg``. Poses
+    outside the room or over an object (within 0.3 m) are dropped: the walker steps around.
+    """
+    waypoints = []
+    for cell in room.cells:
+        low, high = _inset(cell, cfg['wall_distance'])
+        loop = np.array([[low[0], low[1]], [low[0], high[1]], [high[0], high[1]],
+                         [high[0], low[1]]])
+        loop = np.roll(loop, int(rng.integers(4)), axis=0)
+        if rng.random() < 0.5:
+            loop = loop[::-1]
+        waypoints += [*loop, loop[0]]
+    waypoints = np.array(waypoints)
+    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(waypoints, axis=0), axis=1))])
+    s = np.linspace(0.0, along[-1], int(cfg['poses']) * max(1, len(room.bays)))
+    xy = np.stack([np.interp(s, along, waypoints[:, i]) for i in range(2)], axis=1)
+    window = max(1, int(round(0.6 / max(s[1] - s[0], 1e-6)))) if len(s) > 1 else 1
+    kernel = np.ones(2 * window + 1) / (2 * window + 1)
+    padded = np.pad(xy, ((window, window), (0, 0)), mode='edge')
+    xy = np.stack([np.convolve(padded[:, i], kernel, mode='valid') for i in range(2)], axis=1)
+    heading = np.arctan2(*np.gradient(xy, axis=0)[:, ::-1].T)
+    phase = rng.uniform(0, 2 * np.pi, 2)
+    yaw = heading + np.radians(cfg['sway_deg']) * np.sin(2 * np.pi * s / 4.0 + phase[0])
+    low_pitch, high_pitch = np.radians(cfg['pitch_deg'])
+    pitch = low_pitch + (high_pitch - low_pitch) * (0.5 +
+                                                    0.5 * np.sin(2 * np.pi * s / 2.5 + phase[1]))
+    look = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], 1)
+    positions = np.column_stack([xy, np.full(len(xy), rng.uniform(*cfg['height']))])
+    keep = points_in_polygon(xy, room.polygon) & (_clearance(xy, room.obstacles) > 0.3)
+    if not keep.any():
+        raise ValueError('tablet: every pose of the walk is inside an object or outside the room')
+    return positions[keep], look[keep]
+
+
+def cast_tablet(
+    scanner: Scanner,
+    positions: np.ndarray,
+    look: np.ndarray,
+    n_points: int,
+    rng: np.random.Generator,
+    cfg: Mapping[str, Any],
+    batch: int,
+    shiny_colours: Sequence[Sequence[int]] = ()) -> tuple[ScanResult, np.ndarray]:
+    """Up to ``n_points`` tablet returns and the pose index (N,) of each.
+
+    Each ray takes a random pose and a uniform random pixel of the image plane (``fov_deg``
+    horizontal x vertical). A return counts when its measured range (true range plus noise of
+    std ``range_noise``) lies in [``min_range``, ``max_range``]; it is kept with a probability
+    falling linearly from 1 at ``min_range`` to ``far_keep`` at ``max_range``, and lost with
+    ``dark_dropout`` on dark and ``shiny_dropout`` on shiny triangles.
+    """
+    colours = scanner.scene.colors.astype(np.float64)
+    luminance = colours @ np.array([0.2126, 0.7152, 0.0722])
+    loss = np.where(luminance < cfg['dark_luminance'], cfg['dark_dropout'], 0.0)
+    if len(shiny_colours):
+        shiny = (scanner.scene.colors[:, None, :] == np.asarray(shiny_colours, np.uint8)[None])
+        loss = np.where(
+            shiny.all(axis=2).any(axis=1), np.maximum(loss, cfg['shiny_dropout']), loss)
+    right = np.stack([look[:, 1], -look[:, 0], np.zeros(len(look))], axis=1)
+    right /= row_norms(right) + 1e-12
+    up = np.cross(right, look)
+    half = np.tan(np.radians(np.asarray(cfg['fov_deg'], dtype=np.float64)) / 2)
+    near, far = cfg['min_range'], cfg['max_range']
+    points, triangles, owners = [], [], []
+    got = rays = 0
+    max_batches = max(64, 16 * n_points // batch + 64)
+    for _ in range(max_batches):
+        if got >= n_points:
+            break
+        pose = rng.integers(len(positions), size=batch)
+        pixel = (rng.random((batch, 2)) * 2 - 1) * half
+        directions = (
+            np.take(look, pose, axis=0) + pixel[:, :1] * np.take(right, pose, axis=0) +
+            pixel[:, 1:] * np.take(up, pose, axis=0))
+        directions /= row_norms(directions)
+        origins = np.take(positions, pose, axis=0)
+        t_hit, prim = scanner.cast(scanner.full_scene, origins, directions)
+        rays += batch
+        rows = np.flatnonzero(np.isfinite(t_hit))
+        measured = t_hit[rows] + rng.standard_normal(len(rows)) * cfg['range_noise']
+        keep_p = 1.0 - (1.0 - cfg['far_keep']) * (measured - near) / (far - near)
+        keep_p *= 1.0 - loss[prim[rows]]
+        kept = (measured >= near) & (measured <= far) & (rng.random(len(rows)) < keep_p)
+        rows, measured = rows[kept][:n_points - got], measured[kept][:n_points - got]
+        points.append(origins[rows] + directions[rows] * measured[:, None])
+        triangles.append(prim[rows].astype(np.int64))
+        owners.append(pose[rows])
+        got += len(rows)
+    if got < n_points:
+        warnings.warn(f'tablet: only {got} of {n_points} points after {rays} rays')
+    pose = np.concatenate(owners)
+    return _result(scanner, np.concatenate(points), np.concatenate(triangles), positions[pose],
+                   rays), pose
+
+
+def _result(scanner: Scanner, xyz: np.ndarray, triangle: np.ndarray, origin: np.ndarray,
+            rays: int) -> ScanResult:
+    """Label the returns by their triangles; ``origin`` (N, 3): where each was seen from."""
+    scene = scanner.scene
+    return ScanResult(
+        xyz=xyz.astype(np.float64),
+        rgb=np.take(scene.colors, triangle, axis=0),
+        part=scene.part[triangle].astype(np.int32),
+        triangle=triangle.astype(np.int64),
+        origin=origin.astype(np.float32),
+        rays_cast=int(rays),
+        object_points=int(scanner.movable_tri[triangle].sum()))

@@ -1,0 +1,381 @@
+"""Sensor models (generator/sensors.py) on real Open3D/Embree: hand-made box rooms for the TLS grid,
+range noise and mixed pixels, the tablet's range window and dropouts, the paper profile's uniform
+directions; and small real rooms from ``python -m generator`` for the per-room mix and
+determinism."""
+import json
+from pathlib import Path
+
+import bpy  # noqa: F401  (bpy before open3d: both ship libtbb)
+import numpy as np
+import pytest
+
+from generator.__main__ import main
+from generator.assets.palette import METAL
+from generator.config import DEFAULTS, ConfigError, load_config
+from generator.scanner import Scanner, TriangleScene
+from generator.sensors import (SENSOR_MODELS, RoomGeometry, cast_tablet, cast_tls, choose_sensor,
+                               scan_room, scan_tls, tls_grid)
+from synthdet.point_text import read_point_file
+from tests.test_generator_pipeline import _same_tree, box
+
+REPO = Path(__file__).resolve().parents[1]
+TLS = dict(DEFAULTS['scanner']['tls'], mixed_pixels=0.0, range_noise=[0.0, 0.0])
+TABLET = DEFAULTS['scanner']['tablet']
+BATCH = 65536
+
+
+def room_scene(size, cubes=()) -> TriangleScene:
+    """A box room ``size`` (part 0, structure) with cubes (lo, hi, rgb), each a movable part."""
+    vertices, triangles = box((0, 0, 0), size, True)
+    vertices, triangles = [vertices], [triangles]
+    colors, part = [[200, 200, 200]] * 12, [0] * 12
+    for index, (lo, hi, rgb) in enumerate(cubes, start=1):
+        v, f = box(lo, hi, False)
+        triangles.append(f + 8 * index)
+        vertices.append(v)
+        colors += [rgb] * 12
+        part += [index] * 12
+    return TriangleScene(
+        np.concatenate(vertices),
+        np.concatenate(triangles).astype(np.int32), np.array(colors, np.uint8),
+        np.array(part, np.int32), np.array([False] + [True] * len(cubes)))
+
+
+def objects(scanner: Scanner) -> np.ndarray:
+    """Per triangle: does it belong to an object (here the movable cubes)."""
+    return scanner.scene.movable[scanner.scene.part]
+
+
+def true_ranges(scanner: Scanner, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Noise-free ranges along the given rays."""
+    t_hit, _ = scanner.cast(scanner.full_scene, np.ascontiguousarray(origins),
+                            np.ascontiguousarray(directions))
+    return t_hit.astype(np.float64)
+
+
+def grid_position(points: np.ndarray, station: np.ndarray, step: float) -> np.ndarray:
+    """Azimuth and elevation of each point seen from ``station``, in units of ``step`` degrees."""
+    rel = points - station
+    azimuth = np.degrees(np.arctan2(rel[:, 1], rel[:, 0])) % 360.0
+    elevation = np.degrees(np.arctan2(rel[:, 2], np.hypot(rel[:, 0], rel[:, 1])))
+    return np.stack([azimuth, elevation], axis=1) / step
+
+
+def unit(degrees: np.ndarray) -> np.ndarray:
+    """Unit vectors (N, 3) float32 of (azimuth, elevation) pairs in degrees."""
+    azimuth, elevation = np.radians(degrees).T
+    return np.stack([
+        np.cos(elevation) * np.cos(azimuth),
+        np.cos(elevation) * np.sin(azimuth),
+        np.sin(elevation)
+    ],
+                    axis=1).astype(np.float32)
+
+
+def test_tls_directions_lie_on_the_angular_grid_of_its_step():
+    scanner = Scanner(room_scene((12, 6, 3), [((5, 2, 0), (6, 3, 1), (200, 0, 0))]))
+    station = np.array([[2.0, 3.0, 1.5]])
+    cfg = dict(TLS, range_noise=[0.005, 0.002], mixed_pixels=0.5)
+    scan, step = scan_tls(scanner, station, 50000, np.random.default_rng(0), cfg, BATCH,
+                          objects(scanner))
+    assert len(scan.xyz) == 50000 and 0.1 < step < 5
+    assert np.isclose(360.0 / step, round(360.0 / step))  # a whole number of azimuth steps
+    position = grid_position(scan.xyz, station[0], step)
+    assert np.abs(position - np.round(position)).max() < 1e-6
+    assert position[:, 1].min() >= cfg['min_elevation_deg'] / step - 1e-6
+    assert (scan.part == 1).sum() > 100 and len(np.unique(scan.triangle)) > 12
+    assert np.array_equal(scan.origin, np.repeat(station, 50000, 0).astype(np.float32))
+    # a coarser fixed step: every beam of the grid that hits is there, once
+    xyz, _, _ = cast_tls(scanner, station, 2.0, np.random.default_rng(0), TLS, BATCH,
+                         objects(scanner))
+    azimuth, elevation = tls_grid(2.0, TLS['min_elevation_deg'])
+    assert len(xyz) == len(azimuth) * len(elevation)  # a closed room returns every beam
+    cells = np.round(grid_position(xyz, station[0], 2.0)).astype(int)
+    assert len(np.unique(cells, axis=0)) == len(xyz)
+
+
+def test_tls_range_noise_grows_with_distance():
+    scanner = Scanner(room_scene((30, 4, 3)))
+    station = np.array([[1.0, 2.0, 1.5]])
+    a, b = 0.002, 0.002
+    xyz, _, _ = cast_tls(scanner, station, 0.25, np.random.default_rng(1),
+                         dict(TLS, range_noise=[a, b]), BATCH, objects(scanner))
+    measured = np.linalg.norm(xyz - station, axis=1)
+    truth = true_ranges(scanner, np.repeat(station, len(xyz), axis=0),
+                        (xyz - station) / measured[:, None])
+    error = measured - truth
+    stds = []
+    for low, high in ((1.0, 3.0), (8.0, 12.0), (20.0, 28.0)):
+        rows = (truth > low) & (truth < high)
+        assert rows.sum() > 300
+        stds.append(error[rows].std())
+        # the model: std a + b * d, checked on the normalised error
+        assert abs(np.std(error[rows] / (a + b * truth[rows])) - 1.0) < 0.1
+    assert stds[0] < stds[1] < stds[2] and stds[2] > 4 * stds[0]
+
+
+def test_tls_mixed_pixels_appear_only_at_depth_edges():
+    cube = ((4, 2.5, 0), (5, 3.5, 1), (0, 0, 200))
+    station = np.array([[1.5, 3.0, 1.5]])
+    cfg = dict(TLS, mixed_pixels=1.0)
+    step = 0.5
+    for cubes in ([], [cube]):
+        scanner = Scanner(room_scene((10, 6, 3), cubes))
+        xyz, _, _ = cast_tls(scanner, station, step, np.random.default_rng(2), cfg, BATCH,
+                             objects(scanner))
+        measured = np.linalg.norm(xyz - station, axis=1)
+        directions = (xyz - station) / measured[:, None]
+        off = np.abs(measured -
+                     true_ranges(scanner, np.repeat(station, len(xyz), 0), directions)) > 1e-3
+        if not cubes:  # walls, floor (even at grazing angles) and corners: no depth edge
+            assert not off.any()
+            continue
+        assert off.sum() > 20
+        # every mixed return: a grid neighbour of its beam hits the other surface (cube vs room)
+        # and the return lies between the two surfaces along its beam
+        for cell, r in zip(np.round(grid_position(xyz[off], station[0], step)), measured[off]):
+            beams = unit(
+                np.array([cell, cell + [1, 0], cell - [1, 0], cell + [0, 1], cell - [0, 1]]) *
+                step)
+            t_hit, prim = scanner.cast(scanner.full_scene, np.repeat(station, 5, 0), beams)
+            part = scanner.scene.part[prim]
+            other = part[1:] != part[0]
+            assert other.any()
+            assert min(t_hit[0], t_hit[1:][other].min()) - 1e-4 <= r
+            assert r <= max(t_hit[0], t_hit[1:][other].max()) + 1e-4
+
+
+def walk(start, end, n: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    """Tablet poses along a straight line at 1.4 m, looking along it and slightly down."""
+    positions = np.linspace(start, end, n)
+    look = np.tile(np.append(np.subtract(end, start)[:2], -0.3), (n, 1))
+    return positions, look / np.linalg.norm(look, axis=1, keepdims=True)
+
+
+def test_tablet_returns_lie_within_its_range_window():
+    scanner = Scanner(room_scene((20, 4, 3), [((8, 1.5, 0), (9, 2.5, 1), (200, 0, 0))]))
+    positions, look = walk((1.0, 2.0, 1.4), (3.0, 2.0, 1.4))
+    scan, pose = cast_tablet(scanner, positions, look, 30000, np.random.default_rng(3), TABLET,
+                             BATCH)
+    distance = np.linalg.norm(scan.xyz - positions[pose], axis=1)
+    assert len(scan.xyz) == 30000
+    assert np.array_equal(scan.origin, positions[pose].astype(np.float32))
+    assert distance.min() >= TABLET['min_range'] and distance.max() <= TABLET['max_range']
+    assert distance.max() > 0.95 * TABLET['max_range']  # the window, not the room, bounds it
+    # without the window the same walk sees the far end of the 20 m room
+    wide, pose = cast_tablet(scanner, positions, look, 30000, np.random.default_rng(3),
+                             dict(TABLET, max_range=40.0, far_keep=1.0), BATCH)
+    assert np.linalg.norm(wide.xyz - positions[pose], axis=1).max() > 15.0
+    # density falls with distance: fewer returns at 4-5 m than with every return kept
+    kept = dict(TABLET, far_keep=1.0)
+    flat, pose = cast_tablet(scanner, positions, look, 30000, np.random.default_rng(3), kept,
+                             BATCH)
+    far_share = np.mean(distance > 4.0)
+    assert far_share < 0.9 * np.mean(np.linalg.norm(flat.xyz - positions[pose], axis=1) > 4.0)
+
+
+def test_tablet_drops_returns_on_dark_and_shiny_triangles():
+    dark, shiny, plain = (20, 20, 24), METAL[1], (200, 60, 40)
+    scanner = Scanner(
+        room_scene((8, 6, 3), [((5, 0.5, 0), (6, 1.5, 1.2), dark),
+                               ((5, 2.5, 0), (6, 3.5, 1.2), shiny),
+                               ((5, 4.5, 0), (6, 5.5, 1.2), plain)]))
+    positions, look = walk((1.0, 1.0, 1.4), (1.0, 5.0, 1.4))
+    look = np.tile([0.95, 0.0, -0.3], (len(look), 1))  # towards the three boxes
+
+    def shares(dark_dropout: float, shiny_dropout: float) -> np.ndarray:
+        cfg = dict(TABLET, dark_dropout=dark_dropout, shiny_dropout=shiny_dropout)
+        scan, _ = cast_tablet(
+            scanner,
+            positions,
+            look,
+            40000,
+            np.random.default_rng(4),
+            cfg,
+            BATCH,
+            shiny_colours=METAL)
+        return np.array([np.mean(scan.part == p) for p in (1, 2, 3)])
+
+    clean = shares(0.0, 0.0)
+    assert np.all(clean > 0.03)
+    gone = shares(1.0, 1.0)
+    assert gone[0] == 0 and gone[1] == 0 and gone[2] > clean[2]
+    half = shares(0.5, 0.5)
+    ratio = half / clean
+    assert 0.35 < ratio[0] < 0.7 and 0.35 < ratio[1] < 0.7 and 0.95 < ratio[2] < 1.3
+
+
+class RecordingScanner(Scanner):
+    """The real scanner, keeping the directions of every batch it casts."""
+
+    def __init__(self, scene: TriangleScene):
+        super().__init__(scene)
+        self.directions: list[np.ndarray] = []
+
+    def cast(self, raycaster, origins, directions):
+        self.directions.append(np.array(directions))
+        return super().cast(raycaster, origins, directions)
+
+
+def test_paper_profile_casts_uniform_directions():
+    profile = load_config(REPO / 'generator' / 'profiles' / 'paper.json')['scanner']
+    assert profile['sensors'] == {'paper': 1.0, 'tls': 0.0, 'tablet': 0.0}
+    scene = room_scene((6, 4, 3), [((2, 1, 0), (3, 2, 1), (255, 0, 0))])
+    room = RoomGeometry(
+        np.array([[0, 0], [0, 4], [6, 4], [6, 0]], float), 3.0, [], np.zeros((0, 2, 2)),
+        np.array([False, True]))
+    z_histograms = {}
+    for aim in (False, True):
+        scanner = RecordingScanner(scene)
+        cfg = dict(profile, batch_rays=16384, aim_at_objects=aim)
+        scan, sensor = scan_room(scanner, room, 'paper', 4000, 0.5, np.random.default_rng(5), cfg)
+        assert sensor['model'] == 'paper' and sensor['aim_at_objects'] == aim
+        assert (scan.part == 1).sum() == 2000
+        directions = np.concatenate(scanner.directions)
+        z_histograms[aim] = np.histogram(
+            directions[:, 2], bins=10, range=(-1, 1))[0] / len(directions)
+        assert np.abs(directions.mean(axis=0)).max() < (0.02 if not aim else 1.0)
+    # uniform on the sphere: z uniform in [-1, 1]; aimed rays mostly go down to the cube
+    assert np.abs(z_histograms[False] - 0.1).max() < 0.01
+    assert np.abs(z_histograms[True] - 0.1).max() > 0.05
+
+
+def test_choose_sensor_follows_the_probabilities():
+    draws = [
+        choose_sensor(DEFAULTS['scanner']['sensors'], np.random.default_rng([9, i]))
+        for i in range(3000)
+    ]
+    for model in SENSOR_MODELS:
+        assert abs(draws.count(model) / 3000 - DEFAULTS['scanner']['sensors'][model]) < 0.03
+    only = {'paper': 0.0, 'tls': 1.0, 'tablet': 0.0}
+    assert {choose_sensor(only, np.random.default_rng(i)) for i in range(50)} == {'tls'}
+
+
+def test_sensor_configuration_errors_name_the_file_and_key(tmp_path):
+    config = tmp_path / 'bad.json'
+    for settings, message in (
+        ({
+            'scanner': {
+                'sensors': {
+                    'paper': 0.5
+                }
+            }
+        }, 'scanner.sensors" probabilities sum to 0.5'),
+        ({
+            'scanner': {
+                'sensors': {
+                    'lidar': 1.0
+                }
+            }
+        }, 'unknown sensor model "lidar"'),
+        ({
+            'scanner': {
+                'tls': {
+                    'range_noise': [0.1]
+                }
+            }
+        }, 'scanner.tls.range_noise'),
+        ({
+            'scanner': {
+                'tls': {
+                    'angular_step_deg': 0
+                }
+            }
+        }, 'scanner.tls.angular_step_deg'),
+        ({
+            'scanner': {
+                'tls': {
+                    'stations': 2
+                }
+            }
+        }, 'unknown key "scanner.tls.stations"'),
+        ({
+            'scanner': {
+                'tablet': {
+                    'min_range': 6.0
+                }
+            }
+        }, 'scanner.tablet.min_range" must be below'),
+        ({
+            'scanner': {
+                'tablet': {
+                    'dark_dropout': 1.5
+                }
+            }
+        }, 'scanner.tablet.dark_dropout'),
+    ):
+        config.write_text(json.dumps(settings))
+        with pytest.raises(ConfigError, match=f'{config}: .*{message}'.replace('[', r'\[')):
+            load_config(config)
+
+
+@pytest.fixture(scope='module')
+def mixed_run(tmp_path_factory):
+    """Three small rooms with the default sensor mix; seed 1 draws paper, TLS and tablet."""
+    work = tmp_path_factory.mktemp('mix')
+    args = [
+        '--areas', '7', '--rooms-per-area', '3', '--points', '20000', '--seed', '1',
+        '--asset-cache',
+        str(work / 'assets'), '--quiet'
+    ]
+    assert main(['--out', str(work / 'out'), *args]) == 0
+    return work, args
+
+
+def test_the_default_mix_gives_each_sensor_its_rooms(mixed_run):
+    work, _ = mixed_run
+    models = {}
+    for meta_path in sorted((work / 'out').rglob('meta.json')):
+        meta = json.loads(meta_path.read_text())
+        room = meta_path.parent
+        points, _ = read_point_file(room / f'{room.name}.txt')
+        assert len(points) == 20000
+        sensor = meta['generator']['sensor']
+        models[sensor['model']] = (meta, points[:, :3])
+    assert set(models) == set(SENSOR_MODELS)
+    paper, _ = models['paper']
+    assert paper['generator']['sensor_path'] and paper['generator']['object_points'] == 10000
+    meta, xyz = models['tls']
+    sensor = meta['generator']['sensor']
+    assert 'sensor_path' not in meta['generator'] and sensor['stations']
+    stations = np.array(sensor['stations'])
+    assert np.all((stations[:, 2] >= 1.4) & (stations[:, 2] <= 1.7))
+    # every point on the grid of the recorded step seen from one of the stations (within the
+    # text files' millimetre rounding)
+    on_grid = np.zeros(len(xyz), bool)
+    for station in stations:
+        rel = xyz - station
+        tol = np.degrees(1e-3 / np.hypot(rel[:, 0], rel[:, 1])) / sensor['angular_step_deg']
+        position = grid_position(xyz, station, sensor['angular_step_deg'])
+        on_grid |= np.all(np.abs(position - np.round(position)) <= tol[:, None] + 1e-3, axis=1)
+    assert on_grid.mean() > 0.99  # a mixed pixel rounded across a cell boundary may miss
+    meta, xyz = models['tablet']
+    sensor = meta['generator']['sensor']
+    trajectory = np.array(sensor['trajectory'])
+    assert len(trajectory) > 100 and sensor['max_range'] == 5.0
+    nearest = np.min(np.linalg.norm(xyz[:, None, :] - trajectory[None, ::4], axis=2), axis=1)
+    assert nearest.max() <= 5.0 + 0.05  # within the range of the walk (text rounding)
+
+
+def test_same_seed_gives_the_same_files(mixed_run):
+    work, args = mixed_run
+    assert main(['--out', str(work / 'again'), *args, '--workers', '2']) == 0
+    _same_tree(work / 'out', work / 'again')
+
+
+def test_profile_option_selects_a_packaged_profile(mixed_run, capsys):
+    work, args = mixed_run
+    assert main(['--out', str(work / 'paper'), *args[:-1], '--profile', 'paper', '--quiet']) == 0
+    for meta_path in (work / 'paper').rglob('meta.json'):
+        meta = json.loads(meta_path.read_text())
+        generator = meta['generator']
+        assert generator['sensor']['model'] == 'paper'
+        assert generator['config']['scanner']['aim_at_objects'] is False
+        assert not generator['appearance']['shading'] and not generator['appearance']['colourless']
+        assert not [obj for obj in meta['objects'] if obj['class'] == 'clutter']
+    with pytest.raises(SystemExit):
+        main(['--out', str(work / 'bad'), '--profile', 'nope'])
+    assert "invalid choice: 'nope'" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(['--out', str(work / 'bad'), '--profile', 'paper', '--config', 'x.json'])
+    assert 'not allowed with argument' in capsys.readouterr().err
