@@ -49,7 +49,8 @@ def test_colourless_rooms_write_zeros_and_keep_the_scan(asset_cache, tmp_path):
     root = tmp_path / 'colourless'
     out = root / 'Stanford3dDataset_v1.2_Aligned_Version'
     rooms = _generate(out, asset_cache, PROFILES / 'colourless.json')
-    plain = _generate(tmp_path / 'off', asset_cache, _config_file(tmp_path, OFF))
+    # the paper profile: the same settings with appearance off
+    plain = _generate(tmp_path / 'off', asset_cache, PROFILES / 'paper.json')
     for room, reference in zip(rooms, plain):
         points = _points(room / f'{room.name}.txt')
         assert len(points) == 4000 and np.all(points[:, 3:] == 0)
@@ -85,7 +86,8 @@ def test_colourless_rooms_write_zeros_and_keep_the_scan(asset_cache, tmp_path):
 
 def test_shaded_profile_changes_colours_only(asset_cache, tmp_path):
     rooms = _generate(tmp_path / 'shaded', asset_cache, PROFILES / 'shaded.json')
-    plain = _generate(tmp_path / 'off', asset_cache, _config_file(tmp_path, OFF))
+    # the paper profile: the same settings with appearance off
+    plain = _generate(tmp_path / 'off', asset_cache, PROFILES / 'paper.json')
     for room, reference in zip(rooms, plain):
         points = _points(room / f'{room.name}.txt')
         reference_points = _points(reference / f'{reference.name}.txt')
