@@ -2,7 +2,7 @@
 held-out generator profiles (issue #16 part 6; docs/results.md "Domain shift").
 
 Usage: python benchmarks/bench_domain_shift.py [--work-dir work_dirs/domain_shift]
-           [--rooms-train 40] [--rooms-test 12] [--iters 300] [--points 200000] [--seed 0]
+           [--rooms-train 50] [--rooms-test 20] [--iters 250] [--points 1000000] [--seed 0]
            [--sample-points 40000] [--jobs 2] [--profiles-dir generator/profiles]
            [--test-profiles paper tls ...] [--progress-every 60]
 
@@ -17,8 +17,8 @@ so a stopped run continues where it stopped (a training resumes from its newest 
  3. train one model per training profile (``tools/train.py``; configs/tr3d/domain_shift_cpu.py
     and domain_shift_mixed_cpu.py, written to ``WORK/models/<model>/config.py`` with this run's
     data root, iterations and points);
- 4. test each model on each test profile (``tools/test.py``: ``WORK/tests/<model>_on_<profile>.json``,
-    the paper's Table 3);
+ 4. test each model on each test profile (``tools/test.py``, the paper's Table 3:
+    ``WORK/tests/<model>_on_<profile>.json``);
  5. print a Table 3 per test profile, each model's in-domain score and its drop on every held-out
     profile, and write all numbers to ``WORK/domain_shift.json`` (the text to
     ``WORK/domain_shift.txt``).
@@ -146,8 +146,10 @@ def run_jobs(jobs: list[Job], parallel: int, progress_every: float) -> None:
             seconds = time.monotonic() - job.started
             if job.process.returncode:
                 failed.append(job)
-                print(f'[domain shift] {job.name}: FAILED (exit {job.process.returncode}) after '
-                      f'{seconds:.0f} s', flush=True)
+                print(
+                    f'[domain shift] {job.name}: FAILED (exit {job.process.returncode}) after '
+                    f'{seconds:.0f} s',
+                    flush=True)
             else:
                 print(f'[domain shift] {job.name}: done in {seconds:.0f} s', flush=True)
         if time.monotonic() - last_shown >= progress_every:
@@ -359,8 +361,9 @@ class DomainShift:
             in_domain = tables[model][model]['rows']
             drops = {
                 profile: {
-                    metric: _difference(in_domain[metric]['mean'],
-                                        tables[model][profile]['rows'][metric]['mean'])
+                    metric:
+                    _difference(in_domain[metric]['mean'],
+                                tables[model][profile]['rows'][metric]['mean'])
                     for metric in METRICS
                 }
                 for profile in held_out(model, self.test_profiles)
@@ -372,8 +375,10 @@ class DomainShift:
                 'training_area': TRAIN_AREAS[model],
                 'robustness_augmentations': self.robustness(model),
                 'in_domain_profile': model,
-                'in_domain': {metric: in_domain[metric]['mean']
-                              for metric in METRICS},
+                'in_domain': {
+                    metric: in_domain[metric]['mean']
+                    for metric in METRICS
+                },
                 'held_out': list(drops),
                 'drops': drops,
                 'worst_held_out_mAP@0.25': _minimum(held),
@@ -393,16 +398,20 @@ class DomainShift:
             },
             'classes': next(iter(tables[MIXED].values()))['classes'],
             'tables': {
-                profile: {model: tables[model][profile]['rows']
-                          for model in TRAIN_AREAS}
+                profile: {
+                    model: tables[model][profile]['rows']
+                    for model in TRAIN_AREAS
+                }
                 for profile in self.test_profiles
             },
             'models': models,
             'goal': {
-                'max_drop_mAP@0.25': GOAL_DROP,
-                'mixed_largest_drop': _maximum(mixed_drops),
-                'met': bool(mixed_drops) and all(
-                    d is not None and d <= GOAL_DROP for d in mixed_drops),
+                'max_drop_mAP@0.25':
+                GOAL_DROP,
+                'mixed_largest_drop':
+                _maximum(mixed_drops),
+                'met':
+                bool(mixed_drops) and all(d is not None and d <= GOAL_DROP for d in mixed_drops),
             },
             'durations_s': self.durations,
         }
@@ -473,6 +482,12 @@ def report(results: dict) -> str:
                          f'{_number(drop["mAP@0.5"], True):>8}')
     goal = results['goal']
     paper, mixed = results['models']['paper'], results['models'][MIXED]
+    if results.get('durations_s'):
+        lines += [
+            '', 'wall time of the steps run now: ' +
+            ', '.join(f'{step} {seconds:.0f} s'
+                      for step, seconds in results['durations_s'].items())
+        ]
     lines += [
         '', f'goal: the mixed model loses at most {GOAL_DROP} mAP@0.25 on every held-out '
         f'profile against its in-domain score: {"met" if goal["met"] else "NOT met"} (largest '
@@ -487,10 +502,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0].replace('\n', ' '))
     parser.add_argument('--work-dir', type=Path, default=REPO / 'work_dirs/domain_shift')
     parser.add_argument(
-        '--rooms-train', type=int, default=40, help='training rooms per training profile')
-    parser.add_argument('--rooms-test', type=int, default=12, help='test rooms per test profile')
-    parser.add_argument('--iters', type=int, default=300, help='training iterations (batch 4)')
-    parser.add_argument('--points', type=int, default=200_000, help='points per generated room')
+        '--rooms-train', type=int, default=50, help='training rooms per training profile')
+    parser.add_argument('--rooms-test', type=int, default=20, help='test rooms per test profile')
+    parser.add_argument('--iters', type=int, default=250, help='training iterations (batch 4)')
+    parser.add_argument('--points', type=int, default=1_000_000, help='points per generated room')
     parser.add_argument(
         '--sample-points', type=int, default=40_000, help='points the detector samples per room')
     parser.add_argument('--seed', type=int, default=0, help='generator and training seed')

@@ -18,7 +18,7 @@ from projects.synthdet.config_helpers import area_datasets, area_info_file  # no
 data_root = 'work_dirs/domain_shift/data/'
 train_area = [11]
 test_area = 21
-max_iters = 300
+max_iters = 250
 
 train_dataloader = dict(
     sampler=dict(type='InfiniteSampler', shuffle=True),
@@ -26,10 +26,10 @@ train_dataloader = dict(
         times=1,
         dataset=dict(
             datasets=area_datasets(
-                dict(_base_.train_area_dataset, data_root=data_root,
-                     pipeline=_base_.train_pipeline), train_area, _base_.metainfo))))
-test_dataloader = dict(
-    dataset=dict(data_root=data_root, ann_file=area_info_file(test_area)))
+                dict(
+                    _base_.train_area_dataset, data_root=data_root,
+                    pipeline=_base_.train_pipeline), train_area, _base_.metainfo))))
+test_dataloader = dict(dataset=dict(data_root=data_root, ann_file=area_info_file(test_area)))
 val_dataloader = None
 val_cfg = None
 val_evaluator = None

@@ -22,6 +22,7 @@ train_dataloader = dict(
     dataset=dict(
         dataset=dict(
             datasets=area_datasets(
-                dict(_base_.train_area_dataset, data_root=_base_.data_root,
-                     pipeline=train_pipeline), train_area, _base_.metainfo))))
+                dict(
+                    _base_.train_area_dataset, data_root=_base_.data_root,
+                    pipeline=train_pipeline), train_area, _base_.metainfo))))
 test_dataloader = dict(dataset=dict(ann_file=area_info_file(test_area)))
