@@ -42,6 +42,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # run as a script from anywhere: make `projects` importable
 
 from projects.synthdet.config_helpers import area_info_file, with_num_points  # noqa: E402
+from tools.demo import StepError, claim_work_dir  # noqa: E402
 
 RAW_DIR = 'Stanford3dDataset_v1.2_Aligned_Version'
 MIXED = 'mixed'  # the generator's default configuration: no profile file
@@ -63,10 +64,6 @@ MODEL_CONFIGS = {
 METRICS = ('mAP@0.25', 'mAP@0.5')
 GOAL_DROP = 0.05  # issue #16: the mixed model loses at most this mAP@0.25 on a held-out profile
 RESULT_FORMAT = 'synthdet.domain_shift/1'
-
-
-class StepError(RuntimeError):
-    """A step failed or cannot run; the message names the step and its log or input file."""
 
 
 @dataclass(frozen=True)
@@ -206,16 +203,8 @@ class DomainShift:
             if model not in self.test_profiles:
                 raise StepError(f'--test-profiles must include {model!r}: the {model} model\'s '
                                 'in-domain test')
-        stamp = self.work / 'settings.json'
-        wanted = dict(format=RESULT_FORMAT, **self.settings.__dict__)
-        if stamp.is_file():
-            found = json.loads(stamp.read_text())
-            if found != wanted:
-                raise StepError(f'{stamp}: this work folder holds a run with {found}, not '
-                                f'{wanted}; choose another --work-dir')
-        else:
-            self.work.mkdir(parents=True, exist_ok=True)
-            stamp.write_text(json.dumps(wanted, indent=1) + '\n')
+        claim_work_dir(self.work / 'settings.json',
+                       dict(format=RESULT_FORMAT, **self.settings.__dict__))
 
     def rooms_in(self, area: int) -> int:
         folder = self.raw / f'Area_{area}'

@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 from mmengine.config import Config
 
-from benchmarks.bench_domain_shift import (MIXED, TEST_AREAS, TRAIN_AREAS, held_out, report)
+from benchmarks.bench_domain_shift import (MIXED, TEST_AREAS, TRAIN_AREAS, DomainShift, Settings,
+                                           StepError, held_out, report)
 
 REPO = Path(__file__).resolve().parents[1]
 LAST_LINE = re.compile(r'domain shift: worst held-out mAP@0\.25 (\d\.\d{3}|-) vs (\d\.\d{3}|-)')
@@ -137,6 +138,18 @@ def test_report_names_held_out_profiles_drops_and_the_worst_of_each_model():
         re.fullmatch(r'\s*tls\s+0\.800\s+\+0\.100\s+0\.500\s+\+0\.000', line) for line in text)
     first = text.index('Table 3 on tls (area 22, 2 rooms):')
     assert text[first + 2].split() == ['paper', 'mAP@0.25', '0.800', '-', '0.800']
+
+
+def test_missing_profile_files_and_in_domain_tests_are_refused_before_any_work(tmp_path):
+    settings = Settings(1, 1, 1, 100, 100, 0)
+    bench = DomainShift(tmp_path / 'work', settings, tmp_path, ['paper', 'noisy', MIXED])
+    with pytest.raises(StepError, match=re.escape(str(tmp_path / 'paper.json'))):
+        bench.check_inputs()
+    (tmp_path / 'paper.json').write_text('{}')
+    (tmp_path / 'noisy.json').write_text('{}')
+    with pytest.raises(StepError, match="must include 'mixed'"):
+        DomainShift(tmp_path / 'work', settings, tmp_path, ['paper', 'noisy']).check_inputs()
+    assert not (tmp_path / 'work').exists()
 
 
 def run_bench(work: Path, profiles: Path, *extra: str) -> subprocess.CompletedProcess:
