@@ -120,6 +120,20 @@ def run_jobs(jobs: list[Job], parallel: int, progress_every: float) -> None:
     and ends and, every ``progress_every`` seconds, the newest log line of each running one.
     Raises ``StepError`` naming the log of the first job that fails (after the others end)."""
     waiting, running, failed = list(jobs), [], []
+    try:
+        _run_until_done(waiting, running, failed, parallel, progress_every)
+    finally:  # interrupted: stop the jobs still running
+        for job in running:
+            job.process.terminate()
+            job.process.wait()
+    if failed:
+        job = failed[0]
+        raise StepError(f'{job.name}: `{" ".join(job.args)}` exited with '
+                        f'{job.process.returncode}; see {job.log}')
+
+
+def _run_until_done(waiting: list[Job], running: list[Job], failed: list[Job], parallel: int,
+                    progress_every: float) -> None:
     env = dict(os.environ, OMP_NUM_THREADS='1', PYTHONUNBUFFERED='1', PYTHONWARNINGS='ignore')
     last_shown = time.monotonic()
     while waiting or running:
@@ -158,10 +172,6 @@ def run_jobs(jobs: list[Job], parallel: int, progress_every: float) -> None:
                     print(f'[domain shift] {job.name}: {line}', flush=True)
         if failed and not running:
             break
-    if failed:
-        job = failed[0]
-        raise StepError(f'{job.name}: `{" ".join(job.args)}` exited with '
-                        f'{job.process.returncode}; see {job.log}')
 
 
 class DomainShift:
@@ -176,7 +186,7 @@ class DomainShift:
                  progress_every: float = 60.0) -> None:
         self.work = work_dir.resolve()
         self.settings = settings
-        self.profiles_dir = profiles_dir
+        self.profiles_dir = profiles_dir.resolve()  # the tools run from the repository
         self.test_profiles = test_profiles
         self.jobs = jobs
         self.progress_every = progress_every
