@@ -22,6 +22,13 @@ so a stopped run continues where it stopped (a training resumes from its newest 
  5. print a Table 3 per test profile, each model's in-domain score and its drop on every held-out
     profile, and write all numbers to ``WORK/domain_shift.json`` (the text to
     ``WORK/domain_shift.txt``).
+The defaults fit about 1.5 h on 2 cores, from a dry run at small scale (4 training rooms, 3 test
+rooms, 200,000 points; a busy machine) and `make exp2-cpu`'s figures (docs/results.md): a training
+iteration of 4 rooms x 40,000 points costs about 10.5 CPU-s, so 250 iterations take about 45 min
+per model on one core, the two in parallel; generating and converting 150 rooms of 1M points
+took 75 s and 20 s on 2 processes, plus about 10 s of start-up per set here; a test costs about
+1 s per room plus about 20 s of start-up (16 tests, two at a time): about 55 min on idle cores
+(the new sensor models may generate more slowly than the paper's path measured here).
 Held out: for the paper model every test profile but ``paper``; for the mixed model every
 single-profile test area (all but ``mixed``, its in-domain test). The last line compares the
 worst held-out mAP@0.25 of the two models.
