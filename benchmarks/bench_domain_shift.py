@@ -294,6 +294,10 @@ class DomainShift:
         test_set = cfg.test_dataloader.dataset
         test_set.data_root = data_root
         test_set.pipeline = with_num_points(test_set.pipeline, points)
+        # the config's variables too, so that the written file reads as what it runs
+        cfg.data_root, cfg.num_points, cfg.max_iters = data_root, points, iters
+        for name in ('train_pipeline', 'test_pipeline'):
+            cfg[name] = with_num_points(cfg[name], points)
         cfg.train_cfg.max_iters = iters
         cfg.param_scheduler.end = iters
         cfg.param_scheduler.milestones = [iters * 4 // 5]

@@ -19,6 +19,7 @@ data_root = 'work_dirs/domain_shift/data/'
 train_area = [11]
 test_area = 21
 max_iters = 250
+robustness = False  # the robustness augmentations (domain_shift_mixed_cpu.py) are off
 
 train_dataloader = dict(
     sampler=dict(type='InfiniteSampler', shuffle=True),
