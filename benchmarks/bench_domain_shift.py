@@ -15,8 +15,8 @@ so a stopped run continues where it stopped (a training resumes from its newest 
     (``--seed`` x 100 + area) per set, into ``WORK/data``;
  2. convert every area (``tools/create_data.py``);
  3. train one model per training profile (``tools/train.py``; configs/tr3d/domain_shift_cpu.py
-    and domain_shift_mixed_cpu.py, written to ``WORK/models/<model>/config.py`` with this run's
-    data root, iterations and points);
+    and domain_shift_mixed_cpu.py, written to ``WORK/models/<model>/domain_shift_<model>.py``
+    with this run's data root, iterations and points);
  4. test each model on each test profile (``tools/test.py``, the paper's Table 3:
     ``WORK/tests/<model>_on_<profile>.json``);
  5. print a Table 3 per test profile, each model's in-domain score and its drop on every held-out
@@ -233,6 +233,10 @@ class DomainShift:
     def model_dir(self, model: str) -> Path:
         return self.work / 'models' / model
 
+    def model_config(self, model: str) -> Path:
+        """The config the model trains and tests with; its name heads the Table 3 text."""
+        return self.model_dir(model) / f'domain_shift_{model}.py'
+
     def final_checkpoint(self, model: str) -> Path:
         return self.model_dir(model) / f'iter_{self.settings.iters}.pth'
 
@@ -303,7 +307,7 @@ class DomainShift:
         cfg.param_scheduler.milestones = [iters * 4 // 5]
         cfg.default_hooks.checkpoint.interval = max(1, iters // 4)
         cfg.randomness = dict(seed=self.settings.seed)
-        path = self.model_dir(model) / 'config.py'
+        path = self.model_config(model)
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(f'# {MODEL_CONFIGS[model].relative_to(REPO)} with the data in '
                         f'{data_root}, {iters} iterations, {points} sampled points; written by '
@@ -315,7 +319,7 @@ class DomainShift:
         for model in TRAIN_AREAS:
             if self.final_checkpoint(model).is_file():
                 continue
-            config = self.model_dir(model) / 'config.py'
+            config = self.model_config(model)
             if not config.is_file():
                 self.write_model_config(model)
             resume = ['--resume'] if list(self.model_dir(model).glob('iter_*.pth')) else []
@@ -331,7 +335,7 @@ class DomainShift:
         return [
             Job(f'test {model} on {profile}', [
                 'tools/test.py',
-                str(self.model_dir(model) / 'config.py'),
+                str(self.model_config(model)),
                 str(self.final_checkpoint(model)), '--work-dir',
                 str(self.work / 'tests' / f'{model}_on_{profile}'), '--out',
                 str(self.table_file(model, profile)), '--cfg-options',
@@ -361,7 +365,7 @@ class DomainShift:
         """Whether the model's config switched the robustness augmentations on."""
         from mmengine.config import Config
         return bool(
-            Config.fromfile(self.model_dir(model) / 'config.py',
+            Config.fromfile(self.model_config(model),
                             import_custom_modules=False).get('robustness', False))
 
     def results(self, tables: dict[str, dict[str, dict]]) -> dict:

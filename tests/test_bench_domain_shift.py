@@ -188,6 +188,8 @@ def test_tiny_run_trains_both_models_tests_every_profile_and_resumes(tmp_path):
         document = json.loads((work / 'tests' / f'paper_on_{profile}.json').read_text())
         assert document['format'] == 'synthdet.table3/1'
         assert document['test_set'] == f's3dis_infos_Area_{TEST_AREAS[profile]}.pkl'
+        assert document['config'] == str(work / 'models/paper/domain_shift_paper.py')
+        assert document['checkpoint'] == str(work / 'models/paper/iter_3.pth')
         assert rows['paper'] == document['rows']
     # every set was generated with its profile, area and seed
     raw = work / 'data/Stanford3dDataset_v1.2_Aligned_Version'
