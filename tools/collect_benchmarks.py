@@ -60,7 +60,8 @@ WHAT = {
     'corners':
     'room corners: traced outline vs the paper\'s method and a convex hull (error, '
     'count, order, time)',
-    'hall': '30M-point generated hall as LAZ -> FCStd (time, memory); windowed vs room recall',
+    'hall':
+    '30M-point generated hall as LAZ -> FCStd (time, memory); windowed vs room recall',
     'domain_shift':
     'TR3D at CPU scale trained on the paper profile vs the mixed default, tested on held-out '
     'generator profiles (about 1.5 h; only with `--only domain_shift`)',
@@ -158,7 +159,9 @@ def render(records: list[dict], not_run: list[str], output_dir: Path) -> str:
         '# Benchmarks',
         '',
         'Written by `make bench` (`tools/collect_benchmarks.py`), which runs every '
-        '`benchmarks/bench_*.py` one after the other, keeps each full output in '
+        '`benchmarks/bench_*.py` one after the other (' +
+        ', '.join(f'`{name}`' for name in sorted(OPT_IN)) + ' only when named with `--only`: '
+        'hours of training), keeps each full output in '
         f'`{shown}/<name>.txt` (progress bars left out) and writes this page from them. Every '
         'benchmark measures all sides of its comparison in the same run, on the same input, '
         'with the same warm-up, repeats and thread or process counts. '
@@ -217,8 +220,8 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr)
         return 2
     for name in names:
-        if args.render_only or (args.only and name not in args.only) or (
-                not args.only and name in OPT_IN):
+        if args.render_only or (args.only and name not in args.only) or (not args.only
+                                                                         and name in OPT_IN):
             continue
         print(f'[bench] {name}: {" ".join(command_of(name))}', flush=True)
         record = run_benchmark(name, args.output_dir)
