@@ -467,9 +467,11 @@ def report(results: dict) -> str:
         f'generated room, seed {settings["seed"]}).'
     ]
     for model, info in results['models'].items():
+        robustness = 'on' if info['robustness_augmentations'] else (
+            'off (not in this checkout)' if model == MIXED else 'off')
         lines.append(f'  {model} model: {info["config"]}, trained on area '
                      f'{info["training_area"]} (profile {model}), robustness augmentations '
-                     f'{"on" if info["robustness_augmentations"] else "off (not available)"}')
+                     f'{robustness}')
     width = max(10, *(len(c) + 1 for c in classes))
     for profile, rows in results['tables'].items():
         test_set = sets[f'test_{profile}']

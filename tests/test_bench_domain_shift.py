@@ -129,6 +129,8 @@ def test_report_names_held_out_profiles_drops_and_the_worst_of_each_model():
     }
     text = report(results).splitlines()
     assert text[-1] == 'domain shift: worst held-out mAP@0.25 0.200 vs 0.890'
+    assert text[1].endswith('(profile paper), robustness augmentations off')
+    assert text[2].endswith('(profile mixed), robustness augmentations on')
     assert text[-2].endswith('NOT met (largest drop +0.080)')
     for profile in profiles:
         assert f'Table 3 on {profile} (area {TEST_AREAS[profile]}, 2 rooms):' in text
