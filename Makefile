@@ -47,6 +47,8 @@ exp2-cpu: setup
 # Every benchmarks/bench_*.py, one after the other; each full output is kept in
 # docs/benchmarks/<name>.txt and docs/benchmarks.md is written from them.
 # BENCH_ARGS="--only scanner convert" runs a subset (the others keep their earlier outputs).
+# The domain-shift benchmark (about 1.5 h on 2 cores: data, two trainings, 16 tests) runs only
+# when named: BENCH_ARGS="--only domain_shift" (docs/results.md, "Domain shift").
 BENCH_ARGS ?=
 bench: setup
 	$(PY) tools/collect_benchmarks.py $(BENCH_ARGS)

@@ -103,6 +103,19 @@ class StepError(RuntimeError):
     """A pipeline step failed; the message names the step and its log file."""
 
 
+def claim_work_dir(stamp: Path, wanted: dict) -> None:
+    """Record a run's settings ``wanted`` in the work dir's ``stamp`` file; raise
+    ``StepError`` if the stamp holds a run with other settings."""
+    if stamp.is_file():
+        found = json.loads(stamp.read_text())
+        if found != wanted:
+            raise StepError(f'{stamp}: this work dir holds a run with {found}, not {wanted}; '
+                            'choose another --work-dir')
+    else:
+        stamp.parent.mkdir(parents=True, exist_ok=True)
+        stamp.write_text(json.dumps(wanted) + '\n')
+
+
 class Demo:
     """The pipeline's steps over one work directory."""
 
@@ -386,16 +399,11 @@ class Demo:
     # ------------------------------------------------------------------ driver
     def check_work_dir(self) -> None:
         """Record the size and seed in ``demo.json``; refuse a work dir made with others."""
-        stamp = self.work / 'demo.json'
-        wanted = {'format': 'synthdet.demo/1', 'size': self.size_name, 'seed': self.seed}
-        if stamp.is_file():
-            found = json.loads(stamp.read_text())
-            if found != wanted:
-                raise StepError(f'{stamp}: this work dir holds a demo run with {found}, not '
-                                f'{wanted}; choose another --work-dir')
-        else:
-            self.work.mkdir(parents=True, exist_ok=True)
-            stamp.write_text(json.dumps(wanted) + '\n')
+        claim_work_dir(self.work / 'demo.json', {
+            'format': 'synthdet.demo/1',
+            'size': self.size_name,
+            'seed': self.seed
+        })
 
     def run_all(self, force: bool = False) -> None:
         """Run every step whose outputs are missing (all of them with ``force``)."""

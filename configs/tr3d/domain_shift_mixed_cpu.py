@@ -1,0 +1,28 @@
+# The domain-shift benchmark's mixed-profile model (benchmarks/bench_domain_shift.py): the
+# paper-profile model of domain_shift_cpu.py trained on the rooms of the generator's default mix
+# (area 12) with the training robustness augmentations (`robust_augmentations` of
+# _base_/s3dis-synthdet.py, inserted by `with_robustness`) switched on; tested in-domain on the
+# mixed test rooms (area 28). `robustness` records whether this checkout has the augmentations
+# (the benchmark prints it): without them the mixed model trains on the plain pipeline.
+_base_ = ['./domain_shift_cpu.py']
+from projects.synthdet.config_helpers import area_datasets, area_info_file  # noqa: E402
+
+try:
+    from projects.synthdet.config_helpers import with_robustness  # noqa: E402
+    train_pipeline = with_robustness(_base_.train_pipeline, _base_.robust_augmentations)
+    robustness = True
+except ImportError:
+    train_pipeline = _base_.train_pipeline
+    robustness = False
+
+train_area = [12]
+test_area = 28
+
+train_dataloader = dict(
+    dataset=dict(
+        dataset=dict(
+            datasets=area_datasets(
+                dict(
+                    _base_.train_area_dataset, data_root=_base_.data_root,
+                    pipeline=train_pipeline), train_area, _base_.metainfo))))
+test_dataloader = dict(dataset=dict(ann_file=area_info_file(test_area)))
