@@ -277,8 +277,8 @@ def main() -> None:
         (lambda o, d, s=scanner: s.cast(s.full_scene, o, d), args.rays)
         for threads, scanner in embree.items()
     }
-    methods['Open3D cast_rays (previous engine)'] = (open3d_caster(
-        triangles.vertices, triangles.triangles), args.rays)
+    methods['Open3D cast_rays (previous engine)'] = (open3d_caster(triangles.vertices,
+                                                                   triangles.triangles), args.rays)
     methods['bpy BVHTree.ray_cast loop'] = (bvhtree_caster(triangles.vertices,
                                                            triangles.triangles), args.rays)
     methods['bpy Object.ray_cast loop (per object)'] = (object_caster(objects,

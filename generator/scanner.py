@@ -163,8 +163,7 @@ class Scanner:
         # Embree's default mode, faster per ray than the robust mode Open3D sets; the benchmark
         # prints the agreement of the two (docs/generator.md, "Speed")
         raycaster = EmbreeScene(robust=False)
-        TriangleMesh(raycaster, self.scene.vertices.astype(np.float32),
-                     triangles.astype(np.int32))
+        TriangleMesh(raycaster, self.scene.vertices.astype(np.float32), triangles.astype(np.int32))
         return raycaster
 
     def cast(self, raycaster, origins: np.ndarray,
@@ -184,8 +183,7 @@ class Scanner:
         else:
             with ThreadPoolExecutor(workers) as pool:
                 slices = list(
-                    pool.map(_cast_slice, [raycaster] * workers,
-                             np.array_split(origins, workers),
+                    pool.map(_cast_slice, [raycaster] * workers, np.array_split(origins, workers),
                              np.array_split(directions, workers)))
             t_hit = np.concatenate([hit for hit, _ in slices])
             primitive = np.concatenate([index for _, index in slices])

@@ -366,8 +366,10 @@ def test_scanner_cast_is_the_same_on_one_and_two_threads():
     inf and the largest uint32; the distance is in units of the direction's length."""
     scene, _ = _box_room_scene()
     rng = np.random.default_rng(0)
-    origins = np.concatenate([rng.uniform([0.5, 0.5, 1.5], [5.5, 3.5, 2.5], (60000, 3)),
-                              np.tile([[3.0, 2.0, 5.0]], (40000, 1))])  # above the ceiling
+    origins = np.concatenate([
+        rng.uniform([0.5, 0.5, 1.5], [5.5, 3.5, 2.5], (60000, 3)),
+        np.tile([[3.0, 2.0, 5.0]], (40000, 1))
+    ])  # above the ceiling
     directions = random_directions(rng, 100000)
     directions[60000:] = [0.0, 0.0, 2.0]  # upwards from above the room: misses
     one, two = Scanner(scene, threads=1), Scanner(scene, threads=2)
