@@ -1,5 +1,5 @@
-"""Ray casting speed on one generated room: the batched Embree scanner (``Scanner.cast``, Open3D
-``RaycastingScene``) against the per-ray loops a bpy user would write, on the same scene and rays.
+"""Ray casting speed on one generated room: the batched Embree scanner (``Scanner.cast``, embreex
+``EmbreeScene``) against the per-ray loops a bpy user would write, on the same scene and rays.
 
     .venv/bin/python benchmarks/bench_scanner.py [--rays 1000000] [--slow-rays 20000]
 
@@ -11,6 +11,10 @@ triangle (face) indices, the input of labelling:
 - ``Object.ray_cast`` loop: the paper's per-object casts, the ray moved into each object's frame
   (vectorised, outside the loop), the nearest hit over the objects kept;
 - ``scene.ray_cast`` loop: one call per ray on the scene (the previous baseline).
+
+Beside them, Open3D's ``RaycastingScene.cast_rays`` (Embree in robust mode, the scanner's
+previous engine), called as the previous ``Scanner.cast`` did: what the switch to embreex gains,
+and whether the two Embree modes find the same hits.
 
 Equal treatment: one warm-up pass on the first 1000 rays, then the median of ``--repeats`` timed
 passes with the garbage collector off, the passes going round the methods in turn; the slow
@@ -34,7 +38,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
-import bpy  # before open3d: both ship libtbb
+import bpy
 import numpy as np
 from mathutils import Vector
 from mathutils.bvhtree import BVHTree
@@ -66,6 +70,24 @@ def bvhtree_caster(vertices: np.ndarray, triangles: np.ndarray) -> Caster:
         distance = np.array(distance, dtype=np.float64)
         face = np.array(face, dtype=np.float64)
         return np.nan_to_num(distance, nan=np.inf), np.nan_to_num(face, nan=-1).astype(np.int64)
+
+    return cast
+
+
+def open3d_caster(vertices: np.ndarray, triangles: np.ndarray) -> Caster:
+    """Open3D's ``RaycastingScene.cast_rays`` on one thread (Embree in robust mode), as the
+    scanner's previous ``Scanner.cast`` called it: an (N, 6) float32 ray array per batch."""
+    import open3d as o3d
+    scene = o3d.t.geometry.RaycastingScene(nthreads=1)
+    scene.add_triangles(
+        o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32)))
+
+    def cast(origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        rays = np.empty((len(origins), 6), dtype=np.float32)
+        rays[:, :3] = origins
+        rays[:, 3:] = directions
+        answer = scene.cast_rays(o3d.core.Tensor.from_numpy(rays), nthreads=1)
+        return answer['t_hit'].numpy(), answer['primitive_ids'].numpy()
 
     return cast
 
@@ -249,13 +271,14 @@ def main() -> None:
     origins = path[np.arange(args.rays) % len(path)]
     directions = random_directions(rng, args.rays)
 
-    import open3d  # noqa: F401
     embree = {threads: Scanner(triangles, threads=threads) for threads in (1, 0)}
     methods = {
         f'Embree Scanner.cast, {threads or os.cpu_count()} thread(s)':
         (lambda o, d, s=scanner: s.cast(s.full_scene, o, d), args.rays)
         for threads, scanner in embree.items()
     }
+    methods['Open3D cast_rays (previous engine)'] = (open3d_caster(triangles.vertices,
+                                                                   triangles.triangles), args.rays)
     methods['bpy BVHTree.ray_cast loop'] = (bvhtree_caster(triangles.vertices,
                                                            triangles.triangles), args.rays)
     methods['bpy Object.ray_cast loop (per object)'] = (object_caster(objects,

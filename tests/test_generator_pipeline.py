@@ -21,7 +21,7 @@ import pytest
 from generator.__main__ import main
 from generator.config import DEFAULTS
 from generator.layout import offset_polygon
-from generator.scanner import Scanner, TriangleScene, sensor_path
+from generator.scanner import Scanner, TriangleScene, random_directions, sensor_path
 from generator.writer import TMP_PREFIX
 from synthdet.classes import GENERATED_CLASSES, GENERATED_STRUCTURE_CLASSES
 from synthdet.geometry import points_in_polygon
@@ -366,6 +366,33 @@ def test_scanner_on_a_hand_made_room():
     assert (uniform.part == 2).sum() == 2000
     cube = uniform.xyz[uniform.part == 2]
     assert np.all((cube >= np.array([2, 1, 0]) - 1e-4) & (cube <= np.array([3, 2, 1]) + 1e-4))
+
+
+def test_scanner_cast_is_the_same_on_one_and_two_threads():
+    """Threads cast slices of a batch: the same hits, in ray order, as one thread; a miss is
+    inf and the largest uint32; the distance is in units of the direction's length."""
+    scene, _ = _box_room_scene()
+    rng = np.random.default_rng(0)
+    origins = np.concatenate([
+        rng.uniform([0.5, 0.5, 1.5], [5.5, 3.5, 2.5], (60000, 3)),
+        np.tile([[3.0, 2.0, 5.0]], (40000, 1))
+    ])  # above the ceiling
+    directions = random_directions(rng, 100000)
+    directions[60000:] = [0.0, 0.0, 2.0]  # upwards from above the room: misses
+    one, two = Scanner(scene, threads=1), Scanner(scene, threads=2)
+    t1, p1 = one.cast(one.full_scene, origins, directions)
+    t2, p2 = two.cast(two.full_scene, origins, directions)
+    assert t1.dtype == np.float32 and p1.dtype == np.uint32
+    assert np.array_equal(t1, t2) and np.array_equal(p1, p2)
+    assert np.isfinite(t1[:60000]).all() and np.isinf(t1[60000:]).all()
+    assert np.all(p1[60000:] == np.iinfo(np.uint32).max)
+    down = one.cast(one.full_scene, np.array([[1.0, 1.0, 2.0]]), np.array([[0.0, 0.0, -2.0]]))
+    assert down[0][0] == pytest.approx(1.0) and scene.part[down[1][0]] == 0  # the floor
+    config = dict(DEFAULTS['scanner'], batch_rays=65536)
+    path, _ = sensor_path(_box_room_scene()[1], 3.0, np.random.default_rng(0))
+    scans = [s.scan(path, 50000, 0.3, np.random.default_rng(1), config) for s in (one, two)]
+    assert np.array_equal(scans[0].xyz, scans[1].xyz)
+    assert np.array_equal(scans[0].part, scans[1].part)
 
 
 def test_user_library_with_two_classes(tmp_path):
