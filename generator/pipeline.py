@@ -98,7 +98,6 @@ class RoomGenerator:
             for inst in self.library.instances(cls)
         }
         self.scene = RoomScene(lambda cls, name: by_name[(cls, name)].mesh_arrays())
-        import open3d  # noqa: F401
 
     def generate(self, task: RoomTask) -> tuple[RoomTask, str, float]:
         """Generate and write one room unless it exists; return (task, status, seconds)."""

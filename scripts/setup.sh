@@ -101,7 +101,7 @@ verify() {
   log "verify: importing the stack ..."
   "$PY" - <<'EOF'
 import bpy  # noqa: F401  (before open3d: both ship libtbb and the first one wins)
-import open3d, torch, mmcv, mmcv.ops, mmengine, mmdet, mmdet3d  # noqa: F401,E401
+import embreex, open3d, torch, mmcv, mmcv.ops, mmengine, mmdet, mmdet3d  # noqa: F401,E401
 import MinkowskiEngine as ME
 print(f"  torch {torch.__version__}, mmcv {mmcv.__version__}, mmdet3d {mmdet3d.__version__}, "
       f"MinkowskiEngine {ME.__version__}, bpy {bpy.app.version_string}, open3d {open3d.__version__}")
