@@ -182,13 +182,14 @@ def _grid_directions(azimuth: np.ndarray, elevation: np.ndarray) -> np.ndarray:
 
 def _cast_all(scanner: Scanner, origins: np.ndarray, directions: np.ndarray,
               batch: int) -> tuple[np.ndarray, np.ndarray]:
-    """First hits of many rays in batches: distance (inf for a miss) and triangle index."""
+    """First hits of many rays in batches: distance (inf for a miss) and triangle index (0 for a
+    miss, so that per-triangle lookups of a whole grid stay in bounds; the distance tells)."""
     t_hit = np.empty(len(origins), np.float32)
     triangle = np.empty(len(origins), np.int64)
     for start in range(0, len(origins), batch):
         stop = start + batch
         t, prim = scanner.cast(scanner.full_scene, origins[start:stop], directions[start:stop])
-        t_hit[start:stop], triangle[start:stop] = t, prim
+        t_hit[start:stop], triangle[start:stop] = t, np.where(np.isfinite(t), prim, 0)
     return t_hit, triangle
 
 

@@ -94,6 +94,23 @@ def test_tls_directions_lie_on_the_angular_grid_of_its_step():
     assert len(np.unique(cells, axis=0)) == len(xyz)
 
 
+def test_tls_beams_escaping_an_open_room_are_lost_without_error():
+    """Windows and doors are openings: beams that hit nothing are no points (and no index)."""
+    scene = room_scene((8, 6, 3), [((3, 2, 0), (4, 3, 1), (200, 0, 0))])
+    corners = scene.vertices[scene.triangles]
+    closed = ~np.all(np.isclose(corners[:, :, 2], 3.0), axis=1)  # no ceiling
+    scene = TriangleScene(scene.vertices, scene.triangles[closed], scene.colors[closed],
+                          scene.part[closed], scene.movable)
+    scanner = Scanner(scene)
+    station = np.array([[2.0, 3.0, 1.5]])
+    cfg = dict(TLS, mixed_pixels=1.0)
+    xyz, triangle, _ = cast_tls(scanner, station, 2.0, np.random.default_rng(0), cfg, BATCH,
+                                objects(scanner))
+    azimuth, elevation = tls_grid(2.0, TLS['min_elevation_deg'])
+    assert 0 < len(xyz) < len(azimuth) * len(elevation)
+    assert np.all(xyz[:, 2] < 3.0 + 1e-4) and triangle.max() < len(scene.triangles)
+
+
 def test_tls_range_noise_grows_with_distance():
     scanner = Scanner(room_scene((30, 4, 3)))
     station = np.array([[1.0, 2.0, 1.5]])
