@@ -2,18 +2,13 @@
 # paper-profile model of domain_shift_cpu.py trained on the rooms of the generator's default mix
 # (area 12) with the training robustness augmentations (`robust_augmentations` of
 # _base_/s3dis-synthdet.py, inserted by `with_robustness`) switched on; tested in-domain on the
-# mixed test rooms (area 28). `robustness` records whether this checkout has the augmentations
-# (the benchmark prints it): without them the mixed model trains on the plain pipeline.
+# mixed test rooms (area 28). `robustness` tells the benchmark's report that they are on.
 _base_ = ['./domain_shift_cpu.py']
 from projects.synthdet.config_helpers import area_datasets, area_info_file  # noqa: E402
+from projects.synthdet.config_helpers import with_robustness  # noqa: E402
 
-try:
-    from projects.synthdet.config_helpers import with_robustness  # noqa: E402
-    train_pipeline = with_robustness(_base_.train_pipeline, _base_.robust_augmentations)
-    robustness = True
-except ImportError:
-    train_pipeline = _base_.train_pipeline
-    robustness = False
+train_pipeline = with_robustness(_base_.train_pipeline, _base_.robust_augmentations)
+robustness = True
 
 train_area = [12]
 test_area = 28
