@@ -157,10 +157,14 @@ def generated_rooms(folder: Path):
         meta = read_room(meta_path)
         scan = meta_path.parent / f'{meta_path.parent.name}.txt'
         noise = meta['generator'].get('config', {}).get('scanner', {}).get('range_noise', 0)
-        label = f'generator {meta["room"].get("shape", "?")}' + (' noisy' if noise else '')
+        sensor = meta['generator'].get('sensor', {}).get('model', 'paper')
+        label = (f'generator {meta["room"].get("shape", "?")}' + ('' if sensor == 'paper' else
+                                                                  f' {sensor}') +
+                 (' noisy' if noise else ''))
         yield label, read_scan(scan), np.array(meta['room']['polygon'], dtype=np.float64)
 
 
+# the paper's sensor (the other models' rooms: --generated, labelled by their sensor)
 GENERATOR_CONFIGS = {
     'clean': {
         'room': {
@@ -168,6 +172,11 @@ GENERATOR_CONFIGS = {
                 'box': 0.34,
                 'L': 0.33,
                 'U': 0.33
+            }
+        },
+        'scanner': {
+            'sensors': {
+                'paper': 1.0
             }
         }
     },
@@ -180,6 +189,9 @@ GENERATOR_CONFIGS = {
             }
         },
         'scanner': {
+            'sensors': {
+                'paper': 1.0
+            },
             'range_noise': 0.01,
             'angular_jitter': 0.001,
             'dropout': 0.1
