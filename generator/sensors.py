@@ -300,9 +300,12 @@ def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int,
     return _result(scanner, xyz, triangle, stations[owner], rays), step
 
 
-def _push_clear(xy: np.ndarray, obstacles: np.ndarray, clearance: float) -> np.ndarray:
-    """``xy`` (N, 2) moved out of every obstacle box grown by ``clearance``, to the nearest
-    side of the grown box (a few passes, for boxes that touch)."""
+def _push_clear(xy: np.ndarray, centre: np.ndarray, obstacles: np.ndarray, clearance: float,
+                polygon: np.ndarray) -> np.ndarray:
+    """``xy`` (N, 2) moved out of every obstacle box grown by ``clearance``, straight to the
+    side of the grown box nearest to the point's ``centre`` (N, 2) among those in ``polygon``:
+    the walker passes an object on the room's side, not between it and a wall (a few passes,
+    for boxes that touch); a point with no such side stays."""
     xy = xy.copy()
     for _ in range(4):
         moved = False
@@ -311,14 +314,16 @@ def _push_clear(xy: np.ndarray, obstacles: np.ndarray, clearance: float) -> np.n
             inside = np.flatnonzero(np.all((xy > low) & (xy < high), axis=1))
             if not len(inside):
                 continue
-            p = xy[inside]
-            exits = np.stack([p[:, 0] - low[0], high[0] - p[:, 0], p[:, 1] - low[1],
-                              high[1] - p[:, 1]], axis=1)
-            side = np.argmin(exits, axis=1)
-            p[side == 0, 0], p[side == 1, 0] = low[0], high[0]
-            p[side == 2, 1], p[side == 3, 1] = low[1], high[1]
-            xy[inside] = p
-            moved = True
+            exits = np.repeat(xy[inside][:, None, :], 4, axis=1)  # (n, side, xy): -x +x -y +y
+            exits[:, 0, 0], exits[:, 1, 0] = low[0], high[0]
+            exits[:, 2, 1], exits[:, 3, 1] = low[1], high[1]
+            distance = np.linalg.norm(exits - centre[inside][:, None, :], axis=2)
+            in_room = points_in_polygon(exits.reshape(-1, 2), polygon).reshape(-1, 4)
+            distance[~in_room] = np.inf
+            side = np.argmin(distance, axis=1)
+            free = np.isfinite(distance[np.arange(len(inside)), side])
+            xy[inside[free]] = exits[np.flatnonzero(free), side[free]]
+            moved |= bool(free.any())
         if not moved:
             break
     return xy
@@ -331,8 +336,8 @@ def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
     The walker goes once around every cell, ``wall_distance`` from its sides (starting corner and
     sense random), the loops joined in cell order; the polyline is resampled to ``poses`` points
     (per bay in a hall) and smoothed (rounded corners). Poses within 0.3 m of an object's bounds
-    are pushed out to 0.3 m (the walker steps around); poses then outside the room or still that
-    near an object are dropped. The device is held at a height drawn from ``height``. Of every
+    are pushed out to 0.3 m on the side towards the cell's centre (the walker steps around, on
+    the room's side); poses then outside the room or still that near an object are dropped. The device is held at a height drawn from ``height``. Of every
     2 m of walk, a share ``wall_look`` faces the nearest side of the cell (outwards, across the
     walk) and the rest the cell's centre or along the walk (drawn per 2 m). The view sways ``sway_deg`` left and right of that direction and tilts through ``pitch_deg``.
     """
@@ -376,7 +381,7 @@ def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
     pitch = low_pitch + (high_pitch - low_pitch) * (0.5 +
                                                     0.5 * np.sin(2 * np.pi * s / 2.5 + phase[1]))
     look = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], 1)
-    xy = _push_clear(xy, room.obstacles, 0.3)
+    xy = _push_clear(xy, centre, room.obstacles, 0.3, room.polygon)
     positions = np.column_stack([xy, np.full(len(xy), rng.uniform(*cfg['height']))])
     keep = points_in_polygon(xy, room.polygon) & (_clearance(xy, room.obstacles) > 0.3 - 1e-6)
     if not keep.any():
