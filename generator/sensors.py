@@ -12,8 +12,9 @@ is what the geometry gives.
   set), a range window, range noise of std ``a + b * d`` and mixed pixels at depth edges (where
   a neighbouring beam's hit lies more than ``edge_jump`` off the plane of a beam's hit, a share
   of the returns lands between the foreground and the background).
-- Tablet: a smooth walk around every cell at hand height, a forward-looking field of view that
-  turns with the walk (and sways left and right), returns only between ``min_range`` and
+- Tablet: a smooth walk around every cell at hand height that steps around objects, the device
+  facing the walls for most of the walk and the room's inside or the way ahead for the rest
+  (swaying left and right, tilting up and down), returns only between ``min_range`` and
   ``max_range``, range noise, fewer returns far away and dropouts on dark triangles (luminance of
   the colour below ``dark_luminance``) and shiny ones (colours of the metal palette).
 """
@@ -123,7 +124,8 @@ def scan_room(
             'trajectory': np.round(positions, 3).tolist(),
             **{
                 k: cfg[k]
-                for k in ('wall_look', 'fov_deg', 'min_range', 'max_range', 'range_noise', 'far_keep', 'dark_luminance', 'dark_dropout', 'shiny_dropout')
+                for k in ('wall_look', 'fov_deg', 'min_range', 'max_range', 'range_noise',
+                          'far_keep', 'dark_luminance', 'dark_dropout', 'shiny_dropout')
             }
         }
     raise ValueError(f'unknown sensor model {model!r} (known: {", ".join(SENSOR_MODELS)})')
@@ -337,9 +339,11 @@ def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
     sense random), the loops joined in cell order; the polyline is resampled to ``poses`` points
     (per bay in a hall) and smoothed (rounded corners). Poses within 0.3 m of an object's bounds
     are pushed out to 0.3 m on the side towards the cell's centre (the walker steps around, on
-    the room's side); poses then outside the room or still that near an object are dropped. The device is held at a height drawn from ``height``. Of every
-    2 m of walk, a share ``wall_look`` faces the nearest side of the cell (outwards, across the
-    walk) and the rest the cell's centre or along the walk (drawn per 2 m). The view sways ``sway_deg`` left and right of that direction and tilts through ``pitch_deg``.
+    the room's side); poses then outside the room or still that near an object are dropped.
+    The device is held at a height drawn from ``height``. Of every 2 m of walk, a share
+    ``wall_look`` faces the nearest side of the cell (outwards, across the walk) and the rest
+    the cell's centre or along the walk (drawn per 2 m). The view sways ``sway_deg`` left and
+    right of that direction and tilts through ``pitch_deg``.
     """
     waypoints, centres = [], []
     for cell in room.cells:
