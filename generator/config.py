@@ -100,7 +100,8 @@ DEFAULTS: dict[str, Any] = {
             'height': [1.2, 1.6],  # hand height, metres
             'wall_distance': 1.0,  # walk this far from the cell's sides, metres
             'fov_deg': [60.0, 48.0],  # horizontal, vertical field of view
-            'sway_deg': 50.0,  # the view swings this far left and right of the walk
+            'wall_look': 0.7,  # share of the walk facing the walls (the rest: inwards, ahead)
+            'sway_deg': 50.0,  # the view swings this far left and right of its direction
             'pitch_deg': [-45.0, 15.0],  # and tilts through this range
             'min_range': 0.3,
             'max_range': 5.0,
@@ -320,7 +321,7 @@ def _validate_sensors(scanner: dict[str, Any], source: str) -> None:
     for sensor, ranges, probabilities, lengths in (
         ('tls', ('height', 'stations_per_cell'), ('mixed_pixels', ),
          ('wall_clearance', 'object_clearance', 'min_range', 'max_range', 'edge_jump')),
-        ('tablet', ('height', ), ('far_keep', 'dark_dropout', 'shiny_dropout'),
+        ('tablet', ('height', ), ('wall_look', 'far_keep', 'dark_dropout', 'shiny_dropout'),
          ('wall_distance', 'min_range', 'max_range', 'range_noise', 'sway_deg', 'dark_luminance')),
     ):
         where = f'scanner.{sensor}'

@@ -12,8 +12,9 @@ is what the geometry gives.
   set), a range window, range noise of std ``a + b * d`` and mixed pixels at depth edges (where
   a neighbouring beam's hit lies more than ``edge_jump`` off the plane of a beam's hit, a share
   of the returns lands between the foreground and the background).
-- Tablet: a smooth walk around every cell at hand height, a forward-looking field of view that
-  turns with the walk (and sways left and right), returns only between ``min_range`` and
+- Tablet: a smooth walk around every cell at hand height that steps around objects, the device
+  facing the walls for most of the walk and the room's inside or the way ahead for the rest
+  (swaying left and right, tilting up and down), returns only between ``min_range`` and
   ``max_range``, range noise, fewer returns far away and dropouts on dark triangles (luminance of
   the colour below ``dark_luminance``) and shiny ones (colours of the metal palette).
 """
@@ -123,7 +124,8 @@ def scan_room(
             'trajectory': np.round(positions, 3).tolist(),
             **{
                 k: cfg[k]
-                for k in ('fov_deg', 'min_range', 'max_range', 'range_noise', 'far_keep', 'dark_luminance', 'dark_dropout', 'shiny_dropout')
+                for k in ('wall_look', 'fov_deg', 'min_range', 'max_range', 'range_noise',
+                          'far_keep', 'dark_luminance', 'dark_dropout', 'shiny_dropout')
             }
         }
     raise ValueError(f'unknown sensor model {model!r} (known: {", ".join(SENSOR_MODELS)})')
@@ -300,17 +302,50 @@ def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int,
     return _result(scanner, xyz, triangle, stations[owner], rays), step
 
 
+def _push_clear(xy: np.ndarray, centre: np.ndarray, obstacles: np.ndarray, clearance: float,
+                polygon: np.ndarray) -> np.ndarray:
+    """``xy`` (N, 2) moved out of every obstacle box grown by ``clearance``, straight to the
+    side of the grown box nearest to the point's ``centre`` (N, 2) among those in ``polygon``:
+    the walker passes an object on the room's side, not between it and a wall (a few passes,
+    for boxes that touch); a point with no such side stays."""
+    xy = xy.copy()
+    for _ in range(4):
+        moved = False
+        for low, high in obstacles:
+            low, high = low - clearance, high + clearance
+            inside = np.flatnonzero(np.all((xy > low) & (xy < high), axis=1))
+            if not len(inside):
+                continue
+            exits = np.repeat(xy[inside][:, None, :], 4, axis=1)  # (n, side, xy): -x +x -y +y
+            exits[:, 0, 0], exits[:, 1, 0] = low[0], high[0]
+            exits[:, 2, 1], exits[:, 3, 1] = low[1], high[1]
+            distance = np.linalg.norm(exits - centre[inside][:, None, :], axis=2)
+            in_room = points_in_polygon(exits.reshape(-1, 2), polygon).reshape(-1, 4)
+            distance[~in_room] = np.inf
+            side = np.argmin(distance, axis=1)
+            free = np.isfinite(distance[np.arange(len(inside)), side])
+            xy[inside[free]] = exits[np.flatnonzero(free), side[free]]
+            moved |= bool(free.any())
+        if not moved:
+            break
+    return xy
+
+
 def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
                       cfg: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """Poses of a walk through the room: positions (P, 3) and view directions (P, 3).
 
     The walker goes once around every cell, ``wall_distance`` from its sides (starting corner and
     sense random), the loops joined in cell order; the polyline is resampled to ``poses`` points
-    (per bay in a hall) and smoothed (rounded corners). The device is held at a height drawn from ``height``, looks
-    along the walk, sways ``sway_deg`` left and right and tilts through ``pitch_deg``. Poses
-    outside the room or over an object (within 0.3 m) are dropped: the walker steps around.
+    (per bay in a hall) and smoothed (rounded corners). Poses within 0.3 m of an object's bounds
+    are pushed out to 0.3 m on the side towards the cell's centre (the walker steps around, on
+    the room's side); poses then outside the room or still that near an object are dropped.
+    The device is held at a height drawn from ``height``. Of every 2 m of walk, a share
+    ``wall_look`` faces the nearest side of the cell (outwards, across the walk) and the rest
+    the cell's centre or along the walk (drawn per 2 m). The view sways ``sway_deg`` left and
+    right of that direction and tilts through ``pitch_deg``.
     """
-    waypoints = []
+    waypoints, centres = [], []
     for cell in room.cells:
         low, high = _inset(cell, cfg['wall_distance'])
         loop = np.array([[low[0], low[1]], [low[0], high[1]], [high[0], high[1]],
@@ -319,23 +354,40 @@ def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
         if rng.random() < 0.5:
             loop = loop[::-1]
         waypoints += [*loop, loop[0]]
-    waypoints = np.array(waypoints)
+        centres += [(low + high) / 2] * 5
+    waypoints, centres = np.array(waypoints), np.array(centres)
     along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(waypoints, axis=0), axis=1))])
     s = np.linspace(0.0, along[-1], int(cfg['poses']) * max(1, len(room.bays)))
     xy = np.stack([np.interp(s, along, waypoints[:, i]) for i in range(2)], axis=1)
+    # the cell each pose walks around: the one of the loop's waypoints
+    centre = centres[np.minimum(np.searchsorted(along, s, side='right') - 1, len(centres) - 1)]
     window = max(1, int(round(0.6 / max(s[1] - s[0], 1e-6)))) if len(s) > 1 else 1
     kernel = np.ones(2 * window + 1) / (2 * window + 1)
     padded = np.pad(xy, ((window, window), (0, 0)), mode='edge')
     xy = np.stack([np.convolve(padded[:, i], kernel, mode='valid') for i in range(2)], axis=1)
-    heading = np.arctan2(*np.gradient(xy, axis=0)[:, ::-1].T)
+    step = np.gradient(xy, axis=0)
+    heading = np.arctan2(step[:, 1], step[:, 0])
+    # across the walk, towards the side of the cell the walker is nearest to
+    outward = heading + np.pi / 2
+    away = xy - centre
+    flip = np.cos(outward) * away[:, 0] + np.sin(outward) * away[:, 1] < 0
+    outward[flip] -= np.pi
+    inward = np.arctan2(-away[:, 1], -away[:, 0])
+    # every 2 m of walk: a share wall_look facing the wall, the rest inwards or ahead
+    offset = rng.uniform(0.0, 2.0)
+    stretch = np.floor((s + offset) / 2.0).astype(int)
+    to_wall = ((s + offset) / 2.0) % 1.0 < cfg['wall_look']
+    to_centre = rng.random(int(stretch.max()) + 1) < 0.5
+    base = np.where(to_wall, outward, np.where(to_centre[stretch], inward, heading))
     phase = rng.uniform(0, 2 * np.pi, 2)
-    yaw = heading + np.radians(cfg['sway_deg']) * np.sin(2 * np.pi * s / 4.0 + phase[0])
+    yaw = base + np.radians(cfg['sway_deg']) * np.sin(2 * np.pi * s / 4.0 + phase[0])
     low_pitch, high_pitch = np.radians(cfg['pitch_deg'])
     pitch = low_pitch + (high_pitch - low_pitch) * (0.5 +
                                                     0.5 * np.sin(2 * np.pi * s / 2.5 + phase[1]))
     look = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], 1)
+    xy = _push_clear(xy, centre, room.obstacles, 0.3, room.polygon)
     positions = np.column_stack([xy, np.full(len(xy), rng.uniform(*cfg['height']))])
-    keep = points_in_polygon(xy, room.polygon) & (_clearance(xy, room.obstacles) > 0.3)
+    keep = points_in_polygon(xy, room.polygon) & (_clearance(xy, room.obstacles) > 0.3 - 1e-6)
     if not keep.any():
         raise ValueError('tablet: every pose of the walk is inside an object or outside the room')
     return positions[keep], look[keep]

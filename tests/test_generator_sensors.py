@@ -9,6 +9,7 @@ import bpy  # noqa: F401  (bpy before open3d: both ship libtbb)
 import numpy as np
 import pytest
 
+from configurator.corners import detect_corners
 from generator.__main__ import main
 from generator.assets.palette import METAL
 from generator.config import DEFAULTS, ConfigError, load_config
@@ -16,6 +17,7 @@ from generator.scanner import Scanner, TriangleScene
 from generator.sensors import (SENSOR_MODELS, RoomGeometry, cast_tablet, cast_tls, choose_sensor,
                                scan_room, scan_tls, tls_grid)
 from synthdet.point_text import read_point_file
+from tests.test_corners import corner_errors
 from tests.test_generator_pipeline import _same_tree, box
 
 REPO = Path(__file__).resolve().parents[1]
@@ -222,6 +224,73 @@ def test_tablet_drops_returns_on_dark_and_shiny_triangles():
     assert 0.35 < ratio[0] < 0.7 and 0.35 < ratio[1] < 0.7 and 0.95 < ratio[2] < 1.3
 
 
+def wall_coverage(xyz: np.ndarray, size) -> list[float]:
+    """Per wall of a box room (x=0, x=X, y=0, y=Y): the share of its length, in 10 cm bins,
+    with points within 5 cm of the wall plane (between 0.2 m above the floor and below the
+    ceiling)."""
+    xyz = xyz[(xyz[:, 2] > 0.2) & (xyz[:, 2] < size[2] - 0.2)]
+    shares = []
+    for axis, plane in ((0, 0.0), (0, size[0]), (1, 0.0), (1, size[1])):
+        along = xyz[np.abs(xyz[:, axis] - plane) < 0.05, 1 - axis]
+        bins = int(round(size[1 - axis] / 0.1))
+        counts = np.histogram(along, bins=bins, range=(0.0, size[1 - axis]))[0]
+        shares.append(float(np.mean(counts > 0)))
+    return shares
+
+
+@pytest.mark.parametrize(
+    'cubes',
+    [
+        [],
+        # a bench along the south wall, across the walk's line 1 m from the wall, and a cabinet
+        [((1.5, 0.5, 0.0), (8.5, 1.4, 0.9), (200, 0, 0)),
+         ((8.8, 4.6, 0.0), (9.6, 5.7, 1.2), (0, 200, 0))],
+    ],
+    ids=['empty', 'objects-along-walls'])
+def test_tablet_walk_covers_every_wall(cubes):
+    """A handheld scan faces the walls while walking around: every wall is seen along >= 90 % of
+    its length, and the walk steps around objects instead of leaving gaps."""
+    size = (10.0, 6.0, 3.0)
+    scanner = Scanner(room_scene(size, cubes))
+    obstacles = np.array([[lo[:2], hi[:2]] for lo, hi, _ in cubes], float).reshape(-1, 2, 2)
+    room = RoomGeometry(
+        np.array([[0, 0], [0, 6], [10, 6], [10, 0]], float), 3.0, [], obstacles,
+        np.array([False] + [True] * len(cubes)))
+    cfg = dict(DEFAULTS['scanner'], batch_rays=BATCH)
+    scan, sensor = scan_room(scanner, room, 'tablet', 100000, 0.0, np.random.default_rng(6),
+                             cfg)
+    shares = wall_coverage(scan.xyz, size)
+    assert min(shares) >= 0.9, f'wall coverage {shares}'
+    trajectory = np.array(sensor['trajectory'])[:, :2]
+    # stepping around a box jumps at most across it (the old walk left metres-long gaps here)
+    assert np.linalg.norm(np.diff(trajectory, axis=0), axis=1).max() < 1.5
+    for low, high in obstacles:  # poses next to an object were pushed out to 0.3 m
+        gap = np.maximum(np.maximum(low - trajectory, trajectory - high), 0.0)
+        assert np.linalg.norm(gap, axis=1).min() >= 0.3 - 1e-3
+
+
+def test_corners_of_generated_tablet_rooms(tmp_path):
+    """The corner finder recovers generated rooms scanned by the tablet: the walls the walk
+    faces are dense enough (the old walk along the walk direction missed walls in 3 of these 4
+    rooms)."""
+    out = tmp_path / 'out'
+    assert main([
+        '--out',
+        str(out), '--areas', '9', '--rooms-per-area', '4', '--points', '200000', '--seed', '0',
+        '--profile', 'tablet', '--asset-cache',
+        str(tmp_path / 'assets'), '--quiet'
+    ]) == 0
+    metas = sorted(out.rglob('meta.json'))
+    assert len(metas) == 4
+    for meta_path in metas:
+        meta = json.loads(meta_path.read_text())
+        assert meta['generator']['sensor']['model'] == 'tablet'
+        points, _ = read_point_file(meta_path.parent / f'{meta_path.parent.name}.txt')
+        truth = np.asarray(meta['room']['polygon'], dtype=float)
+        errors = corner_errors(detect_corners(points).corners, truth)
+        assert errors.max() < 0.05, f'{meta_path.parent.name}: corner errors {errors}'
+
+
 class RecordingScanner(Scanner):
     """The real scanner, keeping the directions of every batch it casts."""
 
@@ -320,6 +389,13 @@ def test_sensor_configuration_errors_name_the_file_and_key(tmp_path):
                 }
             }
         }, 'scanner.tablet.dark_dropout'),
+        ({
+            'scanner': {
+                'tablet': {
+                    'wall_look': 1.5
+                }
+            }
+        }, 'scanner.tablet.wall_look" is outside'),
     ):
         config.write_text(json.dumps(settings))
         with pytest.raises(ConfigError, match=f'{config}: .*{message}'.replace('[', r'\[')):
