@@ -22,13 +22,10 @@ so a stopped run continues where it stopped (a training resumes from its newest 
  5. print a Table 3 per test profile, each model's in-domain score and its drop on every held-out
     profile, and write all numbers to ``WORK/domain_shift.json`` (the text to
     ``WORK/domain_shift.txt``).
-The defaults fit about 1.5 h on 2 cores, from a dry run at small scale (4 training rooms, 3 test
-rooms, 200,000 points; a busy machine) and `make exp2-cpu`'s figures (docs/results.md): a training
-iteration of 4 rooms x 40,000 points costs about 10.5 CPU-s, so 250 iterations take about 45 min
-per model on one core, the two in parallel; generating and converting 150 rooms of 1M points
-took 75 s and 20 s on 2 processes, plus about 10 s of start-up per set here; a test costs about
-1 s per room plus about 20 s of start-up (16 tests, two at a time): about 55 min on idle cores
-(the new sensor models may generate more slowly than the paper's path measured here).
+The defaults (40 training rooms per model, 10 test rooms per profile, 500,000 points per room,
+200 iterations) are the scale of the documented run (docs/results.md "Domain shift"): 85 min on
+2 cores shared with `make exp2-cpu`, of which training 76 min (about 20-25 s per iteration with
+three trainings on the two cores; 10.5 CPU-s per iteration alone).
 Held out: for the paper model every test profile but ``paper``; for the mixed model every
 single-profile test area (all but ``mixed``, its in-domain test). The last line compares the
 worst held-out mAP@0.25 of the two models.
@@ -518,10 +515,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0].replace('\n', ' '))
     parser.add_argument('--work-dir', type=Path, default=REPO / 'work_dirs/domain_shift')
     parser.add_argument(
-        '--rooms-train', type=int, default=50, help='training rooms per training profile')
-    parser.add_argument('--rooms-test', type=int, default=20, help='test rooms per test profile')
-    parser.add_argument('--iters', type=int, default=250, help='training iterations (batch 4)')
-    parser.add_argument('--points', type=int, default=1_000_000, help='points per generated room')
+        '--rooms-train', type=int, default=40, help='training rooms per training profile')
+    parser.add_argument('--rooms-test', type=int, default=10, help='test rooms per test profile')
+    parser.add_argument('--iters', type=int, default=200, help='training iterations (batch 4)')
+    parser.add_argument('--points', type=int, default=500_000, help='points per generated room')
     parser.add_argument(
         '--sample-points', type=int, default=40_000, help='points the detector samples per room')
     parser.add_argument('--seed', type=int, default=0, help='generator and training seed')

@@ -18,7 +18,7 @@ from projects.synthdet.config_helpers import area_datasets, area_info_file  # no
 data_root = 'work_dirs/domain_shift/data/'
 train_area = [11]
 test_area = 21
-max_iters = 250
+max_iters = 200
 robustness = False  # the robustness augmentations (domain_shift_mixed_cpu.py) are off
 
 train_dataloader = dict(
