@@ -118,6 +118,21 @@ def row_norms(v: np.ndarray) -> np.ndarray:
     return np.sqrt((x * x + y * y) + z * z)[:, None]
 
 
+def part_bounds(scene: TriangleScene, parts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned bounds (P, 3) low and high of the triangles of each of ``parts``, in one
+    pass over the triangles (inf / -inf for a part without triangles)."""
+    corners = scene.vertices[scene.triangles]  # (T, 3, 3)
+    row = np.full(int(scene.part.max(initial=-1)) + 1, -1)
+    row[parts] = np.arange(len(parts))
+    rows = row[scene.part]
+    mine = rows >= 0
+    low = np.full((len(parts), 3), np.inf)
+    high = np.full((len(parts), 3), -np.inf)
+    np.minimum.at(low, rows[mine], corners[mine].min(axis=1))
+    np.maximum.at(high, rows[mine], corners[mine].max(axis=1))
+    return low, high
+
+
 # fewer rays than this per thread are cast on one thread (starting threads would cost more)
 _MIN_SLICE = 16_384
 
@@ -141,13 +156,7 @@ class Scanner:
         self.object_tri = np.flatnonzero(self.movable_tri)
         # axis-aligned bounds of each movable part: the targets of aimed object rays
         self.targets = np.flatnonzero(scene.movable)
-        tri_vertices = scene.vertices[scene.triangles]  # (T, 3, 3)
-        self.target_lo = np.array([
-            tri_vertices[scene.part == p].reshape(-1, 3).min(axis=0) for p in self.targets
-        ]).reshape(-1, 3)
-        self.target_hi = np.array([
-            tri_vertices[scene.part == p].reshape(-1, 3).max(axis=0) for p in self.targets
-        ]).reshape(-1, 3)
+        self.target_lo, self.target_hi = part_bounds(scene, self.targets)
         self.target_extent = self.target_hi - self.target_lo
         extent = self.target_extent
         area = 2 * (

@@ -25,7 +25,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from generator.scanner import ScanResult, Scanner, TriangleScene, row_norms, sensor_path
+from generator.scanner import (ScanResult, Scanner, TriangleScene, part_bounds, row_norms,
+                               sensor_path)
 from synthdet.geometry import grid_cells, points_in_polygon
 
 SENSOR_MODELS = ('paper', 'tls', 'tablet')
@@ -53,14 +54,10 @@ def room_geometry(polygon: np.ndarray, height: float, bays: list[np.ndarray], sc
                   classes: Sequence[str]) -> RoomGeometry:
     """The :class:`RoomGeometry` of a scene whose parts have ``classes``."""
     object_parts = np.array([cls not in ROOM_STRUCTURE for cls in classes], dtype=bool)
-    tri_xy = scene.vertices[scene.triangles][..., :2]  # (T, 3, 2)
-    bounds = []
-    for part in np.flatnonzero(object_parts):
-        xy = tri_xy[scene.part == part].reshape(-1, 2)
-        if len(xy):
-            bounds.append([xy.min(axis=0), xy.max(axis=0)])
-    return RoomGeometry(polygon, height, bays,
-                        np.array(bounds, dtype=np.float64).reshape(-1, 2, 2), object_parts)
+    low, high = part_bounds(scene, np.flatnonzero(object_parts))
+    meshed = np.isfinite(low[:, 0])  # parts without triangles have no bounds
+    obstacles = np.stack([low[meshed, :2], high[meshed, :2]], axis=1)
+    return RoomGeometry(polygon, height, bays, obstacles, object_parts)
 
 
 def choose_sensor(probabilities: Mapping[str, float], rng: np.random.Generator) -> str:
