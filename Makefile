@@ -27,12 +27,17 @@ demo: setup
 # Experiment 2 at CPU scale (docs/results.md): 3 generated areas x 50 rooms x 1M points in
 # data/s3dis, train areas 7, 8 and test area 9 with configs/tr3d/exp2_cpu.py. Every step resumes:
 # finished rooms are kept, training continues from the newest checkpoint of work_dirs/exp2_cpu,
-# and the test uses the final epoch's checkpoint (named in last_checkpoint).
+# and the test uses the final epoch's checkpoint (named in last_checkpoint), on all of area 9 and
+# then on the rooms of each generator sensor (tools/test.py --sensor).
 EXP2_DATA ?= data/s3dis
 EXP2_WORK ?= work_dirs/exp2_cpu
 # One OpenMP thread per process by default: on a busy machine torch's default (all cores)
 # oversubscribes the cores. Set EXP2_THREADS=2 on an idle 2-core machine.
 EXP2_THREADS ?= 1
+# the config's data root (data/s3dis/) replaced by EXP2_DATA in every dataset
+EXP2_DATA_OPTIONS = $(foreach key,train_dataloader.dataset.dataset.datasets.0 \
+    train_dataloader.dataset.dataset.datasets.1 val_dataloader.dataset test_dataloader.dataset,\
+    $(key).data_root=$(EXP2_DATA)/)
 exp2-cpu: export OMP_NUM_THREADS = $(EXP2_THREADS)
 exp2-cpu: setup
 	$(PY) -m generator --out $(EXP2_DATA)/Stanford3dDataset_v1.2_Aligned_Version --areas 7 8 9 \
@@ -40,9 +45,15 @@ exp2-cpu: setup
 	$(PY) tools/create_data.py s3dis --root-path $(EXP2_DATA) --out-dir $(EXP2_DATA) --areas 7 8 9 --workers 2
 	$(PY) tools/dataset_stats.py $(EXP2_DATA) --areas 7 8 9
 	$(PY) tools/train.py configs/tr3d/exp2_cpu.py --work-dir $(EXP2_WORK) \
-	    $$(ls $(EXP2_WORK)/epoch_*.pth >/dev/null 2>&1 && echo --resume)
+	    $$(ls $(EXP2_WORK)/epoch_*.pth >/dev/null 2>&1 && echo --resume) \
+	    --cfg-options $(EXP2_DATA_OPTIONS)
 	$(PY) tools/test.py configs/tr3d/exp2_cpu.py $$(cat $(EXP2_WORK)/last_checkpoint) \
-	    --work-dir $(EXP2_WORK)/test
+	    --work-dir $(EXP2_WORK)/test --cfg-options $(EXP2_DATA_OPTIONS)
+	for sensor in paper tls tablet; do \
+	    $(PY) tools/test.py configs/tr3d/exp2_cpu.py $$(cat $(EXP2_WORK)/last_checkpoint) \
+	        --sensor $$sensor --work-dir $(EXP2_WORK)/test_$$sensor \
+	        --cfg-options $(EXP2_DATA_OPTIONS) || exit 1; \
+	done
 
 # Every benchmarks/bench_*.py, one after the other; each full output is kept in
 # docs/benchmarks/<name>.txt and docs/benchmarks.md is written from them.

@@ -50,6 +50,7 @@ from configurator.corners import (
     find_levels,
     simplify_outline)
 from synthdet.contracts import read_room  # noqa: E402
+from synthdet.info_files import room_sensor  # noqa: E402
 from synthdet.scan_io import read_scan  # noqa: E402
 from tests.room_scans import SHAPES, NoiseModel, make_room  # noqa: E402
 
@@ -157,7 +158,7 @@ def generated_rooms(folder: Path):
         meta = read_room(meta_path)
         scan = meta_path.parent / f'{meta_path.parent.name}.txt'
         noise = meta['generator'].get('config', {}).get('scanner', {}).get('range_noise', 0)
-        sensor = meta['generator'].get('sensor', {}).get('model', 'paper')
+        sensor = room_sensor(meta)
         label = (f'generator {meta["room"].get("shape", "?")}' + ('' if sensor == 'paper' else
                                                                   f' {sensor}') +
                  (' noisy' if noise else ''))

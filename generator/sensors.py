@@ -27,9 +27,9 @@ import numpy as np
 
 from generator.scanner import (ScanResult, Scanner, TriangleScene, part_bounds, row_norms,
                                sensor_path)
+from synthdet.contracts import SENSOR_MODELS
 from synthdet.geometry import grid_cells, points_in_polygon
 
-SENSOR_MODELS = ('paper', 'tls', 'tablet')
 # the room's structure; every other part is an object (kept clear of, edges for mixed pixels)
 ROOM_STRUCTURE = ('floor', 'ceiling', 'wall', 'door', 'window')
 

@@ -25,6 +25,8 @@ from synthdet.geometry import first_self_crossing, signed_area
 ROOM_FORMAT = 'synthdet.room/1'
 PREDICTIONS_FORMAT = 'synthdet.predictions/1'
 CORNERS_FORMAT = 'synthdet.corners/1'
+# the generator's sensor models, recorded in a room's meta.json as generator.sensor.model
+SENSOR_MODELS = ('paper', 'tls', 'tablet')
 
 MAX_NAME_LENGTH = 200
 MAX_DETECTIONS = 100_000

@@ -9,7 +9,6 @@ Everything stays in the scan's own frame.
 from __future__ import annotations
 
 import os
-import pickle
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +18,7 @@ import numpy as np
 from synthdet.classes import SEMANTIC_CLASSES
 from synthdet.contracts import read_corners, read_predictions, read_room
 from synthdet.geometry import box_corners_xy
+from synthdet.info_files import load_info_pickle
 from synthdet.ply import write_ply
 from synthdet.scan_io import ply_vertex, read_scan
 
@@ -118,8 +118,7 @@ def boxes_from_info(path: str | os.PathLike, scan_name: str) -> list[Box]:
     """Axis-aligned ground-truth boxes of the room ``scan_name`` (e.g. ``Area_9_factory_1.bin``)
     in an mmdet3d info pickle written by ``tools/create_data.py``."""
     path = Path(path)
-    with open(path, 'rb') as handle:
-        infos = pickle.load(handle)
+    infos = load_info_pickle(path)
     categories = infos['metainfo']['categories']
     names = {index: name for name, index in categories.items()}
     for entry in infos['data_list']:

@@ -8,6 +8,7 @@ run in this process with command-line arguments.
 """
 import importlib.util
 import json
+import shutil
 from pathlib import Path
 from types import ModuleType
 
@@ -21,6 +22,8 @@ from projects.synthdet.checkpoint import load_model_weights
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.evaluation.table3 import format_table3, table3, table3_rows
 from projects.synthdet.evaluation.table4 import truth_from_infos
+from synthdet.contracts import ROOM_FORMAT
+from synthdet.info_files import InfoFileError, load_info_pickle
 from synthdet.scan_io import read_scan, write_scan
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
 from tests.tool_process import run_tool
@@ -434,3 +437,42 @@ def test_count_table_reads_ground_truth_from_info_pickles(tiny: dict, tmp_path: 
         n = sum(c == cls for c, _ in boxes)
         assert table['scans'][0]['truth'][cls] == n
         assert cells[cls] == {'correct': n, 'incorrect': 0}
+
+
+def _write_meta(room_dir: Path, sensor: str | None) -> None:
+    """A minimal generator ``meta.json`` recording ``sensor`` (none: from before the sensors)."""
+    generator = {} if sensor is None else {'sensor': {'model': sensor}}
+    room = {'polygon': [[0.0, 0.0], [0.0, 4.0], [4.0, 4.0], [4.0, 0.0]], 'height': 3.0}
+    document = {'format': ROOM_FORMAT, 'room': room, 'objects': [], 'generator': generator}
+    (room_dir / 'meta.json').write_text(json.dumps(document))
+
+
+def test_test_tool_tests_the_rooms_of_one_sensor(tiny: dict, tmp_path: Path) -> None:
+    data = tmp_path / 'data'
+    shutil.copytree(tiny['data'], data)
+    shutil.copytree(tiny['raw'], data / S3DIS_DIR / 'Area_1')
+    rooms = [Path(info['lidar_points']['lidar_path']).stem.removeprefix('Area_1_')
+             for info in load_info_pickle(data / 's3dis_infos_Area_1.pkl')['data_list']]
+    assert len(rooms) == 2
+    checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
+    test = load_tool('test')
+
+    def run(name: str, sensor: str | None = None, *options: str) -> dict:
+        return test.main([
+            str(TINY),
+            str(checkpoint), '--work-dir',
+            str(tmp_path / name), *(['--sensor', sensor] if sensor else []), '--cfg-options',
+            *data_options(data), *options
+        ])
+
+    _write_meta(data / S3DIS_DIR / 'Area_1' / rooms[0], 'tls')
+    with pytest.raises(InfoFileError, match=f'{rooms[1]}.*no generator meta.json'):
+        run('missing', 'tls')
+    _write_meta(data / S3DIS_DIR / 'Area_1' / rooms[1], None)  # counts as the paper sensor
+    for sensor, index in (('tls', 0), ('paper', 1)):
+        by_sensor = run(sensor, sensor)
+        by_index = run(f'index_{index}', None, f'test_dataloader.dataset.indices=[{index}]')
+        assert by_sensor['test_set'] == f's3dis_infos_Area_1.pkl ({sensor} rooms)'
+        assert by_sensor['rows'] == by_index['rows'] and by_sensor['metrics'] == by_index['metrics']
+    with pytest.raises(InfoFileError, match='no room scanned by the tablet sensor'):
+        run('tablet', 'tablet')

@@ -1,7 +1,8 @@
 """Evaluate a checkpoint with mmengine's Runner and print the paper's Table 3.
 
 Usage: python tools/test.py CONFIG CHECKPOINT [--work-dir DIR] [--out JSON] [--cfg-options k=v ...]
-                            [--show-dir DIR [--score-thr T]] [--launcher {none,pytorch,slurm,mpi}]
+                            [--show-dir DIR [--score-thr T]] [--sensor {paper,tls,tablet}]
+                            [--launcher {none,pytorch,slurm,mpi}]
 
 The numbers are mmdet3d's IndoorMetric (per-class average precision at 3D IoU 0.25 and 0.5 and
 their mean over the evaluated classes). The table has a row per IoU threshold and a column per
@@ -11,8 +12,10 @@ JSON (``"format": "synthdet.table3/1"``) goes to ``<work_dir>/table3.json`` unle
 the text next to it (``table3.txt``). ``--show-dir`` saves a top-view picture of every test scan
 with its ground truth and the predictions scoring at least ``--score-thr``
 (``projects/synthdet/visualization.py``); the threshold affects the pictures only, as in
-mmdet3d's test tool. The checkpoint is loaded weights-only (``projects/synthdet/checkpoint.py``):
-one that holds anything else is refused (exit 2).
+mmdet3d's test tool. ``--sensor`` tests only the generated rooms that one of the generator's
+sensor models scanned (their ``meta.json``), for a table per sensor. The checkpoint is loaded
+weights-only (``projects/synthdet/checkpoint.py``): one that holds anything else is refused, as
+is a ``--sensor`` whose rooms cannot be found (exit 2).
 """
 import argparse
 import sys
@@ -31,6 +34,8 @@ from projects.synthdet.checkpoint import CheckpointError, load_model_weights  # 
 from projects.synthdet.evaluation.table3 import format_table3, table3  # noqa: E402
 from projects.synthdet.evaluation.table_files import write_table  # noqa: E402
 from projects.synthdet.visualization import TopViewHook  # noqa: E402
+from synthdet.contracts import SENSOR_MODELS  # noqa: E402
+from synthdet.info_files import InfoFileError, rooms_scanned_by  # noqa: E402
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -46,6 +51,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         type=float,
         default=0.1,
         help='lowest score of the predictions drawn with --show-dir (default 0.1)')
+    parser.add_argument(
+        '--sensor',
+        choices=SENSOR_MODELS,
+        help='test only the generated rooms this generator sensor scanned (meta.json)')
     add_runner_arguments(parser, 'logs and table3.json (default work_dirs/<config>)')
     return parse_runner_args(parser, argv)
 
@@ -59,19 +68,33 @@ def add_show_hook(cfg: Config, show_dir: str | None, score_thr: float) -> None:
         ]
 
 
+def select_sensor(cfg: Config, sensor: str | None) -> str:
+    """With ``sensor``, keep only the test rooms that sensor scanned (mmengine's dataset
+    ``indices``); returns the test set's name for the table."""
+    dataset = cfg.test_dataloader.dataset
+    name = str(dataset.get('ann_file', ''))
+    if sensor:
+        info_file = Path(dataset.get('data_root', '')) / name
+        dataset.indices = rooms_scanned_by(info_file, sensor)
+        if not dataset.indices:
+            raise InfoFileError(f'{info_file}: no room scanned by the {sensor} sensor')
+        name += f' ({sensor} rooms)'
+    return name
+
+
 def main(argv: list[str] | None = None) -> dict:
     """Run the test loop, print Table 3 and write it; returns the JSON document."""
     args = parse_args(argv)
     cfg = runner_config(args)
     cfg.load_from = None  # the weights come from the weights-only load below
     add_show_hook(cfg, args.show_dir, args.score_thr)
+    test_set = select_sensor(cfg, args.sensor)
     runner = Runner.from_cfg(cfg)
-    load_model_weights(runner.model.module if is_model_wrapper(runner.model) else runner.model,
-                       args.checkpoint)
+    load_model_weights(
+        runner.model.module if is_model_wrapper(runner.model) else runner.model, args.checkpoint)
     metrics = runner.test()
     document = table3(metrics, list(runner.test_dataloader.dataset.metainfo['classes']),
-                      str(args.config), str(args.checkpoint),
-                      str(cfg.test_dataloader.dataset.get('ann_file', '')))
+                      str(args.config), str(args.checkpoint), test_set)
     if is_main_process():
         out = Path(args.out) if args.out else Path(cfg.work_dir) / 'table3.json'
         text = (f'Table 3 ({Path(args.config).stem}, {document["test_set"]}):\n'
@@ -82,4 +105,4 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 if __name__ == '__main__':
-    run_tool(main, 'test.py', bad_input=(CheckpointError, ))
+    run_tool(main, 'test.py', bad_input=(CheckpointError, InfoFileError))

@@ -1,38 +1,13 @@
 """The paper's Table 1: detection instances per class and area, counted from the info pickles."""
-import pickle
 from collections import Counter
 from pathlib import Path
 from typing import Sequence
 
 from synthdet.classes import REAL_AREAS
+from synthdet.info_files import load_info_pickle
 
 TABLE1_FORMAT = 'synthdet.table1/1'
 TABLE1_CLASSES = ('chair', 'table', 'sofa', 'bookcase', 'board', 'yumi', '3dprinter')
-
-
-class InfoFileError(ValueError):
-    """An info pickle that is empty, broken or not in the converter's format; names the file."""
-
-
-class _PlainUnpickler(pickle.Unpickler):
-    """Unpickles dicts, lists, strings and numbers only: an info pickle never runs code."""
-
-    def find_class(self, module: str, name: str) -> object:
-        raise pickle.UnpicklingError(f'{module}.{name} is not plain data')
-
-
-def load_info_pickle(path: str | Path) -> dict:
-    """Read an info pickle written by ``tools/create_data.py`` (plain data only)."""
-    try:
-        with open(path, 'rb') as f:
-            infos = _PlainUnpickler(f).load()
-    except (pickle.UnpicklingError, EOFError, ValueError, IndexError, KeyError) as error:
-        raise InfoFileError(f'{path}: not an info pickle of tools/create_data.py '
-                            f'({error or type(error).__name__})') from None
-    if not isinstance(infos, dict) or not {'metainfo', 'data_list'} <= set(infos):
-        raise InfoFileError(f'{path}: not an info pickle of tools/create_data.py (no metainfo '
-                            'and data_list)')
-    return infos
 
 
 def info_path(data_root: str | Path, area: int, prefix: str = 's3dis') -> Path:

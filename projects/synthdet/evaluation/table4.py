@@ -6,7 +6,6 @@ which it has the highest 3D IoU (mmdet3d's ``DepthInstance3DBoxes.overlaps``, th
 IndoorMetric). It is correct if that IoU is >= the IoU threshold, otherwise incorrect (a
 duplicate of a matched object is incorrect). A class the model does not predict is ``None``.
 """
-import pickle
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +13,7 @@ import torch
 from mmdet3d.structures import DepthInstance3DBoxes
 
 from synthdet.classes import DETECTION_CLASSES
+from synthdet.info_files import load_info_pickle
 
 TABLE4_FORMAT = 'synthdet.table4/1'
 
@@ -32,8 +32,7 @@ def truth_from_infos(paths: list[str]) -> dict[str, list[TrueBox]]:
     """Map points file name (e.g. ``Area_9_lab_3.bin``) to its true boxes."""
     truth = {}
     for path in paths:
-        with open(path, 'rb') as f:
-            infos = pickle.load(f)
+        infos = load_info_pickle(path)
         categories = infos.get('metainfo', {}).get('categories') or {
             name: i
             for i, name in enumerate(DETECTION_CLASSES)

@@ -1,0 +1,72 @@
+"""Read the info pickles of ``tools/create_data.py`` without running code, and select rooms.
+
+An info pickle is plain data (dicts, lists, strings, numbers): the reader refuses anything
+else, so a pickle handed over by someone else cannot run code when it is opened.
+"""
+from __future__ import annotations
+
+import os
+import pickle
+import re
+from pathlib import Path
+
+from synthdet.contracts import SchemaError, read_room
+
+RAW_DIR = 'Stanford3dDataset_v1.2_Aligned_Version'
+_SCAN_NAME = re.compile(r'^(Area_\d+)_(.+)\.bin$')
+
+
+class InfoFileError(ValueError):
+    """An info pickle that is empty, broken or not in the converter's format; names the file."""
+
+
+class _PlainUnpickler(pickle.Unpickler):
+    """Unpickles dicts, lists, strings and numbers only: an info pickle never runs code."""
+
+    def find_class(self, module: str, name: str) -> object:
+        raise pickle.UnpicklingError(f'{module}.{name} is not plain data')
+
+
+def load_info_pickle(path: str | os.PathLike) -> dict:
+    """Read an info pickle written by ``tools/create_data.py`` (plain data only)."""
+    try:
+        with open(path, 'rb') as f:
+            infos = _PlainUnpickler(f).load()
+    except (pickle.UnpicklingError, EOFError, ValueError, IndexError, KeyError) as error:
+        raise InfoFileError(f'{path}: not an info pickle of tools/create_data.py '
+                            f'({error or type(error).__name__})') from None
+    if not isinstance(infos, dict) or not {'metainfo', 'data_list'} <= set(infos):
+        raise InfoFileError(f'{path}: not an info pickle of tools/create_data.py (no metainfo '
+                            'and data_list)')
+    return infos
+
+
+def room_sensor(room: dict) -> str:
+    """The generator sensor model (``paper``, ``tls``, ``tablet``) that scanned a validated
+    ``synthdet.room/1`` document; rooms from before the sensor models are ``paper``."""
+    return room.get('generator', {}).get('sensor', {}).get('model', 'paper')
+
+
+def rooms_scanned_by(info_file: str | os.PathLike, sensor: str) -> list[int]:
+    """Indices into the info pickle's ``data_list`` of the rooms that ``sensor`` scanned.
+
+    Each room's ``meta.json`` is looked up in the raw folder next to the pickle
+    (``<data_root>/Stanford3dDataset_v1.2_Aligned_Version/Area_N/<room>/meta.json``); a room
+    without one (a real S3DIS room) raises ``InfoFileError`` naming it.
+    """
+    info_file = Path(info_file)
+    raw = info_file.parent / RAW_DIR
+    selected = []
+    for index, info in enumerate(load_info_pickle(info_file)['data_list']):
+        name = Path(info['lidar_points']['lidar_path']).name
+        match = _SCAN_NAME.match(name)
+        meta = raw / match[1] / match[2] / 'meta.json' if match else None
+        if meta is None or not meta.is_file():
+            raise InfoFileError(f'{info_file}: room {name} has no generator meta.json '
+                                f'({meta or "not an Area_N_<room>.bin name"})')
+        try:
+            if room_sensor(read_room(meta)) == sensor:
+                selected.append(index)
+        except SchemaError as error:
+            raise InfoFileError(str(error)) from None
+    return selected
