@@ -281,9 +281,9 @@ class DomainShift:
             if not self.info_file(area).is_file()
         ]
 
-    def write_model_config(self, model: str) -> Path:
-        """The model's config (its template with this run's data root, schedule and points)
-        as one self-contained file next to its checkpoints; returns its path."""
+    def model_config_text(self, model: str) -> str:
+        """The model's config: its template with this run's data root, schedule and points, as
+        one self-contained file."""
         from mmengine.config import Config
 
         cfg = Config.fromfile(MODEL_CONFIGS[model], import_custom_modules=False)
@@ -304,11 +304,33 @@ class DomainShift:
         cfg.param_scheduler.milestones = [iters * 4 // 5]
         cfg.default_hooks.checkpoint.interval = max(1, iters // 4)
         cfg.randomness = dict(seed=self.settings.seed)
+        return (f'# {MODEL_CONFIGS[model].relative_to(REPO)} with the data in {data_root}, '
+                f'{iters} iterations, {points} sampled points; written by '
+                f'benchmarks/bench_domain_shift.py.\n' + cfg.pretty_text)
+
+    def check_model_configs(self) -> None:
+        """Refuse a work folder whose models were trained from other configs (a template in
+        ``configs/tr3d/`` changed since): their checkpoints and tables would be stale."""
+        from mmengine.config import Config
+
+        def settings(cfg: Config) -> dict:  # tools/train.py adds the run's launcher and work dir
+            return {k: v for k, v in cfg.to_dict().items() if k not in ('launcher', 'work_dir')}
+
+        for model in TRAIN_AREAS:
+            path = self.model_config(model)
+            if not path.is_file():
+                continue
+            wanted = Config.fromstring(self.model_config_text(model), '.py')
+            if settings(Config.fromfile(path, import_custom_modules=False)) != settings(wanted):
+                raise StepError(f'{path}: this work dir\'s {model} model was trained from another '
+                                f'version of {MODEL_CONFIGS[model].relative_to(REPO)}; choose '
+                                'another --work-dir')
+
+    def write_model_config(self, model: str) -> Path:
+        """Write the model's config next to its checkpoints; returns its path."""
         path = self.model_config(model)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(f'# {MODEL_CONFIGS[model].relative_to(REPO)} with the data in '
-                        f'{data_root}, {iters} iterations, {points} sampled points; written by '
-                        f'benchmarks/bench_domain_shift.py.\n' + cfg.pretty_text)
+        path.write_text(self.model_config_text(model))
         return path
 
     def train_jobs(self) -> list[Job]:
@@ -346,6 +368,7 @@ class DomainShift:
         self.check_inputs()
         self.run_step('generate', self.generate_jobs())
         self.run_step('convert', self.convert_jobs())
+        self.check_model_configs()
         self.run_step('train', self.train_jobs())
         self.run_step('test', self.test_jobs())
         tables = {

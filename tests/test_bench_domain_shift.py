@@ -215,3 +215,10 @@ def test_tiny_run_trains_both_models_tests_every_profile_and_resumes(tmp_path):
     # other settings in the same work folder are refused, naming the settings file
     other = run_bench(work, profiles, '--iters', '4')
     assert other.returncode == 1 and 'settings.json' in other.stderr
+    # a model trained from another version of its config template is refused, not reused
+    written = work / 'models' / MIXED / f'domain_shift_{MIXED}.py'
+    text = written.read_text()
+    assert 'lr=0.001,' in text
+    written.write_text(text.replace('lr=0.001,', 'lr=0.002,'))
+    stale = run_bench(work, profiles)
+    assert stale.returncode == 1 and f'{written}: this work dir' in stale.stderr

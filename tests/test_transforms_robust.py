@@ -21,7 +21,8 @@ from generator.__main__ import main as generate
 from projects.synthdet.config_helpers import with_robustness
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.datasets.transforms import (RandomColourJitter, RandomDensityFalloff,
-                                                   RandomPointDropout, RandomQuarterTurn)
+                                                   RandomPointDropout, RandomQuarterTurn,
+                                                   ThinRoomStructure)
 from tests.s3dis_fixtures import S3DIS_DIR
 from tests.tool_process import run_tool
 
@@ -407,3 +408,60 @@ def test_one_training_iteration_of_the_tiny_config_with_robustness(generated_roo
     [record] = [json.loads(line) for line in scalars.read_text().splitlines()]
     assert record['iter'] == 1 and math.isfinite(record['loss']) and record['loss'] > 0
     assert (work / 'epoch_1.pth').is_file()
+
+
+def _room_with_objects(ceiling_points: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A 6 x 5 x 3 m room: a dense floor, walls, a ceiling of ``ceiling_points`` points, a
+    0.4 m high seat denser than the floor, a 1.9 m cabinet 0.2 m from a wall and a table.
+    Returns the points and a 0/1 label per point (1 = object)."""
+    rng = np.random.default_rng(seed)
+
+    def plane(n, low, high):
+        return low + rng.random((n, 3)) * (np.asarray(high) - np.asarray(low))
+
+    structure = [
+        plane(30000, [0, 0, -0.005], [6, 5, 0.005]),
+        plane(ceiling_points, [0, 0, 2.995], [6, 5, 3.005]),
+        plane(6000, [0, 0, 0], [6, 0.01, 3]),
+        plane(6000, [0, 4.99, 0], [6, 5, 3]),
+        plane(5000, [0, 0, 0], [0.01, 5, 3]),
+        plane(5000, [5.99, 0, 0], [6, 5, 3]),
+    ]
+    objects = [
+        plane(40000, [1, 1, 0.39], [3, 2, 0.41]),  # a sofa seat: the fullest slice near the floor
+        plane(3000, [4, 4.2, 0.05], [4.6, 4.8, 1.9]),  # a tall cabinet 0.2 m from the wall
+        plane(3000, [2, 3, 0.7], [3.2, 3.8, 0.75]),  # a table top
+    ]
+    xyz = np.concatenate(structure + objects)
+    labels = np.repeat([0] * len(structure) + [1] * len(objects),
+                       [len(p) for p in structure + objects])
+    return xyz, labels
+
+
+@pytest.mark.parametrize('ceiling_points', [20000, 50])
+def test_thin_room_structure_finds_floor_ceiling_and_walls_not_objects(ceiling_points):
+    xyz, labels = _room_with_objects(ceiling_points)
+    flagged = ThinRoomStructure().structure(xyz)
+    assert flagged[labels == 0].mean() > 0.99
+    # the seat stays (it is not the floor), the cabinet and the table are not walls, even under
+    # a ceiling too sparse to be a plane
+    assert flagged[labels == 1].mean() < 0.01
+
+
+def test_thin_room_structure_keeps_a_share_of_the_structure_and_every_object_point():
+    np.random.seed(0)
+    xyz, labels = _room_with_objects(20000)
+    scene = make_scene(xyz, np.zeros_like(xyz))
+    scene['pts_semantic_mask'] = labels
+    scene['pts_instance_mask'] = np.arange(len(xyz))
+    out = ThinRoomStructure(keep=0.1)(scene)
+    rows = out['pts_instance_mask']
+    assert np.array_equal(out['pts_semantic_mask'], labels[rows])
+    assert torch.equal(out['points'].tensor[:, :3], torch.tensor(xyz, dtype=torch.float32)[rows])
+    kept = np.bincount(labels[rows], minlength=2) / np.bincount(labels)
+    assert kept[1] > 0.99 and 0.09 < kept[0] < 0.11
+    assert len(out['gt_bboxes_3d']) == len(BOXES)  # the boxes are not touched
+    with pytest.raises(ValueError, match='keep'):
+        ThinRoomStructure(keep=1.5)
+    with pytest.raises(ValueError, match='cell'):
+        ThinRoomStructure(cell=0.0)

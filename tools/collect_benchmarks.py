@@ -41,6 +41,7 @@ ARGUMENTS = {
     'corners': [],
     'hall': ['--checkpoint', 'work_dirs/demo/train/epoch_5.pth'],  # the model of `make demo`
     'sensors': ['--rooms', '2', '--repeats', '2'],
+    'structure_thinning': ['--rooms', '4'],
     'domain_shift': [],  # its defaults are the documented scale (about 1.5 h on 2 cores)
 }
 # Run only when named: `make bench BENCH_ARGS="--only domain_shift"` (docs/results.md).
@@ -64,6 +65,9 @@ WHAT = {
     'hall': '30M-point generated hall as LAZ -> FCStd (time, memory); windowed vs room recall',
     'sensors': 'generation time of the same 1M-point rooms per sensor model (paper aimed and '
     'uniform, TLS, tablet)',
+    'structure_thinning':
+    'points on objects among 40,000 sampled per room and sensor: `PointSample` alone vs '
+    '`ThinRoomStructure` first',
     'domain_shift':
     'TR3D at CPU scale trained on the paper profile vs the mixed default, tested on held-out '
     'generator profiles (about 1.5 h; only with `--only domain_shift`)',
