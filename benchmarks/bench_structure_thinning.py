@@ -11,7 +11,9 @@ seeded per room) sample ``--sample`` points, and the table gives per sensor the 
 sampled points on detection-class objects (table, chair, sofa, yumi, 3dprinter), the median
 and 10th-percentile sampled points per object, the share of object points that the thinning
 took for structure, and the time of each pipeline per room. The last line gives the gain in
-median points per object on the sparsest sensor.
+median points per object on the sparsest sensor. ``--pictures DIR`` also draws the first room of
+each sensor from above after each pipeline (``DIR/<sensor>_<pipeline>.png``, points by class,
+the true boxes).
 """
 import argparse
 import sys
@@ -35,41 +37,43 @@ import projects.synthdet.datasets.synthdet_s3dis  # noqa: E402,F401  (registers 
 from generator.config import load_config  # noqa: E402
 from generator.pipeline import RoomGenerator, RunOptions, plan_tasks  # noqa: E402
 from synthdet.classes import GENERATED_CLASSES  # noqa: E402
-from synthdet.room_data import annotation_class, annotation_files  # noqa: E402
+from synthdet.room_data import (
+    Scan,
+    annotation_class,
+    annotation_files,  # noqa: E402
+    boxes_from_meta)
 from synthdet.scan_io import read_scan  # noqa: E402
+from synthdet.topview import draw_top_view  # noqa: E402
 
 SENSORS = ('paper', 'tls', 'tablet')
 
 
-def read_room(folder: Path) -> tuple[np.ndarray, np.ndarray]:
-    """The points of a generated room and an instance id per point (-1 off the detection
-    classes), from its ``Annotations/``."""
-    parts, ids = [], []
+def read_room(folder: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The points of a generated room, an instance id per point (-1 off the detection
+    classes) and a class name per point, from its ``Annotations/``."""
+    parts, ids, names = [], [], []
     instance = 0
     for file in annotation_files(folder / 'Annotations'):
         points = read_scan(file)
         parts.append(points)
-        if annotation_class(file) in GENERATED_CLASSES:
+        name = annotation_class(file) or file.stem
+        names.append(np.full(len(points), name, dtype=object))
+        if name in GENERATED_CLASSES:
             ids.append(np.full(len(points), instance))
             instance += 1
         else:
             ids.append(np.full(len(points), -1))
-    return np.concatenate(parts), np.concatenate(ids)
+    return np.concatenate(parts), np.concatenate(ids), np.concatenate(names)
 
 
-def sampled(points: np.ndarray, ids: np.ndarray, steps: list,
-            seed: int) -> tuple[np.ndarray, float]:
-    """Run ``steps`` on the room; the instance ids of the points kept and the seconds taken."""
+def sampled(points: np.ndarray, steps: list, seed: int) -> tuple[np.ndarray, float]:
+    """Run ``steps`` on the room; the rows of the points kept and the seconds taken."""
     np.random.seed(seed)
-    results = {
-        'points':
-        DepthPoints(
-            torch.from_numpy(points.astype(np.float32)),
-            points_dim=6,
-            attribute_dims=dict(color=[3, 4, 5])),
-        'pts_instance_mask':
-        ids,
-    }
+    cloud = DepthPoints(
+        torch.from_numpy(points.astype(np.float32)),
+        points_dim=6,
+        attribute_dims=dict(color=[3, 4, 5]))
+    results = {'points': cloud, 'pts_instance_mask': np.arange(len(points))}
     start = time.perf_counter()
     for step in steps:
         results = step(results)
@@ -82,10 +86,13 @@ def main() -> None:
     parser.add_argument('--points', type=int, default=1_000_000)
     parser.add_argument('--sample', type=int, default=40_000)
     parser.add_argument('--keep', type=float, default=0.1)
+    parser.add_argument('--pictures', type=Path, help='draw the first room of each sensor here')
     args = parser.parse_args()
     sample = TRANSFORMS.build(dict(type='PointSample', num_points=args.sample))
     thin = TRANSFORMS.build(dict(type='ThinRoomStructure', keep=args.keep))
     pipelines = {'PointSample': [sample], 'thinned': [thin, sample]}
+    if args.pictures:
+        args.pictures.mkdir(parents=True, exist_ok=True)
     rows = {}
     with tempfile.TemporaryDirectory(prefix='synthdet-bench-thinning-') as work:
         for sensor in SENSORS:
@@ -104,12 +111,20 @@ def main() -> None:
             flagged = []
             for index, folder in enumerate(
                     sorted(p for p in Path(options.out).glob('Area_7/*') if p.is_dir())):
-                points, ids = read_room(folder)
+                points, ids, names = read_room(folder)
                 objects = ids >= 0
                 structure = thin.structure(points[:, :3].astype(np.float64))
                 flagged.append((structure & objects).sum() / max(objects.sum(), 1))
                 for name, steps in pipelines.items():
-                    kept, seconds = sampled(points, ids, steps, seed=index)
+                    kept_rows, seconds = sampled(points, steps, seed=index)
+                    kept = ids[kept_rows]
+                    if args.pictures and index == 0:
+                        draw_top_view(
+                            args.pictures / f'{sensor}_{name}.png',
+                            Scan(points[kept_rows], names[kept_rows]),
+                            boxes_from_meta(folder / 'meta.json'),
+                            title=f'{sensor} room {folder.name}, {len(kept_rows):,} points '
+                            f'after {name}')
                     counts = np.bincount(kept[kept >= 0], minlength=ids.max() + 1)
                     stats[name]['share'].append(np.mean(kept >= 0))
                     stats[name]['per_object'].extend(counts.tolist())
