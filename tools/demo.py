@@ -38,11 +38,11 @@ sys.path.insert(0, str(REPO_ROOT))
 
 from projects.synthdet.config_helpers import with_num_points  # noqa: E402
 from synthdet.contracts import read_corners, read_predictions, read_room  # noqa: E402
+from synthdet.info_files import RAW_DIR  # noqa: E402
 
 BASE_CONFIG = REPO_ROOT / 'configs/tr3d/exp2_cpu.py'
 AREAS = (7, 8, 9)
 TEST_AREA = 9
-RAW_DIR = 'Stanford3dDataset_v1.2_Aligned_Version'
 
 
 @dataclass(frozen=True)

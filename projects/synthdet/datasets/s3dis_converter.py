@@ -32,13 +32,13 @@ import numpy as np
 from tqdm import tqdm
 
 from synthdet.classes import DETECTION_CLASSES, FALLBACK_CLASS, SEMANTIC_CLASSES
+from synthdet.info_files import RAW_DIR as S3DIS_DIR
 from synthdet.point_text import PointFileError, compile_parser, max_rows, read_point_file
 from synthdet.processes import die_with_parent
 from synthdet.room_data import annotation_class, annotation_files, natural_key
 
 from .s3dis_repairs import repaired_point_text
 
-S3DIS_DIR = 'Stanford3dDataset_v1.2_Aligned_Version'
 OUTPUT_DIRS = ('points', 'instance_mask', 'semantic_mask')
 PARTIAL_SUFFIX = '.partial'
 ON_ERROR_CHOICES = ('raise', 'skip')

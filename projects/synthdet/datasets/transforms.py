@@ -31,11 +31,16 @@ def _keep_smallest(results: dict, keys: np.ndarray, count: int) -> dict:
     rows of ``pts_instance_mask`` and ``pts_semantic_mask`` when present."""
     if count >= len(keys):
         return results
-    keep = np.sort(np.argpartition(keys, count - 1)[:count])
-    results['points'] = results['points'][keep]
+    return _keep_rows(results, np.sort(np.argpartition(keys, count - 1)[:count]))
+
+
+def _keep_rows(results: dict, rows: np.ndarray) -> dict:
+    """Keep the points at ``rows`` (ascending) with the same rows of ``pts_instance_mask`` and
+    ``pts_semantic_mask`` when present."""
+    results['points'] = results['points'][rows]
     for mask in ('pts_instance_mask', 'pts_semantic_mask'):
         if results.get(mask) is not None:
-            results[mask] = results[mask][keep]
+            results[mask] = results[mask][rows]
     return results
 
 
@@ -357,12 +362,7 @@ class ThinRoomStructure(BaseTransform):
         if len(xyz) == 0:
             return results
         dropped = self.structure(xyz) & (np.random.rand(len(xyz)) >= self.keep)
-        keep = np.flatnonzero(~dropped)
-        results['points'] = results['points'][keep]
-        for mask in ('pts_instance_mask', 'pts_semantic_mask'):
-            if results.get(mask) is not None:
-                results[mask] = results[mask][keep]
-        return results
+        return _keep_rows(results, np.flatnonzero(~dropped))
 
     def __repr__(self) -> str:
         return (f'{type(self).__name__}(keep={self.keep}, band={self.band}, bin={self.bin}, '
