@@ -8,7 +8,9 @@ from pathlib import Path
 import pytest
 from mmengine.config import Config
 
-from projects.synthdet.config_helpers import area_datasets, with_num_points
+from projects.synthdet.config_helpers import (area_datasets, with_num_points,
+                                              with_structure_thinning,
+                                              without_structure_thinning)
 from projects.synthdet.inference.windows import density_from_config
 
 CONFIGS = Path(__file__).resolve().parents[1] / 'configs' / 'tr3d'
@@ -19,16 +21,25 @@ TRAIN_STEPS = [
 ]
 TEST_STEPS = ['LoadPointsFromFile', 'PointSample', 'NormalizePointsColor', 'Pack3DDetInputs']
 
-# config: train areas, test area, data_root, sampled points, train steps (tests/test_tr3d_tools.py
-# checks the classes, models and schedules)
+
+def thinned(steps: list[str]) -> list[str]:
+    """The step names with ``ThinRoomStructure`` right before ``PointSample``."""
+    index = steps.index('PointSample')
+    return steps[:index] + ['ThinRoomStructure'] + steps[index:]
+
+
+# config: train areas, test area, data_root, sampled points, train steps, test steps
+# (tests/test_tr3d_tools.py checks the classes, models and schedules)
 EXPECTED = {
-    'exp1': ([1, 2, 3, 4, 6], 5, 'data/s3dis/', 100000, TRAIN_STEPS),
-    'exp2': ([7, 8], 9, 'data/s3dis/', 100000, TRAIN_STEPS),
-    'exp2_paper': ([1, 2, 3, 7, 8], 9, 'data/s3dis/', 100000, TRAIN_STEPS),
-    'exp3': ([1, 2, 3, 4, 6, 7, 8, 9], 5, 'data/s3dis/', 100000, TRAIN_STEPS),
-    'exp3_finetune': ([1, 2, 3, 4, 6, 7, 8, 9], 5, 'data/s3dis/', 100000, TRAIN_STEPS),
-    'exp2_cpu': ([7, 8], 9, 'data/s3dis/', 40000, TRAIN_STEPS),
-    'tiny': ([1], 1, 'data/s3dis_tiny/', 10000, [s for s in TRAIN_STEPS if s not in AUGMENTATION]),
+    'exp1': ([1, 2, 3, 4, 6], 5, 'data/s3dis/', 100000, TRAIN_STEPS, TEST_STEPS),
+    'exp2': ([7, 8], 9, 'data/s3dis/', 100000, TRAIN_STEPS, TEST_STEPS),
+    'exp2_paper': ([1, 2, 3, 7, 8], 9, 'data/s3dis/', 100000, TRAIN_STEPS, TEST_STEPS),
+    'exp3': ([1, 2, 3, 4, 6, 7, 8, 9], 5, 'data/s3dis/', 100000, TRAIN_STEPS, TEST_STEPS),
+    'exp3_finetune': ([1, 2, 3, 4, 6, 7, 8, 9], 5, 'data/s3dis/', 100000, TRAIN_STEPS,
+                      TEST_STEPS),
+    'exp2_cpu': ([7, 8], 9, 'data/s3dis/', 40000, thinned(TRAIN_STEPS), thinned(TEST_STEPS)),
+    'tiny': ([1], 1, 'data/s3dis_tiny/', 10000,
+             [s for s in TRAIN_STEPS if s not in AUGMENTATION], TEST_STEPS),
 }
 
 
@@ -42,7 +53,7 @@ def _num_points(pipeline: list) -> list[int]:
 
 @pytest.mark.parametrize('name', sorted(EXPECTED))
 def test_resolved_datasets_and_pipelines(name):
-    areas, test_area, data_root, num_points, train_steps = EXPECTED[name]
+    areas, test_area, data_root, num_points, train_steps, test_steps = EXPECTED[name]
     cfg = load(name)
     datasets = cfg.train_dataloader.dataset.dataset.datasets
     assert [d.ann_file for d in datasets] == [f's3dis_infos_Area_{a}.pkl' for a in areas]
@@ -56,15 +67,19 @@ def test_resolved_datasets_and_pipelines(name):
     assert (test_set.ann_file, test_set.data_root) == (f's3dis_infos_Area_{test_area}.pkl',
                                                        data_root)
     assert test_set.pipeline == cfg.test_pipeline and test_set.metainfo == cfg.metainfo
-    assert [step.type for step in cfg.test_pipeline] == TEST_STEPS
+    assert [step.type for step in cfg.test_pipeline] == test_steps
     assert _num_points(cfg.test_pipeline) == [num_points]
 
 
 @pytest.mark.parametrize('name', ['exp2_cpu', 'tiny'])
-def test_cpu_configs_change_only_the_point_count_of_exp2_pipelines(name):
+def test_cpu_configs_change_only_the_point_count_and_thinning_of_exp2_pipelines(name):
     exp2, cfg = load('exp2'), load(name)
     for key in ('train_pipeline', 'test_pipeline'):
-        derived = [step for step in cfg[key] if step.type != 'PointSample']
+        thinning = [step for step in cfg[key] if step.type == 'ThinRoomStructure']
+        assert thinning == ([dict(type='ThinRoomStructure', keep=0.1)] if name == 'exp2_cpu' else [])
+        derived = [
+            step for step in cfg[key] if step.type not in ('PointSample', 'ThinRoomStructure')
+        ]
         original = [
             step for step in exp2[key]
             if step.type != 'PointSample' and step.type in [s.type for s in cfg[key]]
@@ -79,6 +94,14 @@ def test_helpers_copy_and_refuse_a_pipeline_without_point_sample():
     assert _num_points(changed) == [7] and _num_points(pipeline) == [5]
     with pytest.raises(ValueError, match='no PointSample step'):
         with_num_points(pipeline[:1], 7)
+    thinning = dict(type='ThinRoomStructure', keep=0.2)
+    thin = with_structure_thinning(pipeline, thinning)
+    assert thin == [pipeline[0], thinning, pipeline[1]] and len(pipeline) == 2
+    assert without_structure_thinning(thin) == pipeline
+    with pytest.raises(ValueError, match='already thins'):
+        with_structure_thinning(thin, thinning)
+    with pytest.raises(ValueError, match='no PointSample step'):
+        with_structure_thinning(pipeline[:1], thinning)
     template = dict(type='SynthdetS3DISDataset', data_root='d/')
     assert area_datasets(template, [2, 9], dict(classes=('sofa', ))) == [
         dict(template, ann_file=f's3dis_infos_Area_{a}.pkl', metainfo=dict(classes=('sofa', )))

@@ -306,7 +306,7 @@ def test_invalid_strengths_are_refused():
 
 
 def test_with_robustness_inserts_after_point_sample():
-    base = Config.fromfile(CONFIGS / 'exp2_cpu.py', import_custom_modules=False)
+    base = Config.fromfile(CONFIGS / 'exp2.py', import_custom_modules=False)
     original = [dict(step) for step in base.train_pipeline]
     robust = with_robustness(base.train_pipeline, base.robust_augmentations)
     types = [step['type'] for step in robust]

@@ -242,6 +242,14 @@ class Demo:
                                                          size.num_points)
         cfg.train_cfg.max_epochs = size.epochs
         cfg.train_cfg.val_interval = 1
+        # a short schedule: the learning rate drops 10x for the last epoch only
+        cfg.param_scheduler = dict(
+            type='MultiStepLR',
+            begin=0,
+            end=size.epochs,
+            by_epoch=True,
+            milestones=[size.epochs - 1] if size.epochs > 1 else [],
+            gamma=0.1)
         cfg.default_hooks.logger.interval = size.log_interval
         cfg.randomness = dict(seed=self.seed)
         self.work.mkdir(parents=True, exist_ok=True)

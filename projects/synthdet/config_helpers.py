@@ -53,6 +53,25 @@ def with_num_points(pipeline: Sequence[Mapping[str, Any]], num_points: int) -> l
     ]
 
 
+def with_structure_thinning(pipeline: Sequence[Mapping[str, Any]],
+                            thinning: Mapping[str, Any]) -> list[dict]:
+    """A copy of ``pipeline`` with the ``thinning`` step (a ``ThinRoomStructure`` dict) right
+    before its ``PointSample``, so that the sampled points fall more often on objects.
+
+    Raises ``ValueError`` if the pipeline has no ``PointSample`` or already thins.
+    """
+    index = _point_sample_index(pipeline)
+    if any(step['type'] == 'ThinRoomStructure' for step in pipeline):
+        raise ValueError(f'the pipeline already thins: {[step["type"] for step in pipeline]}')
+    steps = [dict(step) for step in pipeline]
+    return steps[:index] + [dict(thinning)] + steps[index:]
+
+
+def without_structure_thinning(pipeline: Sequence[Mapping[str, Any]]) -> list[dict]:
+    """A copy of ``pipeline`` without its ``ThinRoomStructure`` steps."""
+    return [dict(step) for step in pipeline if step['type'] != 'ThinRoomStructure']
+
+
 def with_robustness(pipeline: Sequence[Mapping[str, Any]],
                     augmentations: Sequence[Mapping[str, Any]]) -> list[dict]:
     """A copy of the train ``pipeline`` with ``augmentations`` (``robust_augmentations`` of
