@@ -74,7 +74,7 @@ def convex_hull_corners(points: np.ndarray, params: CornerParams = CornerParams(
 
 def wall_band_xy(points: np.ndarray, params: CornerParams) -> np.ndarray:
     """The plan (x, y) of the points between the floor and ceiling levels, a margin away."""
-    floor_z, ceiling_z = find_levels(points[:, 2], params)
+    floor_z, ceiling_z = find_levels(points[:, :3], params)
     band = (points[:, 2] > floor_z + params.wall_margin) & \
         (points[:, 2] < ceiling_z - params.wall_margin)
     return points[band, :2]

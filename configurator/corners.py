@@ -60,6 +60,9 @@ class CornerParams:
     max_quality_points: int = 50_000  # wall points used for the quality figures
     cluster_gap: float = 2.0  # points beyond an empty gap this wide (x or y) are far outliers
     min_floor_prominence: float = 3.0  # the floor level is this many times denser than walls
+    min_level_peak: float = 0.05  # a floor peak holds this share of the biggest lower peak
+    floor_cell: float = 0.5  # plan grid on which the floor level must span the scan
+    min_floor_cover: float = 0.3  # share of the scan's occupied plan cells the floor spans
 
 
 @dataclass
@@ -104,7 +107,7 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
     origin = np.floor(xyz[keep, :2].min(axis=0))
     xyz = xyz[keep] - np.array([origin[0], origin[1], 0.0])
 
-    floor_z, ceiling_z = find_levels(xyz[:, 2], params)
+    floor_z, ceiling_z = find_levels(xyz, params)
     in_band = (xyz[:, 2] > floor_z + params.wall_margin) & \
         (xyz[:, 2] < ceiling_z - params.wall_margin)
     wall_xy = _subsample(xyz[in_band, :2], params.max_fit_points)
@@ -226,14 +229,19 @@ def outline_to_dict(outline: RoomOutline, scan: str) -> dict:
 # --------------------------------------------------------------------------- levels and angle
 
 
-def find_levels(z: np.ndarray, params: CornerParams | None = None) -> tuple[float, float]:
-    """Floor and ceiling heights: the lowest and highest strong peaks of the z histogram.
+def find_levels(xyz: np.ndarray, params: CornerParams | None = None) -> tuple[float, float]:
+    """Floor and ceiling heights of (N, 3) points from the peaks of their z histogram.
 
-    A peak is strong if it holds a quarter of the biggest peak of its half of the range.
-    Without a ceiling peak (an open scan) the ceiling is the 99.9th z percentile.
+    The floor is the lowest peak of the lower half that holds ``min_level_peak`` of its
+    biggest peak and whose points (within 2 bins) span ``min_floor_cover`` of the plan cells
+    the scan occupies: chair seats or a table top can be denser than a floor that clutter
+    hides, but they never span the room. Without such a peak, the lowest peak holding a
+    quarter of the biggest. The ceiling is the highest peak of the upper half holding a
+    quarter of its biggest; without one (an open scan) the 99.9th z percentile.
     """
     params = params or CornerParams()
-    z = z[::max(1, len(z) // params.max_fit_points)]  # levels need no more points than this
+    xyz = xyz[::max(1, len(xyz) // params.max_fit_points)]  # levels need no more points
+    z = xyz[:, 2]
     low, high = np.percentile(z, [0.1, 99.9])
     if high - low < params.min_room_height:
         raise CornerDetectionError(f'no walls found: the scan is only {high - low:.2f} m tall')
@@ -243,15 +251,31 @@ def find_levels(z: np.ndarray, params: CornerParams | None = None) -> tuple[floa
     is_peak = (hist >= np.roll(hist, 1)) & (hist >= np.roll(hist, -1)) & (hist > 0)
     lower = centres < (low + high) / 2
 
-    floor_candidates = np.flatnonzero(is_peak & lower & (hist >= 0.25 * hist[lower].max()))
-    floor_z = _level_at(z, centres[floor_candidates[0]], params.level_bin)
+    strongest = hist[lower].max()
+    cells = _plan_cells(xyz, params.floor_cell)
+    occupied = len(np.unique(cells))
+    peaks = np.flatnonzero(is_peak & lower & (hist >= params.min_level_peak * strongest))
+    spanning = [
+        peak for peak in peaks
+        if len(np.unique(cells[np.abs(z - centres[peak]) < 2 * params.level_bin])) >=
+        params.min_floor_cover * occupied
+    ]
+    strong = np.flatnonzero(is_peak & lower & (hist >= 0.25 * strongest))
+    floor_peak = spanning[0] if spanning else strong[0]
+    floor_z = _level_at(z, centres[floor_peak], params.level_bin)
     upper = ~lower
     ceiling_candidates = np.flatnonzero(is_peak & upper & (hist >= 0.25 * hist[upper].max()))
-    if hist[upper].max() >= 0.2 * hist[floor_candidates[0]]:
+    if hist[upper].max() >= 0.2 * hist[floor_peak]:
         ceiling_z = _level_at(z, centres[ceiling_candidates[-1]], params.level_bin)
     else:
         ceiling_z = float(high)
     return floor_z, ceiling_z
+
+
+def _plan_cells(xyz: np.ndarray, cell: float) -> np.ndarray:
+    """One integer key per point: its ``cell`` x ``cell`` square of the plan."""
+    squares = np.floor((xyz[:, :2] - xyz[:, :2].min(axis=0)) / cell).astype(np.int64)
+    return squares[:, 0] * (int(squares[:, 1].max()) + 1) + squares[:, 1]
 
 
 def main_cluster(xy: np.ndarray, gap: float) -> np.ndarray:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from configurator.corners import (CornerDetectionError, detect_corners, dominant_wall_angle,
-                                  simplify_outline, trace_boundary)
+                                  find_levels, simplify_outline, trace_boundary)
 from synthdet.contracts import CORNERS_FORMAT, read_corners
 from synthdet.scan_io import read_scan, write_scan
 from tests.room_scans import SHAPES, NoiseModel, inside_polygon, make_room
@@ -107,9 +107,8 @@ def test_sparsely_scanned_arm_of_a_u_room():
 def generator_rooms(tmp_path_factory) -> list:
     """Rooms made by ``python -m generator`` (real bpy scenes and ray casting): 2 box, 2 L and
     2 U rooms without noise and the same again with the generator's noise models, with the
-    earlier light clutter (plain boxes and cylinders): with factory clutter the floor of a
-    chairs-only room can hold fewer points than the chair seats, and find_levels takes the
-    seats for the floor (noted in docs/corners.md)."""
+    earlier light clutter (plain boxes and cylinders). A floor that factory clutter hides, under
+    denser chair seats, is test_seats_denser_than_the_floor_are_not_the_floor's."""
     from generator.__main__ import main
     work = tmp_path_factory.mktemp('generated')
     rooms = []
@@ -153,6 +152,28 @@ def test_corners_of_generated_rooms_of_each_shape(generator_rooms, noisy):
         assert abs(outline.ceiling_z - outline.floor_z - meta['room']['height']) < 0.02
         shapes.add(shape)
     assert shapes == {'box', 'L', 'U'}
+
+
+def test_seats_denser_than_the_floor_are_not_the_floor():
+    """Four chair seats holding five times the floor's points (clutter hides a floor, the
+    chairs face the scanner) form the densest low level, but they span a few plan cells of
+    the room, so the floor stays the floor and the corners stay right."""
+    room = make_room('L', n_points=150_000, seed=4, rotate=False)
+    rng = np.random.default_rng(0)
+    on_floor = int(np.count_nonzero(np.abs(room.points[:, 2] - room.floor_z) < 0.005))
+    centre = room.polygon.mean(axis=0)
+    seats = []
+    for dx, dy in ((-0.6, -0.6), (-0.6, 0.6), (0.6, -0.6), (0.6, 0.6)):
+        xy = centre + (dx, dy) + rng.uniform(-0.22, 0.22, (5 * on_floor // 4, 2))
+        z = np.full((len(xy), 1), room.floor_z + 0.47)
+        seats.append(np.hstack([xy, z, np.full((len(xy), 3), 90.0)]))
+    points = np.concatenate([room.points, *seats])
+    floor_z, ceiling_z = find_levels(points[:, :3])
+    assert floor_z == pytest.approx(room.floor_z, abs=0.005)
+    assert ceiling_z == pytest.approx(room.ceiling_z, abs=0.005)
+    outline = detect_corners(points)
+    assert outline.floor_z == pytest.approx(room.floor_z, abs=0.005)
+    assert_corners_close(outline.corners, room.polygon)
 
 
 def test_floor_seen_through_a_door_is_not_part_of_the_room():
