@@ -114,6 +114,21 @@ def test_training_density_is_the_sampled_points_over_the_median_floor_area(name)
     cfg = load(name)
     assert cfg.inference_window == dict(size=8.0, overlap=2.6)
     assert cfg.inference_density == dict(floor_area=59.0)
-    assert density_from_config(cfg) == pytest.approx(EXPECTED[name][3] / 59.0)
+    thinned = 'ThinRoomStructure' in EXPECTED[name][5]  # keep=0.1: 10x the points
+    assert density_from_config(cfg) == pytest.approx(EXPECTED[name][3] / 59.0 *
+                                                     (10 if thinned else 1))
     with pytest.raises(ValueError, match='no inference_density'):
         density_from_config({key: cfg[key] for key in cfg if key != 'inference_density'})
+
+
+def test_training_density_counts_the_structure_thinning():
+    def config(*steps: dict) -> dict:
+        pipeline = [*steps, dict(type='PointSample', num_points=1000)]
+        return dict(
+            inference_density=dict(floor_area=50.0),
+            test_dataloader=dict(dataset=dict(pipeline=pipeline)))
+
+    assert density_from_config(config()) == pytest.approx(20.0)
+    assert density_from_config(config(dict(type='ThinRoomStructure', keep=0.25))) == \
+        pytest.approx(80.0)
+    assert density_from_config(config(dict(type='ThinRoomStructure'))) == pytest.approx(200.0)

@@ -30,6 +30,7 @@ points per m^2 of floor a median training room was sampled to.
 """
 from __future__ import annotations
 
+import inspect
 import math
 from dataclasses import dataclass
 from typing import Callable, Mapping
@@ -39,6 +40,7 @@ import torch
 from tqdm import tqdm
 
 from projects.synthdet.core.nms import axis_aligned_nms3d
+from projects.synthdet.datasets.transforms import ThinRoomStructure
 
 
 @dataclass(frozen=True)
@@ -113,7 +115,13 @@ def window_spec_from_config(cfg: Mapping) -> WindowSpec:
 def density_from_config(cfg: Mapping) -> float:
     """The points per m^2 of floor the model was trained on: the ``num_points`` of the test
     pipeline's ``PointSample`` over the ``inference_density = dict(floor_area=...)`` of a model
-    config (the median training floor area, as for the window size)."""
+    config (the median training floor area, as for the window size).
+
+    A test pipeline that thins the room structure first (``ThinRoomStructure`` with ``keep``)
+    needs ``1 / keep`` times as many: after thinning, even a window of structure alone still
+    holds ``num_points`` points, so ``PointSample`` draws from the same mix of objects and
+    structure as in training, where every room had more points than that.
+    """
     density = cfg.get('inference_density')
     if density is None:
         raise ValueError('the config has no inference_density = dict(floor_area=...): see '
@@ -122,7 +130,11 @@ def density_from_config(cfg: Mapping) -> float:
     counts = [step['num_points'] for step in pipeline if step['type'] == 'PointSample']
     if not counts:
         raise ValueError('the test pipeline has no PointSample step, so no training density')
-    return float(counts[0]) / float(density['floor_area'])
+    default_keep = inspect.signature(ThinRoomStructure).parameters['keep'].default
+    kept = math.prod(
+        float(step.get('keep', default_keep)) for step in pipeline
+        if step['type'] == 'ThinRoomStructure')
+    return float(counts[0]) / float(density['floor_area']) / kept
 
 
 def inference_settings(cfg: Mapping, config: str) -> tuple[WindowSpec, float]:
