@@ -28,7 +28,8 @@ demo: setup
 # data/s3dis, train areas 7, 8 and test area 9 with configs/tr3d/exp2_cpu.py. Every step resumes:
 # finished rooms are kept, training continues from the newest checkpoint of work_dirs/exp2_cpu,
 # and the test uses the final epoch's checkpoint (named in last_checkpoint), on all of area 9 and
-# then on the rooms of each generator sensor (tools/test.py --sensor).
+# then on the rooms of each generator sensor (tools/test.py --sensor). About 3.5 hours on an idle
+# 2-core machine with EXP2_THREADS=2 (12 epochs of 15-17 min, docs/results.md).
 EXP2_DATA ?= data/s3dis
 EXP2_WORK ?= work_dirs/exp2_cpu
 # One OpenMP thread per process by default: on a busy machine torch's default (all cores)

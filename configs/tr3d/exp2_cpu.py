@@ -21,7 +21,7 @@
 #   mAP@0.5 was 0.896 against 0.988 after the learning-rate drop (docs/results.md).
 # Nothing here selects a device: the Runner uses a GPU when there is one.
 # Cost measured on generated 1M-point rooms (2 OpenMP threads, an idle 2-core machine): about
-# 7 s per training iteration of 4 rooms and 1.3 s per test room, 1.7 GB peak memory.
+# 6.5 s per training iteration of 4 rooms and 1 s per test room, 1.7 GB peak memory.
 _base_ = ['./exp2.py']
 from projects.synthdet.config_helpers import area_datasets, with_num_points  # noqa: E402
 from projects.synthdet.config_helpers import with_structure_thinning  # noqa: E402
