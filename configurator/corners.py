@@ -253,15 +253,14 @@ def find_levels(xyz: np.ndarray, params: CornerParams | None = None) -> tuple[fl
 
     strongest = hist[lower].max()
     cells = _plan_cells(xyz, params.floor_cell)
-    occupied = len(np.unique(cells))
-    peaks = np.flatnonzero(is_peak & lower & (hist >= params.min_level_peak * strongest))
-    spanning = [
-        peak for peak in peaks
-        if len(np.unique(cells[np.abs(z - centres[peak]) < 2 * params.level_bin])) >=
-        params.min_floor_cover * occupied
-    ]
-    strong = np.flatnonzero(is_peak & lower & (hist >= 0.25 * strongest))
-    floor_peak = spanning[0] if spanning else strong[0]
+    least_cover = params.min_floor_cover * len(np.unique(cells))
+    floor_peak = next(
+        (peak
+         for peak in np.flatnonzero(is_peak & lower & (hist >= params.min_level_peak * strongest))
+         if len(np.unique(cells[np.abs(z - centres[peak]) < 2 * params.level_bin])) >=
+         least_cover), None)
+    if floor_peak is None:  # no level spans the scan: the lowest strong peak
+        floor_peak = np.flatnonzero(is_peak & lower & (hist >= 0.25 * strongest))[0]
     floor_z = _level_at(z, centres[floor_peak], params.level_bin)
     upper = ~lower
     ceiling_candidates = np.flatnonzero(is_peak & upper & (hist >= 0.25 * hist[upper].max()))
