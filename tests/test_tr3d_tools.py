@@ -20,6 +20,7 @@ from mmengine.registry import init_default_scope
 
 from projects.synthdet.checkpoint import load_model_weights
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
+from projects.synthdet.evaluation.box_fit import best_fits, summarize_fits
 from projects.synthdet.evaluation.table3 import format_table3, table3, table3_rows
 from projects.synthdet.evaluation.table4 import truth_from_infos
 from synthdet.contracts import ROOM_FORMAT
@@ -250,6 +251,60 @@ def test_test_tool_prints_and_writes_table3(tiny: dict, capsys: pytest.CaptureFi
     assert float(lines[header + 1].split()[-1]) == pytest.approx(
         table['rows']['mAP@0.25']['mean'], abs=5e-4)
     assert lines[header + 2].split()[0] == 'mAP@0.5'
+
+
+def test_best_fit_is_the_closest_prediction_of_the_same_class() -> None:
+    from mmdet3d.structures import DepthInstance3DBoxes
+
+    def boxes(rows: list[list[float]]) -> DepthInstance3DBoxes:  # gravity centre, size, yaw
+        return DepthInstance3DBoxes(torch.tensor(rows).reshape(-1, 7), origin=(0.5, 0.5, 0.5))
+
+    truth = boxes([[0, 0, 0.5, 1, 1, 1, 0], [5, 0, 0.5, 2, 1, 1, 0], [9, 9, 0.5, 1, 1, 1, 0]])
+    pred = boxes([
+        [0, 0, 0.5, 1, 1, 1, 0],  # exact on the first box, but of class 1
+        [0.1, 0, 0.5, 1.25, 1, 1, 0],  # class 0, 1.25x as long: IoU 1 / 1.25
+        [5, 0, 0.55, 1, 0.5, 0.9, 0],  # class 1, half as long and wide, 5 cm higher
+        [5, 3, 0.5, 2, 1, 1, 0],  # class 1, a perfect size but 3 m off: IoU 0
+    ])
+    fits = best_fits(truth, [0, 1, 2], pred, [1, 0, 1, 1])
+    assert fits[:, 0].tolist() == [0, 1, 2]
+    np.testing.assert_allclose(fits[0, 1:], [0.8, 1.25, 1, 1, 0.1], rtol=1e-6, atol=1e-6)
+    # second box: 2 x 1 x 1 against 1 x 0.5 x 0.9 inside it; 0.45 / 2 = 0.225
+    np.testing.assert_allclose(fits[1, 1:], [0.225, 0.5, 0.5, 0.9, 0.05], rtol=1e-5, atol=1e-6)
+    assert fits[2, 1] == 0 and np.isnan(fits[2, 2:]).all()  # class 2 has no prediction
+    summary = summarize_fits(fits, ['table', 'chair', 'sofa', 'yumi'])
+    assert summary['table_boxes'] == 1 and summary['table_below_0.25'] == 0.0
+    assert summary['chair_below_0.25'] == summary['chair_below_0.50'] == 1.0
+    assert summary['sofa_iou_median'] == 0 and np.isnan(summary['sofa_size_x'])
+    assert not any(key.startswith('yumi') for key in summary)  # no true yumi
+    assert best_fits(truth, [0, 1, 2], pred[[]], [])[:, 1].tolist() == [0, 0, 0]
+
+
+def test_test_tool_box_fit_bounds_the_recall(tiny: dict, capsys: pytest.CaptureFixture) -> None:
+    out_dir = tiny['root'] / 'test_box_fit'
+    checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
+    document = load_tool('test').main([
+        str(TINY),
+        str(checkpoint), '--work-dir',
+        str(out_dir), '--box-fit', '--cfg-options', *data_options(tiny['data'])
+    ])
+    fit = json.loads((out_dir / 'box_fit.json').read_text())
+    assert fit['format'] == 'synthdet.box_fit/1' and list(fit['rows']) == TINY_CLASSES
+    truth = [name for boxes in truth_from_infos([tiny['data'] / 's3dis_infos_Area_1.pkl']).values()
+             for name, _ in boxes]
+    metrics = document['metrics']
+    for name, row in fit['rows'].items():
+        assert row['boxes'] == truth.count(name)
+        assert 0.0 <= row['iou_median'] <= 1.0
+        assert 0.0 <= row['below_0.25'] <= row['below_0.50'] <= 1.0
+        # a true box IndoorMetric counts as found at IoU t has a prediction with IoU >= t
+        for thr in ('0.25', '0.50'):
+            assert 1.0 - row[f'below_{thr}'] >= metrics[f'{name}_rec_{thr}'] - 1e-9
+    lines = capsys.readouterr().out.splitlines()
+    header = next(i for i, line in enumerate(lines) if line.startswith('class '))
+    assert lines[header].split()[:3] == ['class', 'boxes', 'iou_median']
+    assert [line.split()[0] for line in lines[header + 1:header + 6]] == TINY_CLASSES
+    assert (out_dir / 'box_fit.txt').read_text().count('\n') == 7  # title, header, 5 classes
 
 
 def test_predict_writes_detections_in_each_scan_frame(tiny: dict) -> None:

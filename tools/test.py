@@ -2,6 +2,7 @@
 
 Usage: python tools/test.py CONFIG CHECKPOINT [--work-dir DIR] [--out JSON] [--cfg-options k=v ...]
                             [--show-dir DIR [--score-thr T]] [--sensor {paper,tls,tablet}]
+                            [--box-fit]
                             [--launcher {none,pytorch,slurm,mpi}]
 
 The numbers are mmdet3d's IndoorMetric (per-class average precision at 3D IoU 0.25 and 0.5 and
@@ -15,7 +16,10 @@ with its ground truth and the predictions scoring at least ``--score-thr``
 mmdet3d's test tool. ``--sensor`` tests only the generated rooms that one of the generator's
 sensor models scanned (their ``meta.json``), for a table per sensor. The checkpoint is loaded
 weights-only (``projects/synthdet/checkpoint.py``): one that holds anything else is refused, as
-is a ``--sensor`` whose rooms cannot be found (exit 2).
+is a ``--sensor`` whose rooms cannot be found (exit 2). ``--box-fit`` adds a table of how well
+the predicted boxes fit the true ones per class (median best IoU, the share below IoU 0.25 and
+0.5, size ratios per axis and centre distance; ``projects/synthdet/evaluation/box_fit.py``),
+printed and written to ``box_fit.json`` / ``box_fit.txt`` next to Table 3.
 """
 import argparse
 import sys
@@ -31,6 +35,8 @@ from mmengine.runner import Runner  # noqa: E402
 from projects.synthdet.bootstrap import (  # noqa: E402
     add_runner_arguments, parse_runner_args, run_tool, runner_config)
 from projects.synthdet.checkpoint import CheckpointError, load_model_weights  # noqa: E402
+from projects.synthdet.evaluation.box_fit import (  # noqa: E402
+    SynthdetBoxFit, box_fit_document, format_box_fit)
 from projects.synthdet.evaluation.table3 import format_table3, table3  # noqa: E402
 from projects.synthdet.evaluation.table_files import write_table  # noqa: E402
 from projects.synthdet.visualization import TopViewHook  # noqa: E402
@@ -55,6 +61,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         '--sensor',
         choices=SENSOR_MODELS,
         help='test only the generated rooms this generator sensor scanned (meta.json)')
+    parser.add_argument(
+        '--box-fit',
+        action='store_true',
+        help='also tabulate how well the predicted boxes fit the true ones (box_fit.json)')
     add_runner_arguments(parser, 'logs and table3.json (default work_dirs/<config>)')
     return parse_runner_args(parser, argv)
 
@@ -66,6 +76,14 @@ def add_show_hook(cfg: Config, show_dir: str | None, score_thr: float) -> None:
             *cfg.get('custom_hooks', []),
             dict(type=TopViewHook.__name__, out_dir=show_dir, score_thr=score_thr)
         ]
+
+
+def add_box_fit(cfg: Config, box_fit: bool) -> None:
+    """With ``box_fit``, evaluate the test with ``SynthdetBoxFit`` as well."""
+    if box_fit:
+        evaluators = cfg.test_evaluator
+        evaluators = list(evaluators) if isinstance(evaluators, (list, tuple)) else [evaluators]
+        cfg.test_evaluator = [*evaluators, dict(type=SynthdetBoxFit.__name__)]
 
 
 def select_sensor(cfg: Config, sensor: str | None) -> str:
@@ -88,19 +106,29 @@ def main(argv: list[str] | None = None) -> dict:
     cfg = runner_config(args)
     cfg.load_from = None  # the weights come from the weights-only load below
     add_show_hook(cfg, args.show_dir, args.score_thr)
+    add_box_fit(cfg, args.box_fit)
     test_set = select_sensor(cfg, args.sensor)
     runner = Runner.from_cfg(cfg)
     load_model_weights(
         runner.model.module if is_model_wrapper(runner.model) else runner.model, args.checkpoint)
     metrics = runner.test()
-    document = table3(metrics, list(runner.test_dataloader.dataset.metainfo['classes']),
-                      str(args.config), str(args.checkpoint), test_set)
+    classes = list(runner.test_dataloader.dataset.metainfo['classes'])
+    document = table3(metrics, classes, str(args.config), str(args.checkpoint), test_set)
     if is_main_process():
         out = Path(args.out) if args.out else Path(cfg.work_dir) / 'table3.json'
         text = (f'Table 3 ({Path(args.config).stem}, {document["test_set"]}):\n'
                 f'{format_table3(document)}')
         print(text)
         print(f'written to {out} and {write_table(out, document, text)}')
+        if args.box_fit:
+            fit = box_fit_document(metrics, classes, str(args.config), str(args.checkpoint),
+                                   test_set)
+            fit_out = out.with_name('box_fit.json')
+            text = (f'Box fit ({Path(args.config).stem}, {test_set}; best IoU of each true box, '
+                    f'size ratios prediction / truth, centre distance in m):\n'
+                    f'{format_box_fit(fit)}')
+            print(text)
+            print(f'written to {fit_out} and {write_table(fit_out, fit, text)}')
     return document
 
 
