@@ -28,8 +28,9 @@ demo: setup
 # data/s3dis, train areas 7, 8 and test area 9 with configs/tr3d/exp2_cpu.py. Every step resumes:
 # finished rooms are kept, training continues from the newest checkpoint of work_dirs/exp2_cpu,
 # and the test uses the final epoch's checkpoint (named in last_checkpoint), on all of area 9 and
-# then on the rooms of each generator sensor (tools/test.py --sensor). About 3.5 hours on an idle
-# 2-core machine with EXP2_THREADS=2 (12 epochs of 15-17 min, docs/results.md).
+# then on the rooms of each generator sensor (tools/test.py --sensor), each test with its box-fit
+# table (--box-fit). About 3.5 hours on an idle 2-core machine with EXP2_THREADS=2 (12 epochs of
+# 15-17 min, docs/results.md).
 EXP2_DATA ?= data/s3dis
 EXP2_WORK ?= work_dirs/exp2_cpu
 # One OpenMP thread per process by default: on a busy machine torch's default (all cores)
@@ -49,10 +50,10 @@ exp2-cpu: setup
 	    $$(ls $(EXP2_WORK)/epoch_*.pth >/dev/null 2>&1 && echo --resume) \
 	    --cfg-options $(EXP2_DATA_OPTIONS)
 	$(PY) tools/test.py configs/tr3d/exp2_cpu.py $$(cat $(EXP2_WORK)/last_checkpoint) \
-	    --work-dir $(EXP2_WORK)/test --cfg-options $(EXP2_DATA_OPTIONS)
+	    --work-dir $(EXP2_WORK)/test --box-fit --cfg-options $(EXP2_DATA_OPTIONS)
 	for sensor in paper tls tablet; do \
 	    $(PY) tools/test.py configs/tr3d/exp2_cpu.py $$(cat $(EXP2_WORK)/last_checkpoint) \
-	        --sensor $$sensor --work-dir $(EXP2_WORK)/test_$$sensor \
+	        --sensor $$sensor --work-dir $(EXP2_WORK)/test_$$sensor --box-fit \
 	        --cfg-options $(EXP2_DATA_OPTIONS) || exit 1; \
 	done
 
