@@ -346,8 +346,8 @@ def _start(command: list, **kwargs) -> subprocess.Popen:
                             **kwargs)
 
 
-def _partials(out: Path) -> list[Path]:
-    return list(out.rglob('*.partial'))
+def _partials(out: Path, pattern: str = '*.partial') -> list[Path]:
+    return list(out.rglob(pattern))
 
 
 @pytest.mark.slow
@@ -360,10 +360,15 @@ def test_kill_9_of_create_data_ends_its_workers_and_a_rerun_is_byte_identical(bi
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL)
     try:
-        parent = psutil.Process(process.pid)
-        assert wait_until(lambda: _partials(killed) or process.poll() is not None, 120)
-        workers = parent.children(recursive=True)
-        assert process.poll() is None and len(workers) == 2, 'the run ended before the kill'
+        # A room half-written (only workers write room .bin partials; the parent renames them
+        # as results arrive). The parent is stopped at once, so that on a loaded machine it
+        # cannot finish the run before the kill; its workers keep their partials.
+        assert wait_until(
+            lambda: process.poll() is not None or _partials(killed, '*.bin.partial'), 120)
+        assert process.poll() is None, 'the run ended before the kill'
+        os.kill(process.pid, signal.SIGSTOP)
+        workers = psutil.Process(process.pid).children(recursive=True)
+        assert len(workers) == 2
         os.kill(process.pid, signal.SIGKILL)
         process.wait()
         assert wait_until(lambda: not alive(workers), 10), f'orphans: {alive(workers)}'
