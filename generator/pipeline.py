@@ -106,7 +106,8 @@ class RoomGenerator:
         from generator.assets.palette import METAL
         from generator.scanner import Scanner
         from generator.scene import export_triangles
-        from generator.sensors import choose_sensor, room_geometry, scan_room
+        from generator.sensors import (choose_sensor, label_stray_returns, room_geometry,
+                                       scan_room)
         from generator.writer import TMP_PREFIX, clean_stale, write_room
         from synthdet.contracts import ROOM_FORMAT
         start = time.perf_counter()
@@ -142,6 +143,10 @@ class RoomGenerator:
         appearance = draw_appearance(
             np.random.default_rng([task.seed, 3]), options.config['appearance'], len(names))
         rgb = apply_appearance(appearance, scan, triangles)
+        labels, names, stray_instance = label_stray_returns(scan.part, names, scan.stray)
+        if stray_instance:
+            sensor['stray_instance'] = stray_instance
+            sensor['stray_points'] = int(scan.stray.sum())
         meta = {
             'format': ROOM_FORMAT,
             'seed': task.seed,
@@ -168,7 +173,7 @@ class RoomGenerator:
             task.name,
             scan.xyz,
             rgb,
-            scan.part,
+            labels,
             names,
             meta,
             ply=options.ply,

@@ -49,6 +49,8 @@ class ScanResult:
     origin: np.ndarray  # (N, 3) float32, the sensor position each point was seen from
     rays_cast: int
     object_points: int
+    # (N,) bool: returns in the air between two surfaces (TLS mixed pixels); None: there are none
+    stray: np.ndarray | None = None
 
 
 def _chord(polygon: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> tuple[float, float]:

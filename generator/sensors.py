@@ -11,7 +11,10 @@ is what the geometry gives.
   regular azimuth x elevation grid of ``angular_step_deg`` (chosen from the point budget when not
   set), a range window, range noise of std ``a + b * d`` and mixed pixels at depth edges (where
   a neighbouring beam's hit lies more than ``edge_jump`` off the plane of a beam's hit, a share
-  of the returns lands between the foreground and the background).
+  of the returns lands between the foreground and the background). Those mixed returns lie in
+  the air, on no surface: they are marked ``stray`` and annotated as a clutter instance of their
+  own (:func:`label_stray_returns`), as an annotator would not give them to the object, whose
+  box they would stretch towards the background.
 - Tablet: a smooth walk around every cell at hand height that steps around objects, the device
   facing the walls for most of the walk and the room's inside or the way ahead for the rest
   (swaying left and right, tilting up and down), returns only between ``min_range`` and
@@ -204,8 +207,9 @@ def _shifted(values: np.ndarray, axis: int, step: int, wrap: bool, fill) -> np.n
 
 def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.ndarray,
                   on_object: np.ndarray, part: np.ndarray, share: float,
-                  jump: float) -> tuple[np.ndarray, np.ndarray]:
-    """Ranges and triangles of one station's grid (E, A) after mixing at depth edges.
+                  jump: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Ranges, triangles and the mixed (stray) beams of one station's grid (E, A) after mixing
+    at depth edges, each flattened.
 
     Two grid neighbours (azimuth wraps around) straddle a depth edge when their ranges differ by
     more than ``jump``, they hit different parts and one of them is an object (``on_object`` per
@@ -233,13 +237,16 @@ def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.nda
     ranges[mixed] += fraction * (other.ravel()[mixed] - ranges[mixed])
     far = mixed[fraction > 0.5]
     triangle[far] = other_tri.ravel()[far]
-    return ranges, triangle
+    stray = np.zeros(ranges.size, dtype=bool)
+    stray[mixed] = True
+    return ranges, triangle, stray
 
 
 def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.random.Generator,
              cfg: Mapping[str, Any], batch: int,
-             on_object: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """All returns of the stations' grids: points (N, 3), triangles (N,), station index (N,).
+             on_object: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """All returns of the stations' grids: points (N, 3), triangles (N,), station index (N,)
+    and whether each is a mixed pixel between two surfaces (N,).
 
     ``on_object`` (T,) marks the triangles of objects, where depth edges can be.
     """
@@ -247,16 +254,17 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
     grid = (len(elevation), len(azimuth))
     directions = _grid_directions(azimuth, elevation).reshape(-1, 3)
     a, b = cfg['range_noise']
-    points, triangles, owner = [], [], []
+    points, triangles, owner, strays = [], [], [], []
     for index, station in enumerate(stations):
         origins = np.broadcast_to(station, directions.shape)
         t_hit, triangle = _cast_all(scanner, origins, directions, batch)
         ranges = t_hit.astype(np.float64)
         ranges[(ranges < cfg['min_range']) | (ranges > cfg['max_range'])] = np.inf
+        stray = np.zeros(ranges.size, dtype=bool)
         if cfg['mixed_pixels'] > 0:
-            ranges, triangle = _mixed_pixels(rng, ranges.reshape(grid), triangle.reshape(grid),
-                                             on_object, scanner.scene.part, cfg['mixed_pixels'],
-                                             cfg['edge_jump'])
+            ranges, triangle, stray = _mixed_pixels(
+                rng, ranges.reshape(grid), triangle.reshape(grid), on_object, scanner.scene.part,
+                cfg['mixed_pixels'], cfg['edge_jump'])
         rows = np.flatnonzero(np.isfinite(ranges))
         measured = ranges[rows]
         if a > 0 or b > 0:
@@ -264,7 +272,9 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
         points.append(station + directions[rows] * measured[:, None])
         triangles.append(triangle[rows])
         owner.append(np.full(len(rows), index))
-    return np.concatenate(points), np.concatenate(triangles), np.concatenate(owner)
+        strays.append(stray[rows])
+    return (np.concatenate(points), np.concatenate(triangles), np.concatenate(owner),
+            np.concatenate(strays))
 
 
 def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int,
@@ -283,7 +293,8 @@ def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int,
     step = fixed or 360.0 / math.ceil(360.0 / math.sqrt(360.0 * span * len(stations) / beams))
     rays = 0
     for _ in range(8):
-        xyz, triangle, owner = cast_tls(scanner, stations, step, rng, cfg, batch, on_object)
+        xyz, triangle, owner, stray = cast_tls(scanner, stations, step, rng, cfg, batch,
+                                               on_object)
         azimuth, elevation = tls_grid(step, cfg['min_elevation_deg'])
         rays += len(stations) * len(azimuth) * len(elevation)
         if fixed or len(xyz) >= n_points:
@@ -292,11 +303,11 @@ def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int,
         step = 360.0 / max(finer, int(round(360.0 / step)) + 1)
     if len(xyz) > n_points:
         keep = np.sort(rng.choice(len(xyz), n_points, replace=False))
-        xyz, triangle, owner = xyz[keep], triangle[keep], owner[keep]
+        xyz, triangle, owner, stray = xyz[keep], triangle[keep], owner[keep], stray[keep]
     elif len(xyz) < n_points:
         warnings.warn(f'TLS: only {len(xyz)} of {n_points} points at an angular step of '
                       f'{step:.4g} deg')
-    return _result(scanner, xyz, triangle, stations[owner], rays), step
+    return _result(scanner, xyz, triangle, stations[owner], rays, stray), step
 
 
 def _push_clear(xy: np.ndarray, centre: np.ndarray, obstacles: np.ndarray, clearance: float,
@@ -451,10 +462,16 @@ def cast_tablet(
                    rays), pose
 
 
-def _result(scanner: Scanner, xyz: np.ndarray, triangle: np.ndarray, origin: np.ndarray,
-            rays: int) -> ScanResult:
-    """Label the returns by their triangles; ``origin`` (N, 3): where each was seen from."""
+def _result(scanner: Scanner,
+            xyz: np.ndarray,
+            triangle: np.ndarray,
+            origin: np.ndarray,
+            rays: int,
+            stray: np.ndarray | None = None) -> ScanResult:
+    """Label the returns by their triangles; ``origin`` (N, 3): where each was seen from;
+    ``stray`` (N,): returns between two surfaces, which count as no object's points."""
     scene = scanner.scene
+    on_object = scanner.movable_tri[triangle]
     return ScanResult(
         xyz=xyz.astype(np.float64),
         rgb=np.take(scene.colors, triangle, axis=0),
@@ -462,4 +479,21 @@ def _result(scanner: Scanner, xyz: np.ndarray, triangle: np.ndarray, origin: np.
         triangle=triangle.astype(np.int64),
         origin=origin.astype(np.float32),
         rays_cast=int(rays),
-        object_points=int(scanner.movable_tri[triangle].sum()))
+        object_points=int((on_object if stray is None else on_object & ~stray).sum()),
+        stray=stray)
+
+
+def label_stray_returns(part: np.ndarray, names: Sequence[str],
+                        stray: np.ndarray | None) -> tuple[np.ndarray, list[str], str | None]:
+    """Annotation labels (``part`` indexes ``names``) with the stray returns as one new clutter
+    instance, named after the room's other clutter (``clutter_<k>``); returns the labels, the
+    names and the new instance's name (None and the inputs unchanged without stray returns)."""
+    names = list(names)
+    if stray is None or not stray.any():
+        return part, names, None
+    numbers = [int(n.rsplit('_', 1)[1]) for n in names if n.rsplit('_', 1)[0] == 'clutter']
+    name = f'clutter_{max(numbers, default=0) + 1}'
+    names.append(name)
+    part = part.copy()
+    part[stray] = len(names) - 1
+    return part, names, name

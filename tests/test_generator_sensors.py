@@ -88,7 +88,7 @@ def test_tls_directions_lie_on_the_angular_grid_of_its_step():
     assert (scan.part == 1).sum() > 100 and len(np.unique(scan.triangle)) > 12
     assert np.array_equal(scan.origin, np.repeat(station, 50000, 0).astype(np.float32))
     # a coarser fixed step: every beam of the grid that hits is there, once
-    xyz, _, _ = cast_tls(scanner, station, 2.0, np.random.default_rng(0), TLS, BATCH,
+    xyz, _, _, _ = cast_tls(scanner, station, 2.0, np.random.default_rng(0), TLS, BATCH,
                          objects(scanner))
     azimuth, elevation = tls_grid(2.0, TLS['min_elevation_deg'])
     assert len(xyz) == len(azimuth) * len(elevation)  # a closed room returns every beam
@@ -106,7 +106,7 @@ def test_tls_beams_escaping_an_open_room_are_lost_without_error():
     scanner = Scanner(scene)
     station = np.array([[2.0, 3.0, 1.5]])
     cfg = dict(TLS, mixed_pixels=1.0)
-    xyz, triangle, _ = cast_tls(scanner, station, 2.0, np.random.default_rng(0), cfg, BATCH,
+    xyz, triangle, _, _ = cast_tls(scanner, station, 2.0, np.random.default_rng(0), cfg, BATCH,
                                 objects(scanner))
     azimuth, elevation = tls_grid(2.0, TLS['min_elevation_deg'])
     assert 0 < len(xyz) < len(azimuth) * len(elevation)
@@ -117,7 +117,7 @@ def test_tls_range_noise_grows_with_distance():
     scanner = Scanner(room_scene((30, 4, 3)))
     station = np.array([[1.0, 2.0, 1.5]])
     a, b = 0.002, 0.002
-    xyz, _, _ = cast_tls(scanner, station, 0.25, np.random.default_rng(1),
+    xyz, _, _, _ = cast_tls(scanner, station, 0.25, np.random.default_rng(1),
                          dict(TLS, range_noise=[a, b]), BATCH, objects(scanner))
     measured = np.linalg.norm(xyz - station, axis=1)
     truth = true_ranges(scanner, np.repeat(station, len(xyz), axis=0),
@@ -140,16 +140,17 @@ def test_tls_mixed_pixels_appear_only_at_depth_edges():
     step = 0.5
     for cubes in ([], [cube]):
         scanner = Scanner(room_scene((10, 6, 3), cubes))
-        xyz, _, _ = cast_tls(scanner, station, step, np.random.default_rng(2), cfg, BATCH,
-                             objects(scanner))
+        xyz, _, _, stray = cast_tls(scanner, station, step, np.random.default_rng(2), cfg, BATCH,
+                                    objects(scanner))
         measured = np.linalg.norm(xyz - station, axis=1)
         directions = (xyz - station) / measured[:, None]
         off = np.abs(measured -
                      true_ranges(scanner, np.repeat(station, len(xyz), 0), directions)) > 1e-3
         if not cubes:  # walls, floor (even at grazing angles) and corners: no depth edge
-            assert not off.any()
+            assert not off.any() and not stray.any()
             continue
         assert off.sum() > 20
+        assert not (off & ~stray).any()  # every return off its surface is marked stray
         # every mixed return: a grid neighbour of its beam hits the other surface (cube vs room)
         # and the return lies between the two surfaces along its beam
         for cell, r in zip(np.round(grid_position(xyz[off], station[0], step)), measured[off]):
@@ -448,6 +449,33 @@ def test_the_default_mix_gives_each_sensor_its_rooms(mixed_run):
     assert len(trajectory) > 100 and sensor['max_range'] == 5.0
     nearest = np.min(np.linalg.norm(xyz[:, None, :] - trajectory[None, ::4], axis=2), axis=1)
     assert nearest.max() <= 5.0 + 0.05  # within the range of the walk (text rounding)
+
+
+def test_tls_mixed_pixels_are_clutter_not_part_of_the_object(mixed_run):
+    work, _ = mixed_run
+    tls = [m for m in (work / 'out').rglob('meta.json')
+           if json.loads(m.read_text())['generator']['sensor']['model'] == 'tls']
+    assert len(tls) == 1
+    meta, room = json.loads(tls[0].read_text()), tls[0].parent
+    sensor = meta['generator']['sensor']
+    stray, _ = read_point_file(room / 'Annotations' / f'{sensor["stray_instance"]}.txt')
+    assert sensor['stray_instance'].startswith('clutter_') and len(stray) == sensor['stray_points']
+    assert len(stray) > 20
+    checked = 0
+    for obj in meta['objects']:
+        annotation = room / 'Annotations' / f'{obj["instance"]}.txt'
+        if obj['class'] == 'clutter' or not annotation.exists():
+            continue
+        points, _ = read_point_file(annotation)
+        box = obj['box']
+        rel = points[:, :3] - box['center']
+        cos, sin = np.cos(box['yaw']), np.sin(box['yaw'])
+        local = np.stack([cos * rel[:, 0] + sin * rel[:, 1], -sin * rel[:, 0] + cos * rel[:, 1],
+                          rel[:, 2]], axis=1)
+        # the object's points lie on it, within the range noise and the text files' millimetres
+        assert np.all(np.abs(local) <= np.array(box['size']) / 2 + 0.03), obj['instance']
+        checked += 1
+    assert checked >= 2
 
 
 def test_same_seed_gives_the_same_files(mixed_run):
