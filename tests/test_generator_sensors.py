@@ -3,6 +3,7 @@ range noise and mixed pixels, the tablet's range window and dropouts, the paper 
 directions; and small real rooms from ``python -m generator`` for the per-room mix and
 determinism."""
 import json
+import shutil
 from pathlib import Path
 
 import bpy  # noqa: F401  (bpy before open3d: both ship libtbb)
@@ -19,6 +20,7 @@ from generator.sensors import (SENSOR_MODELS, RoomGeometry, cast_tablet, cast_tl
 from synthdet.point_text import read_point_file
 from tests.test_corners import corner_errors
 from tests.test_generator_pipeline import _same_tree, box
+from tools.check_annotations import main as check_annotations
 
 REPO = Path(__file__).resolve().parents[1]
 TLS = dict(DEFAULTS['scanner']['tls'], mixed_pixels=0.0, range_noise=[0.0, 0.0])
@@ -476,6 +478,34 @@ def test_tls_mixed_pixels_are_clutter_not_part_of_the_object(mixed_run):
         assert np.all(np.abs(local) <= np.array(box['size']) / 2 + 0.03), obj['instance']
         checked += 1
     assert checked >= 2
+
+
+def test_check_annotations_passes_the_rooms_and_catches_points_given_to_an_object(
+        mixed_run, tmp_path, capsys):
+    work, _ = mixed_run
+    assert check_annotations([str(work / 'out'), '--areas', '7', '--out', str(tmp_path / 'ok.json')]) == 0
+    rows = json.loads((tmp_path / 'ok.json').read_text())['rows']
+    assert {row['sensor'] for row in rows} == set(SENSOR_MODELS)
+    assert all(row['objects_with_points_outside'] == 0 for row in rows)
+    assert all(row['extent_median'] <= 1.1 for row in rows)  # tablet noise: about 1 cm
+    # the labelling before the fix: the TLS room's mixed pixels given to one of its objects
+    copy = tmp_path / 'raw'
+    shutil.copytree(work / 'out', copy)
+    meta_path = next(m for m in copy.rglob('meta.json')
+                     if json.loads(m.read_text())['generator']['sensor']['model'] == 'tls')
+    meta, room = json.loads(meta_path.read_text()), meta_path.parent
+    stray = room / 'Annotations' / f'{meta["generator"]["sensor"]["stray_instance"]}.txt'
+    chair = next(o['instance'] for o in meta['objects']
+                 if o['class'] in ('chair', 'table', 'yumi', '3dprinter', 'sofa')
+                 and (room / 'Annotations' / f'{o["instance"]}.txt').exists())
+    with open(room / 'Annotations' / f'{chair}.txt', 'a') as f:
+        f.write(stray.read_text())
+    capsys.readouterr()
+    assert check_annotations([str(copy), '--areas', '7']) == 1
+    out = capsys.readouterr()
+    assert f'{room.name}/{chair} (tls)' in out.out and 'points outside their box' in out.err
+    assert check_annotations([str(copy), '--areas', '8']) == 2  # no such area: named, exit 2
+    assert f'{copy / "Area_8"}: no such area folder' in capsys.readouterr().err
 
 
 def test_same_seed_gives_the_same_files(mixed_run):

@@ -1,0 +1,95 @@
+"""Do a generated room's annotations describe its objects? (``tools/check_annotations.py``)
+
+A detector's true boxes are the extents of each instance's annotated points (mmdet3d's S3DIS
+converter), so a labelling rule that gives an object points off its surface (for example a laser
+scanner's mixed pixels, which lie in the air between an object and the wall behind it) stretches
+its box. The generator knows each object's real box (``meta.json``): :func:`object_fit` compares
+the annotated points with it, in the box's own axes.
+"""
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from synthdet.classes import DETECTION_CLASSES
+from synthdet.contracts import read_room
+from synthdet.point_text import read_point_file
+
+
+@dataclass
+class ObjectFit:
+    """One annotated object against its ``meta.json`` box."""
+
+    room: str
+    sensor: str
+    instance: str
+    class_name: str
+    points: int
+    extent_ratio: float  # largest horizontal extent of the points / the box's, in box axes
+    outside: float  # share of the points outside the box grown by the tolerance
+
+
+def object_fit(points: np.ndarray, box: dict, tolerance: float) -> tuple[float, float]:
+    """``(extent ratio, share outside)`` of ``points`` (N, 3) against a ``meta.json`` box
+    (gravity centre, size, yaw about z), with the box grown by ``tolerance`` metres per side."""
+    rel = points - np.asarray(box['center'])
+    cos, sin = np.cos(box['yaw']), np.sin(box['yaw'])
+    local = np.stack([cos * rel[:, 0] + sin * rel[:, 1], -sin * rel[:, 0] + cos * rel[:, 1],
+                      rel[:, 2]], axis=1)
+    size = np.asarray(box['size'], dtype=float)
+    extent = local.max(axis=0) - local.min(axis=0)
+    ratio = float(np.max(extent[:2] / size[:2]))
+    outside = np.any(np.abs(local) > size / 2 + tolerance, axis=1)
+    return ratio, float(outside.mean())
+
+
+def check_room(room_dir: Path, tolerance: float) -> list[ObjectFit]:
+    """Every detection-class object of a generated room with an annotation file."""
+    meta = read_room(room_dir / 'meta.json')
+    sensor = meta.get('generator', {}).get('sensor', {}).get('model', 'paper')
+    fits = []
+    for obj in meta['objects']:
+        annotation = room_dir / 'Annotations' / f'{obj["instance"]}.txt'
+        if obj['class'] not in DETECTION_CLASSES or not annotation.is_file():
+            continue
+        points, _ = read_point_file(annotation)
+        ratio, outside = object_fit(points[:, :3], obj['box'], tolerance)
+        fits.append(
+            ObjectFit(room_dir.name, sensor, obj['instance'], obj['class'], len(points), ratio,
+                      outside))
+    return fits
+
+
+def summarize(fits: list[ObjectFit]) -> list[dict]:
+    """Per sensor and class: objects, median / 90th-percentile extent ratio and share outside,
+    and how many objects have any point outside."""
+    groups: dict[tuple[str, str], list[ObjectFit]] = {}
+    for fit in fits:
+        groups.setdefault((fit.sensor, fit.class_name), []).append(fit)
+    rows = []
+    for (sensor, cls), group in sorted(groups.items()):
+        ratio = np.array([f.extent_ratio for f in group])
+        outside = np.array([f.outside for f in group])
+        rows.append({
+            'sensor': sensor,
+            'class': cls,
+            'objects': len(group),
+            'extent_median': float(np.median(ratio)),
+            'extent_p90': float(np.percentile(ratio, 90)),
+            'outside_median': float(np.median(outside)),
+            'outside_p90': float(np.percentile(outside, 90)),
+            'objects_with_points_outside': int(np.count_nonzero(outside > 0)),
+        })
+    return rows
+
+
+def format_summary(rows: list[dict]) -> str:
+    """The rows of :func:`summarize` as aligned text."""
+    header = (f'{"sensor":8s}{"class":11s}{"objects":>8s}{"extent":>8s}{"p90":>7s}'
+              f'{"outside":>9s}{"p90":>7s}{"with":>6s}')
+    lines = [header]
+    for r in rows:
+        lines.append(f'{r["sensor"]:8s}{r["class"]:11s}{r["objects"]:8d}{r["extent_median"]:8.2f}'
+                     f'{r["extent_p90"]:7.2f}{r["outside_median"]:9.3f}{r["outside_p90"]:7.3f}'
+                     f'{r["objects_with_points_outside"]:6d}')
+    return '\n'.join(lines)
