@@ -12,7 +12,9 @@ so a stopped run continues where it stopped (a training resumes from its newest 
  1. generate (``python -m generator --config generator/profiles/<profile>.json``; the mixed
     default without a file) the training rooms of the profiles ``paper`` (area 11) and ``mixed``
     (area 12) and the test rooms of every test profile (areas 21-28), one area and one run seed
-    (``--seed`` x 100 + area) per set, into ``WORK/data``;
+    (``--seed`` x 100 + area) per set, into ``WORK/data``; then check every room's object
+    annotations against the objects' boxes (``synthdet/annotation_check.py``) and refuse rooms
+    that give objects points off them (kept rooms of an older generator);
  2. convert every area (``tools/create_data.py``);
  3. train one model per training profile (``tools/train.py``; configs/tr3d/domain_shift_cpu.py
     and domain_shift_mixed_cpu.py, written to ``WORK/models/<model>/domain_shift_<model>.py``
@@ -363,10 +365,30 @@ class DomainShift:
             for profile in self.test_profiles if not self.table_file(model, profile).is_file()
         ]
 
+    def check_annotations(self) -> None:
+        """Refuse generated rooms whose objects' annotations hold points off the objects
+        (``tools/check_annotations.py``): kept data of an older generator, whose true boxes
+        differ from what the generator writes now."""
+        from synthdet.annotation_check import check_room, describe_offenders
+
+        areas = sorted({area for _, _, area, _ in self.sets()})
+        rooms = [
+            meta.parent for area in areas
+            for meta in sorted((self.raw / f'Area_{area}').glob('*/meta.json'))
+        ]
+        offenders = describe_offenders([fit for room in rooms for fit in check_room(room)])
+        print(f'[domain shift] annotations of {len(rooms)} rooms checked against their boxes: '
+              f'{len(offenders)} objects with more than 1 % of their points off them', flush=True)
+        if offenders:
+            raise StepError(f'{self.raw}: {len(offenders)} objects have annotated points outside '
+                            f'their boxes, e.g. {offenders[0]} (rooms of an older generator?); '
+                            f'empty {self.work} or choose another --work-dir')
+
     def run_all(self) -> dict:
         """Run every step whose outputs are missing; returns the results document."""
         self.check_inputs()
         self.run_step('generate', self.generate_jobs())
+        self.check_annotations()
         self.run_step('convert', self.convert_jobs())
         self.check_model_configs()
         self.run_step('train', self.train_jobs())

@@ -15,6 +15,9 @@ from synthdet.classes import DETECTION_CLASSES
 from synthdet.contracts import read_room
 from synthdet.point_text import read_point_file
 
+TOLERANCE = 0.03  # metres a box grows per side: range noise and the text files' millimetres
+MAX_OUTSIDE = 0.01  # share of an object's points allowed outside: noise tails, not a rule
+
 
 @dataclass
 class ObjectFit:
@@ -43,7 +46,7 @@ def object_fit(points: np.ndarray, box: dict, tolerance: float) -> tuple[float, 
     return ratio, float(outside.mean())
 
 
-def check_room(room_dir: Path, tolerance: float) -> list[ObjectFit]:
+def check_room(room_dir: Path, tolerance: float = TOLERANCE) -> list[ObjectFit]:
     """Every detection-class object of a generated room with an annotation file."""
     meta = read_room(room_dir / 'meta.json')
     sensor = meta.get('generator', {}).get('sensor', {}).get('model', 'paper')
@@ -93,3 +96,11 @@ def format_summary(rows: list[dict]) -> str:
                      f'{r["extent_p90"]:7.2f}{r["outside_median"]:9.3f}{r["outside_p90"]:7.3f}'
                      f'{r["objects_with_points_outside"]:6d}')
     return '\n'.join(lines)
+
+
+def describe_offenders(fits: list[ObjectFit], max_outside: float = MAX_OUTSIDE) -> list[str]:
+    """One line per object with more than ``max_outside`` of its points outside its box."""
+    return [
+        f'{fit.room}/{fit.instance} ({fit.sensor}): {fit.outside:.1%} of {fit.points} points '
+        f'outside, extent x{fit.extent_ratio:.2f}' for fit in fits if fit.outside > max_outside
+    ]

@@ -222,3 +222,17 @@ def test_tiny_run_trains_both_models_tests_every_profile_and_resumes(tmp_path):
     written.write_text(text.replace('lr=0.001,', 'lr=0.002,'))
     stale = run_bench(work, profiles)
     assert stale.returncode == 1 and f'{written}: this work dir' in stale.stderr
+    written.write_text(text)
+    # rooms whose annotations give an object points off it (the labelling of an older
+    # generator, e.g. TLS mixed pixels) are refused before they are converted or used
+    room = next(raw.glob('Area_*/*/meta.json')).parent
+    meta = json.loads((room / 'meta.json').read_text())
+    annotations = room / 'Annotations'
+    obj = next(o['instance'] for o in meta['objects']
+               if o['class'] != 'clutter' and (annotations / f'{o["instance"]}.txt').exists())
+    wall = (annotations / 'wall_1.txt').read_text()
+    with open(annotations / f'{obj}.txt', 'a') as annotation:
+        annotation.write(wall)
+    refused = run_bench(work, profiles)
+    assert refused.returncode == 1, refused.stdout[-2000:]
+    assert f'{room.name}/{obj}' in refused.stderr and 'outside their boxes' in refused.stderr

@@ -23,7 +23,8 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `synthdet`
 
-from synthdet.annotation_check import check_room, format_summary, summarize  # noqa: E402
+from synthdet.annotation_check import (  # noqa: E402
+    MAX_OUTSIDE, TOLERANCE, check_room, describe_offenders, format_summary, summarize)
 from synthdet.contracts import SchemaError  # noqa: E402
 from synthdet.point_text import PointFileError  # noqa: E402
 
@@ -34,11 +35,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('raw_dir', type=Path, help='folder of Area_N/<room>/ folders')
     parser.add_argument('--areas', type=int, nargs='+', help='areas (default: every Area_N)')
     parser.add_argument(
-        '--tolerance', type=float, default=0.03,
-        help='metres the box grows per side before a point counts as outside (default 0.03)')
+        '--tolerance', type=float, default=TOLERANCE,
+        help=f'metres the box grows per side before a point counts as outside '
+        f'(default {TOLERANCE})')
     parser.add_argument(
-        '--max-outside', type=float, default=0.01,
-        help='largest share of an object\'s points allowed outside (default 0.01)')
+        '--max-outside', type=float, default=MAX_OUTSIDE,
+        help=f'largest share of an object\'s points allowed outside (default {MAX_OUTSIDE})')
     parser.add_argument('--out', type=Path, help='also write the rows and offenders as JSON')
     return parser.parse_args(argv)
 
@@ -69,12 +71,12 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     rows = summarize(fits)
     offenders = [f for f in fits if f.outside > args.max_outside]
+    lines = describe_offenders(fits, args.max_outside)
     print(f'{len(fits)} objects in {len(rooms)} rooms; extent: largest horizontal extent of the '
           f'points / the box\'s; outside: share of points beyond the box + {args.tolerance:g} m')
     print(format_summary(rows))
-    for fit in offenders[:10]:
-        print(f'  {fit.room}/{fit.instance} ({fit.sensor}): {fit.outside:.1%} of {fit.points} '
-              f'points outside, extent x{fit.extent_ratio:.2f}')
+    for line in lines[:10]:
+        print(f'  {line}')
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({
