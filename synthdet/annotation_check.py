@@ -15,7 +15,7 @@ from synthdet.classes import DETECTION_CLASSES
 from synthdet.contracts import read_room
 from synthdet.point_text import read_point_file
 
-TOLERANCE = 0.03  # metres a box grows per side: range noise and the text files' millimetres
+TOLERANCE = 0.05  # metres a box grows per side: 5 sigma of a 1 cm range noise, and rounding
 MAX_OUTSIDE = 0.01  # share of an object's points allowed outside: noise tails, not a rule
 
 

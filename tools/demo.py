@@ -10,6 +10,7 @@ goes to ``data/``: the generated areas and converted files live in ``WORK/data``
 
 Steps and outputs (``WORK`` = the work directory):
  1. generate areas 7-9          WORK/data/Stanford3dDataset_v1.2_Aligned_Version/Area_{7,8,9}
+                                (annotations checked with tools/check_annotations.py)
  2. convert                     WORK/data/s3dis_infos_Area_{7,8,9}.pkl, points/, masks
  3. Table 1                     WORK/table1.json, WORK/table1.txt
  4. train (exp2_cpu, resized)   WORK/exp2_cpu_<size>.py, WORK/train/epoch_N.pth (the last one is tested)
@@ -207,6 +208,9 @@ class Demo:
                  '--rooms-per-area', str(self.size.rooms_per_area), '--points',
                  str(self.size.points), '--seed', str(self.seed), '--workers',
                  str(self.size.workers))
+        # a labelling rule that gives objects points off them would stretch their true boxes
+        self.run('check_annotations', 'tools/check_annotations.py', self.raw, '--areas',
+                 *map(str, AREAS))
 
     def converted(self) -> bool:
         return all((self.data / f's3dis_infos_Area_{area}.pkl').is_file() for area in AREAS)
