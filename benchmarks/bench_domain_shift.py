@@ -369,19 +369,20 @@ class DomainShift:
         """Refuse generated rooms whose objects' annotations hold points off the objects
         (``tools/check_annotations.py``): kept data of an older generator, whose true boxes
         differ from what the generator writes now."""
-        from synthdet.annotation_check import check_room, describe_offenders
+        from synthdet.annotation_check import check_room, describe, offenders
 
         areas = sorted({area for _, _, area, _ in self.sets()})
         rooms = [
             meta.parent for area in areas
             for meta in sorted((self.raw / f'Area_{area}').glob('*/meta.json'))
         ]
-        offenders = describe_offenders([fit for room in rooms for fit in check_room(room)])
+        bad = offenders([fit for room in rooms for fit in check_room(room)])
         print(f'[domain shift] annotations of {len(rooms)} rooms checked against their boxes: '
-              f'{len(offenders)} objects with more than 1 % of their points off them', flush=True)
-        if offenders:
-            raise StepError(f'{self.raw}: {len(offenders)} objects have annotated points outside '
-                            f'their boxes, e.g. {offenders[0]} (rooms of an older generator?); '
+              f'{len(bad)} objects with more than 1 % of their points off them', flush=True)
+        if bad:
+            raise StepError(f'{self.raw}: {len(bad)} objects have annotated points outside '
+                            f'their boxes, e.g. {describe(bad[0])} (rooms of an older '
+                            f'generator?); '
                             f'empty {self.work} or choose another --work-dir')
 
     def run_all(self) -> dict:

@@ -13,6 +13,7 @@ import numpy as np
 
 from synthdet.classes import DETECTION_CLASSES
 from synthdet.contracts import read_room
+from synthdet.geometry import rotation_z
 from synthdet.point_text import read_point_file
 
 TOLERANCE = 0.05  # metres a box grows per side: 5 sigma of a 1 cm range noise, and rounding
@@ -35,10 +36,7 @@ class ObjectFit:
 def object_fit(points: np.ndarray, box: dict, tolerance: float) -> tuple[float, float]:
     """``(extent ratio, share outside)`` of ``points`` (N, 3) against a ``meta.json`` box
     (gravity centre, size, yaw about z), with the box grown by ``tolerance`` metres per side."""
-    rel = points - np.asarray(box['center'])
-    cos, sin = np.cos(box['yaw']), np.sin(box['yaw'])
-    local = np.stack([cos * rel[:, 0] + sin * rel[:, 1], -sin * rel[:, 0] + cos * rel[:, 1],
-                      rel[:, 2]], axis=1)
+    local = (points - np.asarray(box['center'])) @ rotation_z(box['yaw'])  # into the box's axes
     size = np.asarray(box['size'], dtype=float)
     extent = local.max(axis=0) - local.min(axis=0)
     ratio = float(np.max(extent[:2] / size[:2]))
@@ -98,9 +96,12 @@ def format_summary(rows: list[dict]) -> str:
     return '\n'.join(lines)
 
 
-def describe_offenders(fits: list[ObjectFit], max_outside: float = MAX_OUTSIDE) -> list[str]:
-    """One line per object with more than ``max_outside`` of its points outside its box."""
-    return [
-        f'{fit.room}/{fit.instance} ({fit.sensor}): {fit.outside:.1%} of {fit.points} points '
-        f'outside, extent x{fit.extent_ratio:.2f}' for fit in fits if fit.outside > max_outside
-    ]
+def offenders(fits: list[ObjectFit], max_outside: float = MAX_OUTSIDE) -> list[ObjectFit]:
+    """The objects with more than ``max_outside`` of their points outside their box."""
+    return [fit for fit in fits if fit.outside > max_outside]
+
+
+def describe(fit: ObjectFit) -> str:
+    """One line naming an object and how far its annotation leaves its box."""
+    return (f'{fit.room}/{fit.instance} ({fit.sensor}): {fit.outside:.1%} of {fit.points} '
+            f'points outside, extent x{fit.extent_ratio:.2f}')

@@ -1,6 +1,6 @@
 """Check generated rooms' annotations against the generator's object boxes (meta.json).
 
-Usage: python tools/check_annotations.py RAW_DIR [--areas N ...] [--tolerance 0.03]
+Usage: python tools/check_annotations.py RAW_DIR [--areas N ...] [--tolerance 0.05]
                                          [--max-outside 0.01] [--out JSON]
 
 RAW_DIR holds ``Area_N/<room>/`` folders (``data/s3dis/Stanford3dDataset_v1.2_Aligned_Version``).
@@ -24,7 +24,7 @@ from tqdm import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `synthdet`
 
 from synthdet.annotation_check import (  # noqa: E402
-    MAX_OUTSIDE, TOLERANCE, check_room, describe_offenders, format_summary, summarize)
+    MAX_OUTSIDE, TOLERANCE, check_room, describe, format_summary, offenders, summarize)
 from synthdet.contracts import SchemaError  # noqa: E402
 from synthdet.point_text import PointFileError  # noqa: E402
 
@@ -70,23 +70,22 @@ def main(argv: list[str] | None = None) -> int:
         print(f'check_annotations: error: {error}', file=sys.stderr)
         return 2
     rows = summarize(fits)
-    offenders = [f for f in fits if f.outside > args.max_outside]
-    lines = describe_offenders(fits, args.max_outside)
+    bad = offenders(fits, args.max_outside)
     print(f'{len(fits)} objects in {len(rooms)} rooms; extent: largest horizontal extent of the '
           f'points / the box\'s; outside: share of points beyond the box + {args.tolerance:g} m')
     print(format_summary(rows))
-    for line in lines[:10]:
-        print(f'  {line}')
+    for fit in bad[:10]:
+        print(f'  {describe(fit)}')
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({
             'format': 'synthdet.annotation_check/1',
             'tolerance': args.tolerance,
             'rows': rows,
-            'offenders': [vars(f) for f in offenders]
+            'offenders': [vars(f) for f in bad]
         }, indent=1) + '\n')
-    if offenders:
-        print(f'check_annotations: {len(offenders)} objects have more than '
+    if bad:
+        print(f'check_annotations: {len(bad)} objects have more than '
               f'{args.max_outside:.1%} of their points outside their box', file=sys.stderr)
         return 1
     return 0
