@@ -382,8 +382,7 @@ class DomainShift:
         if bad:
             raise StepError(f'{self.raw}: {len(bad)} objects have annotated points outside '
                             f'their boxes, e.g. {describe(bad[0])} (rooms of an older '
-                            f'generator?); '
-                            f'empty {self.work} or choose another --work-dir')
+                            f'generator?); empty {self.work} or choose another --work-dir')
 
     def run_all(self) -> dict:
         """Run every step whose outputs are missing; returns the results document."""
