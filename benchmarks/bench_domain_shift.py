@@ -25,9 +25,8 @@ so a stopped run continues where it stopped (a training resumes from its newest 
     profile, and write all numbers to ``WORK/domain_shift.json`` (the text to
     ``WORK/domain_shift.txt``).
 The defaults (40 training rooms per model, 10 test rooms per profile, 500,000 points per room,
-200 iterations) are the scale of the documented run (docs/results.md "Domain shift"): 85 min on
-2 cores shared with `make exp2-cpu`, of which training 76 min (about 20-25 s per iteration with
-three trainings on the two cores; 10.5 CPU-s per iteration alone).
+200 iterations) are the scale of the documented run (docs/results.md "Domain shift"): 45 min on
+2 cores, of which training 40 min (the two models side by side, about 12 s per iteration each).
 Held out: for the paper model every test profile but ``paper``; for the mixed model every
 single-profile test area (all but ``mixed``, its in-domain test). The last line compares the
 worst held-out mAP@0.25 of the two models.
