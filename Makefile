@@ -45,6 +45,7 @@ EXP2_DATA_OPTIONS = $(foreach key,train_dataloader.dataset.dataset.datasets.0 \
 # more --cfg-options for the training and the tests, e.g. a variant of the model
 # (EXP2_OPTIONS="model.bbox_head.label2level=[1,0,0,0,0]"); use a new EXP2_WORK for each variant
 EXP2_OPTIONS ?=
+EXP2_CFG_OPTIONS = $(EXP2_DATA_OPTIONS) $(EXP2_OPTIONS)
 exp2-cpu: export OMP_NUM_THREADS = $(EXP2_THREADS)
 exp2-cpu: setup
 	$(PY) -m generator --out $(EXP2_DATA)/Stanford3dDataset_v1.2_Aligned_Version --areas 7 8 9 \
@@ -54,13 +55,13 @@ exp2-cpu: setup
 	$(PY) tools/dataset_stats.py $(EXP2_DATA) --areas 7 8 9
 	$(PY) tools/train.py configs/tr3d/exp2_cpu.py --work-dir $(EXP2_WORK) \
 	    $$(ls $(EXP2_WORK)/epoch_*.pth >/dev/null 2>&1 && echo --resume) \
-	    --cfg-options $(EXP2_DATA_OPTIONS) $(EXP2_OPTIONS)
+	    --cfg-options $(EXP2_CFG_OPTIONS)
 	$(PY) tools/test.py configs/tr3d/exp2_cpu.py $$(cat $(EXP2_WORK)/last_checkpoint) \
-	    --work-dir $(EXP2_WORK)/test --box-fit --cfg-options $(EXP2_DATA_OPTIONS) $(EXP2_OPTIONS)
+	    --work-dir $(EXP2_WORK)/test --box-fit --cfg-options $(EXP2_CFG_OPTIONS)
 	for sensor in paper tls tablet; do \
 	    $(PY) tools/test.py configs/tr3d/exp2_cpu.py $$(cat $(EXP2_WORK)/last_checkpoint) \
 	        --sensor $$sensor --work-dir $(EXP2_WORK)/test_$$sensor --box-fit \
-	        --cfg-options $(EXP2_DATA_OPTIONS) $(EXP2_OPTIONS) || exit 1; \
+	        --cfg-options $(EXP2_CFG_OPTIONS) || exit 1; \
 	done
 
 # Every benchmarks/bench_*.py, one after the other; each full output is kept in
