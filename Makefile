@@ -31,13 +31,28 @@ demo: setup
 # test uses the final epoch's checkpoint (named in last_checkpoint), on all of area 9 and then on
 # the rooms of each generator sensor (tools/test.py --sensor), each test with its box-fit table
 # (--box-fit). About 3.5 hours on an idle 2-core machine with EXP2_THREADS=2 (12 epochs of
-# 15-17 min, docs/results.md). Rooms written by an older generator are kept as they are: empty
+# 15-17 min, docs/results.md); EXP2_PROCS=2 trains 1.38x faster per iteration (12 epochs: about
+# 2 hours, estimated from its first iterations). Rooms written by an older generator are kept as they are: empty
 # data/s3dis to regenerate them.
 EXP2_DATA ?= data/s3dis
 EXP2_WORK ?= work_dirs/exp2_cpu
 # One OpenMP thread per process by default: on a busy machine torch's default (all cores)
 # oversubscribes the cores. Set EXP2_THREADS=2 on an idle 2-core machine.
 EXP2_THREADS ?= 1
+# Training processes (tools/dist_train.sh, gloo on the CPU) sharing the batch of 4 rooms: 1, 2 or
+# 4. On an idle 2-core machine EXP2_PROCS=2 with EXP2_THREADS=1 trains at 4.6 s per iteration
+# against 6.3 s for one process with 2 threads (docs/results.md); the tests stay one process.
+EXP2_PROCS ?= 1
+ifneq ($(filter-out 1 2 4,$(EXP2_PROCS)),)
+$(error EXP2_PROCS=$(EXP2_PROCS): must be 1, 2 or 4, to split the batch of 4 rooms evenly)
+endif
+ifeq ($(EXP2_PROCS),1)
+EXP2_TRAIN = $(PY) tools/train.py configs/tr3d/exp2_cpu.py
+EXP2_BATCH_OPTIONS =
+else
+EXP2_TRAIN = PYTHON=$(PY) tools/dist_train.sh configs/tr3d/exp2_cpu.py $(EXP2_PROCS)
+EXP2_BATCH_OPTIONS = train_dataloader.batch_size=$(shell expr 4 / $(EXP2_PROCS))
+endif
 # the config's data root (data/s3dis/) replaced by EXP2_DATA in every dataset
 EXP2_DATA_OPTIONS = $(foreach key,train_dataloader.dataset.dataset.datasets.0 \
     train_dataloader.dataset.dataset.datasets.1 val_dataloader.dataset test_dataloader.dataset,\
@@ -53,9 +68,9 @@ exp2-cpu: setup
 	$(PY) tools/check_annotations.py $(EXP2_DATA)/Stanford3dDataset_v1.2_Aligned_Version --areas 7 8 9
 	$(PY) tools/create_data.py s3dis --root-path $(EXP2_DATA) --out-dir $(EXP2_DATA) --areas 7 8 9 --workers 2
 	$(PY) tools/dataset_stats.py $(EXP2_DATA) --areas 7 8 9
-	$(PY) tools/train.py configs/tr3d/exp2_cpu.py --work-dir $(EXP2_WORK) \
+	$(EXP2_TRAIN) --work-dir $(EXP2_WORK) \
 	    $$(ls $(EXP2_WORK)/epoch_*.pth >/dev/null 2>&1 && echo --resume) \
-	    --cfg-options $(EXP2_CFG_OPTIONS)
+	    --cfg-options $(EXP2_CFG_OPTIONS) $(EXP2_BATCH_OPTIONS)
 	$(PY) tools/test.py configs/tr3d/exp2_cpu.py $$(cat $(EXP2_WORK)/last_checkpoint) \
 	    --work-dir $(EXP2_WORK)/test --box-fit --cfg-options $(EXP2_CFG_OPTIONS)
 	for sensor in paper tls tablet; do \

@@ -1,0 +1,47 @@
+"""``make exp2-cpu``'s training command, read with ``make -n`` (prints, runs nothing): one
+process by default, ``tools/dist_train.sh`` with the batch of 4 rooms split evenly for
+``EXP2_PROCS``, and a clear refusal of a count that cannot split it."""
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _dry_run(*variables: str) -> subprocess.CompletedProcess:
+    return subprocess.run(['make', '-n', 'exp2-cpu', *variables], cwd=ROOT,
+                          capture_output=True, text=True, timeout=60)
+
+
+def _train_command(stdout: str) -> str:
+    """The recipe's training command, its continuation lines joined."""
+    joined = stdout.replace('\\\n', ' ')
+    lines = [line for line in joined.splitlines() if '--work-dir work_dirs/exp2_cpu ' in line]
+    assert len(lines) == 1, stdout
+    return lines[0]
+
+
+def test_one_process_by_default():
+    proc = _dry_run()
+    assert proc.returncode == 0, proc.stderr
+    command = _train_command(proc.stdout)
+    assert 'tools/train.py configs/tr3d/exp2_cpu.py' in command
+    assert 'dist_train.sh' not in command and 'batch_size' not in command
+
+
+@pytest.mark.parametrize('procs, batch', [(2, 2), (4, 1)])
+def test_processes_share_the_batch_of_four(procs: int, batch: int):
+    proc = _dry_run(f'EXP2_PROCS={procs}')
+    assert proc.returncode == 0, proc.stderr
+    command = _train_command(proc.stdout)
+    assert f'tools/dist_train.sh configs/tr3d/exp2_cpu.py {procs} ' in command
+    assert command.split()[-1] == f'train_dataloader.batch_size={batch}'
+    tests = [line for line in proc.stdout.splitlines() if 'tools/test.py' in line]
+    assert tests and not any('dist_test' in line for line in tests)
+
+
+def test_uneven_split_is_refused():
+    proc = _dry_run('EXP2_PROCS=3')
+    assert proc.returncode != 0
+    assert 'EXP2_PROCS=3: must be 1, 2 or 4' in proc.stderr
