@@ -31,9 +31,8 @@ demo: setup
 # test uses the final epoch's checkpoint (named in last_checkpoint), on all of area 9 and then on
 # the rooms of each generator sensor (tools/test.py --sensor), each test with its box-fit table
 # (--box-fit). About 3.5 hours on an idle 2-core machine with EXP2_THREADS=2 (12 epochs of
-# 15-17 min, docs/results.md); EXP2_PROCS=2 trains 1.38x faster per iteration (12 epochs: about
-# 2 hours, estimated from its first iterations). Rooms written by an older generator are kept as they are: empty
-# data/s3dis to regenerate them.
+# 15-17 min, docs/results.md); about 2 hours with EXP2_PROCS=2 (below). Rooms written by an
+# older generator are kept as they are: empty data/s3dis to regenerate them.
 EXP2_DATA ?= data/s3dis
 EXP2_WORK ?= work_dirs/exp2_cpu
 # One OpenMP thread per process by default: on a busy machine torch's default (all cores)
