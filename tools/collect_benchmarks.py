@@ -42,6 +42,7 @@ ARGUMENTS = {
     'hall': ['--checkpoint', 'work_dirs/demo/train/epoch_5.pth'],  # the model of `make demo`
     'sensors': ['--rooms', '2', '--repeats', '2'],
     'structure_thinning': ['--rooms', '4'],
+    'dist_train': ['--rooms-per-area', '4', '--iters', '8'],
     'domain_shift': [],  # its defaults are the documented scale (about 1.5 h on 2 cores)
 }
 # Run only when named: `make bench BENCH_ARGS="--only domain_shift"` (docs/results.md).
@@ -68,6 +69,9 @@ WHAT = {
     'structure_thinning':
     'points on objects among 40,000 sampled per room and sensor: `PointSample` alone vs '
     '`ThinRoomStructure` first',
+    'dist_train':
+    'exp2_cpu training speed: 2 processes x 1 thread (`tools/dist_train.sh`, gloo) vs 1 '
+    'process x 2 threads, batch of 4 rooms',
     'domain_shift':
     'TR3D at CPU scale trained on the paper profile vs the mixed default, tested on held-out '
     'generator profiles (about 1.5 h; only with `--only domain_shift`)',

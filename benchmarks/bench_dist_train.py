@@ -1,0 +1,130 @@
+"""Training speed of ``configs/tr3d/exp2_cpu.py`` on a 2-core CPU: one process with 2 OpenMP
+threads (``tools/train.py``, ``make exp2-cpu``) vs 2 processes with 1 thread each
+(``tools/dist_train.sh``, gloo, ``make exp2-cpu EXP2_PROCS=2``), the same batch of 4 rooms.
+
+    .venv/bin/python benchmarks/bench_dist_train.py [--rooms-per-area 4] [--points 1000000]
+                                                    [--iters 8] [--warmup 2] [--seed 0]
+
+The generator writes ``--rooms-per-area`` rooms of ``--points`` points into areas 7, 8 and 9 of
+a temporary folder and ``tools/create_data.py`` converts them. Each setup then trains the
+exp2_cpu config (2 cm voxels, 40,000 sampled points, the mixed-sensor data of ``make exp2-cpu``)
+from the same seed for ``--iters`` iterations of 4 rooms, without validation, logging every
+iteration: one process takes the 4 rooms with ``OMP_NUM_THREADS=2``; two processes take 2 rooms
+each with ``OMP_NUM_THREADS=1`` and average their gradients. The time per iteration is the
+Runner's own (``time`` in ``vis_data/scalars.json``: loading, forward, backward, gradient
+exchange and optimiser step), its median over the iterations after the first ``--warmup``.
+The last line is the speed-up of the two processes. It needs an idle machine: another job on
+the cores slows the two setups differently.
+"""
+import argparse
+import json
+import os
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+CONFIG = 'configs/tr3d/exp2_cpu.py'
+BATCH = 4  # rooms per iteration, as in exp2_cpu.py
+TRAIN_ROOMS_AREAS = (7, 8)
+# (name, processes, OpenMP threads per process); both use the machine's 2 cores
+SETUPS = (('tools/train.py', 1, 2), ('tools/dist_train.sh', 2, 1))
+
+
+def free_port() -> int:
+    """A TCP port that is free now, for the processes' rendezvous."""
+    with socket.socket() as sock:
+        sock.bind(('127.0.0.1', 0))
+        return sock.getsockname()[1]
+
+
+def make_data(root: Path, rooms_per_area: int, points: int, seed: int) -> None:
+    """Generate areas 7-9 into ``root`` and convert them to info pickles, as ``make exp2-cpu``."""
+    raw = root / 'Stanford3dDataset_v1.2_Aligned_Version'
+    for command in (
+        [
+            '-m', 'generator', '--out', raw, '--areas', 7, 8, 9, '--rooms-per-area',
+            rooms_per_area, '--points', points, '--seed', seed, '--workers', 2
+        ],
+        [
+            'tools/create_data.py', 's3dis', '--root-path', root, '--out-dir', root, '--areas', 7,
+            8, 9, '--workers', 2
+        ],
+    ):
+        subprocess.run([sys.executable, *map(str, command)],
+                       cwd=REPO,
+                       check=True,
+                       stdout=subprocess.DEVNULL)
+
+
+def train(data: Path, work: Path, processes: int, threads: int, repeats: int,
+          seed: int) -> list[float]:
+    """Train one setup and return the Runner's seconds per iteration, in order."""
+    options = [
+        f'{key}.data_root={data}/' for key in ('train_dataloader.dataset.dataset.datasets.0',
+                                               'train_dataloader.dataset.dataset.datasets.1',
+                                               'val_dataloader.dataset', 'test_dataloader.dataset')
+    ]
+    options += [
+        f'train_dataloader.batch_size={BATCH // processes}',
+        f'train_dataloader.dataset.times={repeats}', 'train_cfg.max_epochs=1',
+        'train_cfg.val_begin=2', 'default_hooks.logger.interval=1', f'randomness.seed={seed}'
+    ]
+    if processes == 1:
+        command = [sys.executable, 'tools/train.py']
+    else:
+        command = ['bash', 'tools/dist_train.sh']
+    command += [CONFIG] + ([str(processes)] if processes > 1 else [])
+    command += ['--work-dir', str(work), '--cfg-options', *options]
+    env = dict(
+        os.environ, OMP_NUM_THREADS=str(threads), PYTHON=sys.executable, PORT=str(free_port()))
+    run = subprocess.run(command, cwd=REPO, env=env, capture_output=True, text=True)
+    if run.returncode != 0:
+        sys.exit(f'{" ".join(command[:3])} failed (exit {run.returncode}):\n{run.stderr[-4000:]}')
+    scalars = next(work.glob('*/vis_data/scalars.json')).read_text().splitlines()
+    return [json.loads(line)['time'] for line in scalars if '"time"' in line]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--rooms-per-area', type=int, default=4)
+    parser.add_argument('--points', type=int, default=1_000_000)
+    parser.add_argument('--iters', type=int, default=8, help='training iterations per setup')
+    parser.add_argument('--warmup', type=int, default=2, help='first iterations not counted')
+    parser.add_argument('--seed', type=int, default=0)
+    args = parser.parse_args()
+    train_rooms = args.rooms_per_area * len(TRAIN_ROOMS_AREAS)
+    if (args.iters * BATCH) % train_rooms:
+        parser.error(f'--iters x {BATCH} rooms must be a multiple of the {train_rooms} '
+                     'training rooms (--rooms-per-area x 2)')
+    if args.iters <= args.warmup:
+        parser.error('--iters must be larger than --warmup')
+    repeats = args.iters * BATCH // train_rooms
+    results = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        data = Path(tmp) / 'data'
+        make_data(data, args.rooms_per_area, args.points, args.seed)
+        for name, processes, threads in SETUPS:
+            times = train(data,
+                          Path(tmp) / f'work_{processes}', processes, threads, repeats, args.seed)
+            if len(times) != args.iters:
+                sys.exit(f'{name}: logged {len(times)} iterations, expected {args.iters}')
+            results[name] = (processes, threads, statistics.median(times[args.warmup:]))
+    print(f'{CONFIG}, batch of {BATCH} rooms of {args.points} generated points, '
+          f'{args.iters} iterations, median of the last {args.iters - args.warmup}; '
+          f'{os.cpu_count()} cores')
+    print(f"{'setup':<22} {'processes':>9} {'threads':>8} {'rooms/proc':>10} "
+          f"{'s/iter':>7} {'rooms/s':>8}")
+    for name, (processes, threads, seconds) in results.items():
+        print(f'{name:<22} {processes:>9} {threads:>8} {BATCH // processes:>10} '
+              f'{seconds:>7.2f} {BATCH / seconds:>8.2f}')
+    (_, _, one), (_, _, two) = results.values()
+    print(f'2 processes x 1 thread vs 1 process x 2 threads: x{one / two:.2f} faster per '
+          f'iteration of {BATCH} rooms ({two:.2f} s vs {one:.2f} s)')
+
+
+if __name__ == '__main__':
+    main()
