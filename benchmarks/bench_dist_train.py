@@ -3,7 +3,7 @@ threads (``tools/train.py``, ``make exp2-cpu``) vs 2 processes with 1 thread eac
 (``tools/dist_train.sh``, gloo, ``make exp2-cpu EXP2_PROCS=2``), the same batch of 4 rooms.
 
     .venv/bin/python benchmarks/bench_dist_train.py [--rooms-per-area 4] [--points 1000000]
-                                                    [--iters 8] [--warmup 2] [--seed 0]
+                                                    [--iters 16] [--warmup 4] [--seed 0]
 
 The generator writes ``--rooms-per-area`` rooms of ``--points`` points into areas 7, 8 and 9 of
 a temporary folder and ``tools/create_data.py`` converts them. Each setup then trains the
@@ -92,8 +92,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--rooms-per-area', type=int, default=4)
     parser.add_argument('--points', type=int, default=1_000_000)
-    parser.add_argument('--iters', type=int, default=8, help='training iterations per setup')
-    parser.add_argument('--warmup', type=int, default=2, help='first iterations not counted')
+    parser.add_argument('--iters', type=int, default=16, help='training iterations per setup')
+    parser.add_argument('--warmup', type=int, default=4, help='first iterations not counted')
     parser.add_argument('--seed', type=int, default=0)
     args = parser.parse_args()
     train_rooms = args.rooms_per_area * len(TRAIN_ROOMS_AREAS)
