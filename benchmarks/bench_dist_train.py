@@ -74,10 +74,9 @@ def train(data: Path, work: Path, processes: int, threads: int, repeats: int,
         'train_cfg.val_begin=2', 'default_hooks.logger.interval=1', f'randomness.seed={seed}'
     ]
     if processes == 1:
-        command = [sys.executable, 'tools/train.py']
+        command = [sys.executable, 'tools/train.py', CONFIG]
     else:
-        command = ['bash', 'tools/dist_train.sh']
-    command += [CONFIG] + ([str(processes)] if processes > 1 else [])
+        command = ['bash', 'tools/dist_train.sh', CONFIG, str(processes)]
     command += ['--work-dir', str(work), '--cfg-options', *options]
     env = dict(
         os.environ, OMP_NUM_THREADS=str(threads), PYTHON=sys.executable, PORT=str(free_port()))
