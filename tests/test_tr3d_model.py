@@ -220,6 +220,34 @@ def test_forward_mode_tensor_gives_two_levels(scenes):
     assert len(points[0][0]) > len(points[1][0])  # the first level is the finer one
 
 
+def test_backbone_fine_level_sits_on_the_first_stage_voxels(scenes):
+    """``TR3DNeck(backbone_fine_level=True)``: a third, finest level on the first backbone
+    stage's own voxels (no new locations), trained through its own blocks."""
+    torch.manual_seed(0)
+    config = tr3d_config(label2level=(2, 1, 1, 1, 0), voxel_size=VOXEL)
+    config['neck']['backbone_fine_level'] = True
+    model = MODELS.build(config)
+    model.init_weights()
+    batch = make_batch(model, scenes)
+    model.eval()
+    with torch.no_grad():
+        stages = model.backbone(model.voxelize(batch['inputs']['points']))
+        levels = model.neck(stages)
+    assert len(levels) == 3
+    assert [level.tensor_stride[0] for level in levels] == [
+        stages[0].tensor_stride[0], stages[1].tensor_stride[0], stages[2].tensor_stride[0]]
+    first = {tuple(c) for c in stages[0].coordinates.tolist()}
+    assert {tuple(c) for c in levels[0].coordinates.tolist()} == first
+    assert levels[0].features.shape[1] == 128
+
+    model.train()
+    losses = model(**make_batch(model, scenes), mode='loss')
+    sum(losses.values()).backward()
+    for parameter in (model.neck.fine_up.kernel, model.neck.fine_out_block[0].kernel,
+                      model.neck.up_block_1[0].kernel):
+        assert parameter.grad is not None and parameter.grad.abs().sum() > 0
+
+
 # --- assigner -----------------------------------------------------------------------------
 
 

@@ -49,16 +49,18 @@ class TR3DDetector(Base3DDetector):
         self.train_cfg = train_cfg
         self.test_cfg = test_cfg
 
-    def extract_feat(self, batch_inputs_dict: dict) -> list[ME.SparseTensor]:
-        """Voxelise every scene's points into one batched sparse tensor; backbone and neck."""
-        points = batch_inputs_dict['points']
+    def voxelize(self, points: list[Tensor]) -> ME.SparseTensor:
+        """Every scene's (N, 3 + C) points as one batched sparse tensor of averaged features."""
         coordinates, features = ME.utils.batch_sparse_collate(
             [(p[:, :3] / self.voxel_size, p[:, 3:]) for p in points], device=points[0].device)
-        x = ME.SparseTensor(
+        return ME.SparseTensor(
             features=features,
             coordinates=coordinates,
             quantization_mode=ME.SparseTensorQuantizationMode.UNWEIGHTED_AVERAGE)
-        return self.neck(self.backbone(x))
+
+    def extract_feat(self, batch_inputs_dict: dict) -> list[ME.SparseTensor]:
+        """Voxelise every scene's points into one batched sparse tensor; backbone and neck."""
+        return self.neck(self.backbone(self.voxelize(batch_inputs_dict['points'])))
 
     def loss(self, batch_inputs_dict: dict, batch_data_samples: SampleList,
              **kwargs) -> dict[str, Tensor]:
