@@ -10,7 +10,12 @@ step on a batch of one scene; inference is ``predict`` with NMS. Times are media
 ``--iters`` runs after one warm-up run, as CPU seconds of the process (``time.process_time``,
 the cost on any machine) and as wall seconds (inflated on a shared machine). Workers get ``OMP_NUM_THREADS=--threads``: the OpenMP
 runtime reads it at start-up only, and ``torch.set_num_threads`` alone leaves MinkowskiEngine's
-CPU kernels spin-waiting on a busy machine. The last line is the 2 cm vs 1 cm ratio.
+CPU kernels spin-waiting on a busy machine.
+
+A third model is 2 cm voxels with ``TR3DNeck(backbone_fine_level=True)``: a finest head level on
+the first backbone stage's voxels (16 cm apart at 2 cm voxels, as TR3D's finest level at 1 cm),
+the CPU-scale way to a finer level against the straightforward one, 1 cm voxels. The last two
+lines are the ratios: 2 cm vs 1 cm, and 2 cm with the fine level vs 2 cm and vs 1 cm.
 """
 import argparse
 import json
@@ -31,6 +36,12 @@ sys.path.insert(0,
 
 CLASSES = ('table', 'chair', 'sofa', 'bookcase', 'board')
 LABEL2LEVEL = (1, 0, 1, 1, 0)  # published TR3D S3DIS
+# model name: voxel size, backbone fine level, label2level (the fine level is level 0)
+MODELS_TIMED = {
+    '1cm': (0.01, False, LABEL2LEVEL),
+    '2cm': (0.02, False, LABEL2LEVEL),
+    '2cm+fine': (0.02, True, tuple(level + 1 for level in LABEL2LEVEL)),
+}
 
 
 def make_room(num_points: int, seed: int, out_file: Path) -> None:
@@ -64,8 +75,8 @@ def make_room(num_points: int, seed: int, out_file: Path) -> None:
         labels=np.array([CLASSES.index(b['class']) for b in boxes]))
 
 
-def run_worker(room_file: Path, voxel_size: float, iters: int, threads: int) -> dict:
-    """Time training and inference of the published TR3D S3DIS model at ``voxel_size``."""
+def run_worker(room_file: Path, name: str, iters: int, threads: int) -> dict:
+    """Time training and inference of the TR3D S3DIS model ``name`` of :data:`MODELS_TIMED`."""
     import torch
     from mmdet3d.registry import MODELS
     from mmdet3d.structures import Det3DDataSample, DepthInstance3DBoxes
@@ -77,14 +88,19 @@ def run_worker(room_file: Path, voxel_size: float, iters: int, threads: int) -> 
     torch.manual_seed(0)
     register_all_modules(init_default_scope=True)
     room = np.load(room_file)
+    voxel_size, fine_level, label2level = MODELS_TIMED[name]
     model = MODELS.build(
         dict(
             type='TR3DDetector',
             voxel_size=voxel_size,
             backbone=dict(
                 type='TR3DMinkResNet', in_channels=3, depth=34, num_planes=(64, 128, 128, 128)),
-            neck=dict(type='TR3DNeck', in_channels=(64, 128, 128, 128), out_channels=128),
-            bbox_head=dict(type='TR3DHead', num_classes=len(CLASSES), label2level=LABEL2LEVEL),
+            neck=dict(
+                type='TR3DNeck',
+                in_channels=(64, 128, 128, 128),
+                out_channels=128,
+                backbone_fine_level=fine_level),
+            bbox_head=dict(type='TR3DHead', num_classes=len(CLASSES), label2level=label2level),
             test_cfg=dict(nms_pre=1000, iou_thr=0.5, score_thr=0.01)))
     model.init_weights()
     sample = Det3DDataSample(metainfo=dict(box_type_3d=DepthInstance3DBoxes))
@@ -139,7 +155,7 @@ def main() -> None:
     parser.add_argument('--iters', type=int, default=3, help='timed runs after one warm-up')
     parser.add_argument('--threads', type=int, default=1, help='torch CPU threads')
     parser.add_argument('--seed', type=int, default=0)
-    parser.add_argument('--worker', type=float, metavar='VOXEL_SIZE', help=argparse.SUPPRESS)
+    parser.add_argument('--worker', choices=MODELS_TIMED, help=argparse.SUPPRESS)
     parser.add_argument('--room', type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker is not None:
@@ -151,24 +167,28 @@ def main() -> None:
         make_room(args.points, args.seed, room_file)
         results = {}
         env = dict(os.environ, OMP_NUM_THREADS=str(args.threads))
-        for voxel_size in (0.01, 0.02):
-            command = [sys.executable, __file__, '--worker', str(voxel_size)]
+        for name in MODELS_TIMED:
+            command = [sys.executable, __file__, '--worker', name]
             command += ['--room', str(room_file), '--iters', str(args.iters)]
             command += ['--threads', str(args.threads)]
             run = subprocess.run(command, check=True, capture_output=True, text=True, env=env)
-            results[voxel_size] = json.loads(run.stdout.strip().splitlines()[-1])
+            results[name] = json.loads(run.stdout.strip().splitlines()[-1])
     print(f'TR3D (published S3DIS model), {args.points} points, one 6x6x3 m room, '
           f'{args.threads} thread(s), median of {args.iters}; CPU = process CPU seconds')
-    print(f"{'voxel':>6} {'voxels':>8} {'train CPU s':>12} {'train wall s':>13} "
+    print(f"{'model':>8} {'voxels':>8} {'train CPU s':>12} {'train wall s':>13} "
           f"{'infer CPU s':>12} {'infer wall s':>13} {'peak RSS MB':>12}")
-    for voxel_size, r in results.items():
-        print(f"{voxel_size * 100:>4.0f}cm {r['voxels']:>8} {r['train_cpu']:>12.2f} "
+    for name, r in results.items():
+        print(f"{name:>8} {r['voxels']:>8} {r['train_cpu']:>12.2f} "
               f"{r['train_wall']:>13.2f} {r['infer_cpu']:>12.2f} {r['infer_wall']:>13.2f} "
               f"{r['peak_rss_mb']:>12.0f}")
-    fine, coarse = results[0.01], results[0.02]
+    fine, coarse, fine_level = results['1cm'], results['2cm'], results['2cm+fine']
     print(f"2 cm vs 1 cm (CPU seconds): train x{fine['train_cpu'] / coarse['train_cpu']:.2f} "
           f"faster, inference x{fine['infer_cpu'] / coarse['infer_cpu']:.2f} faster, "
           f"peak memory x{coarse['peak_rss_mb'] / fine['peak_rss_mb']:.2f}")
+    train, infer = fine_level['train_cpu'], fine_level['infer_cpu']
+    print(f"2 cm + fine level (CPU seconds): train x{train / coarse['train_cpu']:.2f} of 2 cm, "
+          f"x{train / fine['train_cpu']:.2f} of 1 cm; inference "
+          f"x{infer / coarse['infer_cpu']:.2f} of 2 cm, x{infer / fine['infer_cpu']:.2f} of 1 cm")
 
 
 if __name__ == '__main__':
