@@ -30,18 +30,19 @@ demo: setup
 # rooms are kept, training continues from the newest checkpoint of work_dirs/exp2_cpu, and the
 # test uses the final epoch's checkpoint (named in last_checkpoint), on all of area 9 and then on
 # the rooms of each generator sensor (tools/test.py --sensor), each test with its box-fit table
-# (--box-fit). About 3.5 hours on an idle 2-core machine with EXP2_THREADS=2 (12 epochs of
-# 15-17 min, docs/results.md); about 2 hours with EXP2_PROCS=2 (below). Rooms written by an
-# older generator are kept as they are: empty data/s3dis to regenerate them.
+# (--box-fit). About 2.5 hours on an idle 2-core machine in the default 2 processes (12 epochs
+# of 11-13 min with validation, docs/results.md). Rooms written by an older generator are kept
+# as they are: empty data/s3dis to regenerate them.
 EXP2_DATA ?= data/s3dis
 EXP2_WORK ?= work_dirs/exp2_cpu
 # One OpenMP thread per process by default: on a busy machine torch's default (all cores)
-# oversubscribes the cores. Set EXP2_THREADS=2 on an idle 2-core machine.
+# oversubscribes the cores. With EXP2_PROCS=1, set EXP2_THREADS=2 on an idle 2-core machine.
 EXP2_THREADS ?= 1
 # Training processes (tools/dist_train.sh, gloo on the CPU) sharing the batch of 4 rooms: 1, 2 or
-# 4. On an idle 2-core machine EXP2_PROCS=2 with EXP2_THREADS=1 trains at 4.6 s per iteration
-# against 6.3 s for one process with 2 threads (docs/results.md); the tests stay one process.
-EXP2_PROCS ?= 1
+# 4. On an idle 2-core machine 2 processes with EXP2_THREADS=1 train at 4.6 s per iteration
+# against 6.3 s for one process with 2 threads (docs/results.md) and end at the same accuracy;
+# the tests stay one process.
+EXP2_PROCS ?= 2
 ifneq ($(filter-out 1 2 4,$(EXP2_PROCS)),)
 $(error EXP2_PROCS=$(EXP2_PROCS): must be 1, 2 or 4, to split the batch of 4 rooms evenly)
 endif
@@ -57,7 +58,7 @@ EXP2_DATA_OPTIONS = $(foreach key,train_dataloader.dataset.dataset.datasets.0 \
     train_dataloader.dataset.dataset.datasets.1 val_dataloader.dataset test_dataloader.dataset,\
     $(key).data_root=$(EXP2_DATA)/)
 # more --cfg-options for the training and the tests, e.g. a variant of the model
-# (EXP2_OPTIONS="model.bbox_head.label2level=[1,0,0,0,0]"); use a new EXP2_WORK for each variant
+# (EXP2_OPTIONS="model.bbox_head.label2level=[2,1,1,1,1]"); use a new EXP2_WORK for each variant
 EXP2_OPTIONS ?=
 EXP2_CFG_OPTIONS = $(EXP2_DATA_OPTIONS) $(EXP2_OPTIONS)
 exp2-cpu: export OMP_NUM_THREADS = $(EXP2_THREADS)

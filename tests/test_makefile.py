@@ -1,6 +1,7 @@
-"""``make exp2-cpu``'s training command, read with ``make -n`` (prints, runs nothing): one
-process by default, ``tools/dist_train.sh`` with the batch of 4 rooms split evenly for
-``EXP2_PROCS``, and a clear refusal of a count that cannot split it."""
+"""``make exp2-cpu``'s training command, read with ``make -n`` (prints, runs nothing): two
+processes by default, ``tools/dist_train.sh`` with the batch of 4 rooms split evenly for
+``EXP2_PROCS``, ``tools/train.py`` for one, and a clear refusal of a count that cannot split
+it."""
 import subprocess
 from pathlib import Path
 
@@ -22,17 +23,18 @@ def _train_command(stdout: str) -> str:
     return lines[0]
 
 
-def test_one_process_by_default():
-    proc = _dry_run()
+def test_one_process_trains_with_train_py():
+    proc = _dry_run('EXP2_PROCS=1')
     assert proc.returncode == 0, proc.stderr
     command = _train_command(proc.stdout)
     assert 'tools/train.py configs/tr3d/exp2_cpu.py' in command
     assert 'dist_train.sh' not in command and 'batch_size' not in command
 
 
-@pytest.mark.parametrize('procs, batch', [(2, 2), (4, 1)])
-def test_processes_share_the_batch_of_four(procs: int, batch: int):
-    proc = _dry_run(f'EXP2_PROCS={procs}')
+@pytest.mark.parametrize('procs, batch', [(None, 2), (2, 2), (4, 1)])
+def test_processes_share_the_batch_of_four(procs, batch: int):
+    proc = _dry_run(*([f'EXP2_PROCS={procs}'] if procs else []))
+    procs = procs or 2  # the default
     assert proc.returncode == 0, proc.stderr
     command = _train_command(proc.stdout)
     assert f'tools/dist_train.sh configs/tr3d/exp2_cpu.py {procs} ' in command
