@@ -30,9 +30,9 @@ demo: setup
 # rooms are kept, training continues from the newest checkpoint of work_dirs/exp2_cpu, and the
 # test uses the final epoch's checkpoint (named in last_checkpoint), on all of area 9 and then on
 # the rooms of each generator sensor (tools/test.py --sensor), each test with its box-fit table
-# (--box-fit). About 2.5 hours on an idle 2-core machine in the default 2 processes (12 epochs
-# of 11-13 min with validation, docs/results.md). Rooms written by an older generator are kept
-# as they are: empty data/s3dis to regenerate them.
+# (--box-fit). About 2 hours on an idle 2-core machine in the default 2 processes (12 epochs
+# of 8-9 min with their validation; docs/results.md). Rooms written by an older generator are
+# kept as they are: empty data/s3dis to regenerate them.
 EXP2_DATA ?= data/s3dis
 EXP2_WORK ?= work_dirs/exp2_cpu
 # One OpenMP thread per process by default: on a busy machine torch's default (all cores)

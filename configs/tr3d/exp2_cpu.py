@@ -1,7 +1,7 @@
 # Experiment 2 at CPU scale: the same data, classes, model and optimiser as exp2.py, shrunk so
 # that training on 2 x 50 generated rooms (areas 7, 8; test area 9) runs on 2 CPU cores
-# (`make exp2-cpu`, resumable; about 3.5 hours). Differences from exp2.py (all others, e.g.
-# validation after each epoch, are unchanged):
+# (`make exp2-cpu`, resumable; about 2 hours in 2 processes). Differences from exp2.py (all
+# others, e.g. validation after each epoch, are unchanged):
 # - voxels of 2 cm instead of 1 cm (model.voxel_size; TR3D's output levels become 32 and 64 cm);
 # - a third, finest head level of 16 cm (TR3D's finest at 1 cm) on the first backbone stage's
 #   own voxels (`TR3DNeck(backbone_fine_level=True)`, not in TR3D) for the 3D printers, and the
@@ -25,8 +25,8 @@
 #   set; the run at 946e69b kept epoch 3 by mAP@0.25 (0.999, as at epoch 5) although its
 #   mAP@0.5 was 0.896 against 0.988 after the learning-rate drop (docs/results.md).
 # Nothing here selects a device: the Runner uses a GPU when there is one.
-# Cost measured on generated 1M-point rooms (2 OpenMP threads, an idle 2-core machine): about
-# 6.5 s per training iteration of 4 rooms and 1 s per test room, 1.7 GB peak memory.
+# Cost measured on generated 1M-point rooms (2 processes of 1 OpenMP thread, 2 rooms each, a
+# 2-core machine): 4.2 s per training iteration of 4 rooms on average, 0.6 s per test room.
 _base_ = ['./exp2.py']
 from projects.synthdet.config_helpers import area_datasets, with_num_points  # noqa: E402
 from projects.synthdet.config_helpers import with_structure_thinning  # noqa: E402
