@@ -30,9 +30,10 @@ demo: setup
 # rooms are kept, training continues from the newest checkpoint of work_dirs/exp2_cpu, and the
 # test uses the final epoch's checkpoint (named in last_checkpoint), on all of area 9 and then on
 # the rooms of each generator sensor (tools/test.py --sensor), each test with its box-fit table
-# (--box-fit). About 2 hours on an idle 2-core machine in the default 2 processes (12 epochs
-# of 8-9 min with their validation; docs/results.md). Rooms written by an older generator are
-# kept as they are: empty data/s3dis to regenerate them.
+# (--box-fit), the area-9 test also with what its false positives hit (--false-positives).
+# About 2 hours on an idle 2-core machine in the default 2 processes (12 epochs of 8-9 min with
+# their validation; docs/results.md). Rooms written by an older generator are kept as they are:
+# empty data/s3dis to regenerate them.
 EXP2_DATA ?= data/s3dis
 EXP2_WORK ?= work_dirs/exp2_cpu
 # One OpenMP thread per process by default: on a busy machine torch's default (all cores)
@@ -72,7 +73,7 @@ exp2-cpu: setup
 	    $$(ls $(EXP2_WORK)/epoch_*.pth >/dev/null 2>&1 && echo --resume) \
 	    --cfg-options $(EXP2_CFG_OPTIONS) $(EXP2_BATCH_OPTIONS)
 	$(PY) tools/test.py configs/tr3d/exp2_cpu.py $$(cat $(EXP2_WORK)/last_checkpoint) \
-	    --work-dir $(EXP2_WORK)/test --box-fit --cfg-options $(EXP2_CFG_OPTIONS)
+	    --work-dir $(EXP2_WORK)/test --box-fit --false-positives --cfg-options $(EXP2_CFG_OPTIONS)
 	for sensor in paper tls tablet; do \
 	    $(PY) tools/test.py configs/tr3d/exp2_cpu.py $$(cat $(EXP2_WORK)/last_checkpoint) \
 	        --sensor $$sensor --work-dir $(EXP2_WORK)/test_$$sensor --box-fit \

@@ -291,8 +291,10 @@ def test_test_tool_box_fit_bounds_the_recall(tiny: dict, capsys: pytest.CaptureF
     ])
     fit = json.loads((out_dir / 'box_fit.json').read_text())
     assert fit['format'] == 'synthdet.box_fit/1' and list(fit['rows']) == TINY_CLASSES
-    truth = [name for boxes in truth_from_infos([tiny['data'] / 's3dis_infos_Area_1.pkl']).values()
-             for name, _ in boxes]
+    truth = [
+        name for boxes in truth_from_infos([tiny['data'] / 's3dis_infos_Area_1.pkl']).values()
+        for name, _ in boxes
+    ]
     metrics = document['metrics']
     for name, row in fit['rows'].items():
         assert row['boxes'] == truth.count(name)
@@ -306,6 +308,34 @@ def test_test_tool_box_fit_bounds_the_recall(tiny: dict, capsys: pytest.CaptureF
     assert lines[header].split()[:3] == ['class', 'boxes', 'iou_median']
     assert [line.split()[0] for line in lines[header + 1:header + 6]] == TINY_CLASSES
     assert (out_dir / 'box_fit.txt').read_text().count('\n') == 7  # title, header, 5 classes
+
+
+def test_test_tool_names_what_the_false_positives_hit(tiny: dict, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture) -> None:
+    data = tmp_path / 'data'
+    shutil.copytree(tiny['data'], data)
+    shutil.copytree(tiny['raw'], data / S3DIS_DIR / 'Area_1')  # create_data's layout
+    checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
+    document = load_tool('test').main([
+        str(TINY),
+        str(checkpoint), '--work-dir',
+        str(tmp_path / 'out'), '--false-positives', '--cfg-options', *data_options(data)
+    ])
+    fps = json.loads((tmp_path / 'out' / 'false_positives.json').read_text())
+    assert fps['format'] == 'synthdet.false_positives/1' and list(fps['rows']) == TINY_CLASSES
+    annotated = {'floor', 'ceiling', 'wall', 'clutter', *TINY_CLASSES}
+    for name, per_thr in fps['rows'].items():
+        assert list(per_thr) == ['0.25', '0.50']
+        for thr, entry in per_thr.items():
+            assert entry['AP'] == pytest.approx(document['metrics'][f'{name}_AP_{thr}'], abs=1e-6)
+            for cause, row in entry['causes'].items():
+                assert row['count'] >= 1 and row['ap_without'] >= entry['AP'] - 1e-9
+                assert cause.removeprefix('as ') in annotated or cause in ('duplicate', 'loose',
+                                                                           'empty',
+                                                                           'score < 0.1'), cause
+    out = capsys.readouterr().out
+    assert out.count('3dprinter  @0.') == 2
+    assert (tmp_path / 'out' / 'false_positives.txt').read_text().count('\n') == 11
 
 
 def test_predict_writes_detections_in_each_scan_frame(tiny: dict) -> None:
@@ -358,8 +388,7 @@ def test_predict_writes_detections_in_each_scan_frame(tiny: dict) -> None:
     raw, shifted = documents['office_1']['detections'], documents['office_1_shifted']['detections']
     assert [d['class'] for d in raw] == [d['class'] for d in shifted]
     np.testing.assert_allclose([d['score'] for d in raw], [d['score'] for d in shifted], atol=1e-5)
-    np.testing.assert_allclose(
-        centres('office_1') - shift, centres('office_1_shifted'), atol=1e-4)
+    np.testing.assert_allclose(centres('office_1') - shift, centres('office_1_shifted'), atol=1e-4)
 
 
 def test_count_table_counts_correct_and_incorrect_detections(tmp_path: Path) -> None:
@@ -507,8 +536,10 @@ def test_test_tool_tests_the_rooms_of_one_sensor(tiny: dict, tmp_path: Path) -> 
     data = tmp_path / 'data'
     shutil.copytree(tiny['data'], data)
     shutil.copytree(tiny['raw'], data / S3DIS_DIR / 'Area_1')
-    rooms = [Path(info['lidar_points']['lidar_path']).stem.removeprefix('Area_1_')
-             for info in load_info_pickle(data / 's3dis_infos_Area_1.pkl')['data_list']]
+    rooms = [
+        Path(info['lidar_points']['lidar_path']).stem.removeprefix('Area_1_')
+        for info in load_info_pickle(data / 's3dis_infos_Area_1.pkl')['data_list']
+    ]
     assert len(rooms) == 2
     checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
     test = load_tool('test')

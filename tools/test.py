@@ -2,7 +2,7 @@
 
 Usage: python tools/test.py CONFIG CHECKPOINT [--work-dir DIR] [--out JSON] [--cfg-options k=v ...]
                             [--show-dir DIR [--score-thr T]] [--sensor {paper,tls,tablet}]
-                            [--box-fit]
+                            [--box-fit] [--false-positives]
                             [--launcher {none,pytorch,slurm,mpi}]
 
 The numbers are mmdet3d's IndoorMetric (per-class average precision at 3D IoU 0.25 and 0.5 and
@@ -20,6 +20,10 @@ is a ``--sensor`` whose rooms cannot be found (exit 2). ``--box-fit`` adds a tab
 the predicted boxes fit the true ones per class (median best IoU, the share below IoU 0.25 and
 0.5, size ratios per axis and centre distance; ``projects/synthdet/evaluation/box_fit.py``),
 printed and written to ``box_fit.json`` / ``box_fit.txt`` next to Table 3.
+``--false-positives`` adds, per class and IoU threshold, what the false positives hit (a
+duplicate, another class, a loose box, or the annotation of the scan's points inside them, e.g.
+``clutter/crate``) with the AP the class would have without each cause
+(``projects/synthdet/evaluation/false_positives.py``), in ``false_positives.json`` / ``.txt``.
 """
 import argparse
 import sys
@@ -37,6 +41,8 @@ from projects.synthdet.bootstrap import (  # noqa: E402
 from projects.synthdet.checkpoint import CheckpointError, load_model_weights  # noqa: E402
 from projects.synthdet.evaluation.box_fit import (  # noqa: E402
     SynthdetBoxFit, box_fit_document, format_box_fit)
+from projects.synthdet.evaluation.false_positives import (  # noqa: E402
+    SynthdetFalsePositives, false_positives_document, format_false_positives)
 from projects.synthdet.evaluation.table3 import format_table3, table3  # noqa: E402
 from projects.synthdet.evaluation.table_files import write_table  # noqa: E402
 from projects.synthdet.visualization import TopViewHook  # noqa: E402
@@ -65,6 +71,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         '--box-fit',
         action='store_true',
         help='also tabulate how well the predicted boxes fit the true ones (box_fit.json)')
+    parser.add_argument(
+        '--false-positives',
+        action='store_true',
+        help='also tabulate what the false positives hit, per class (false_positives.json)')
     add_runner_arguments(parser, 'logs and table3.json (default work_dirs/<config>)')
     return parse_runner_args(parser, argv)
 
@@ -78,12 +88,11 @@ def add_show_hook(cfg: Config, show_dir: str | None, score_thr: float) -> None:
         ]
 
 
-def add_box_fit(cfg: Config, box_fit: bool) -> None:
-    """With ``box_fit``, evaluate the test with ``SynthdetBoxFit`` as well."""
-    if box_fit:
-        evaluators = cfg.test_evaluator
-        evaluators = list(evaluators) if isinstance(evaluators, (list, tuple)) else [evaluators]
-        cfg.test_evaluator = [*evaluators, dict(type=SynthdetBoxFit.__name__)]
+def add_metric(cfg: Config, metric: type) -> None:
+    """Evaluate the test with ``metric`` (a registered metric class) as well."""
+    evaluators = cfg.test_evaluator
+    evaluators = list(evaluators) if isinstance(evaluators, (list, tuple)) else [evaluators]
+    cfg.test_evaluator = [*evaluators, dict(type=metric.__name__)]
 
 
 def select_sensor(cfg: Config, sensor: str | None) -> str:
@@ -106,7 +115,10 @@ def main(argv: list[str] | None = None) -> dict:
     cfg = runner_config(args)
     cfg.load_from = None  # the weights come from the weights-only load below
     add_show_hook(cfg, args.show_dir, args.score_thr)
-    add_box_fit(cfg, args.box_fit)
+    if args.box_fit:
+        add_metric(cfg, SynthdetBoxFit)
+    if args.false_positives:
+        add_metric(cfg, SynthdetFalsePositives)
     test_set = select_sensor(cfg, args.sensor)
     runner = Runner.from_cfg(cfg)
     load_model_weights(
@@ -129,6 +141,15 @@ def main(argv: list[str] | None = None) -> dict:
                     f'{format_box_fit(fit)}')
             print(text)
             print(f'written to {fit_out} and {write_table(fit_out, fit, text)}')
+        if args.false_positives:
+            fps = false_positives_document(metrics, classes, str(args.config),
+                                           str(args.checkpoint), test_set)
+            fps_out = out.with_name('false_positives.json')
+            text = (f'False positives ({Path(args.config).stem}, {test_set}; per class and IoU '
+                    f'threshold the AP, then the causes that cost most: cause, count -> AP '
+                    f'without them):\n{format_false_positives(fps)}')
+            print(text)
+            print(f'written to {fps_out} and {write_table(fps_out, fps, text)}')
     return document
 
 
