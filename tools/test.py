@@ -109,6 +109,13 @@ def select_sensor(cfg: Config, sensor: str | None) -> str:
     return name
 
 
+def report(path: Path, document: dict, title: str, table: str) -> None:
+    """Print a table under its title; write its document to ``path`` and the text beside it."""
+    text = f'{title}:\n{table}'
+    print(text)
+    print(f'written to {path} and {write_table(path, document, text)}')
+
+
 def main(argv: list[str] | None = None) -> dict:
     """Run the test loop, print Table 3 and write it; returns the JSON document."""
     args = parse_args(argv)
@@ -128,28 +135,23 @@ def main(argv: list[str] | None = None) -> dict:
     document = table3(metrics, classes, str(args.config), str(args.checkpoint), test_set)
     if is_main_process():
         out = Path(args.out) if args.out else Path(cfg.work_dir) / 'table3.json'
-        text = (f'Table 3 ({Path(args.config).stem}, {document["test_set"]}):\n'
-                f'{format_table3(document)}')
-        print(text)
-        print(f'written to {out} and {write_table(out, document, text)}')
+        stem = Path(args.config).stem
+        report(out, document, f'Table 3 ({stem}, {document["test_set"]})', format_table3(document))
         if args.box_fit:
             fit = box_fit_document(metrics, classes, str(args.config), str(args.checkpoint),
                                    test_set)
-            fit_out = out.with_name('box_fit.json')
-            text = (f'Box fit ({Path(args.config).stem}, {test_set}; best IoU of each true box, '
-                    f'size ratios prediction / truth, centre distance in m):\n'
-                    f'{format_box_fit(fit)}')
-            print(text)
-            print(f'written to {fit_out} and {write_table(fit_out, fit, text)}')
+            report(
+                out.with_name('box_fit.json'), fit,
+                f'Box fit ({stem}, {test_set}; best IoU of each true box, size ratios '
+                f'prediction / truth, centre distance in m)', format_box_fit(fit))
         if args.false_positives:
             fps = false_positives_document(metrics, classes, str(args.config),
                                            str(args.checkpoint), test_set)
-            fps_out = out.with_name('false_positives.json')
-            text = (f'False positives ({Path(args.config).stem}, {test_set}; per class and IoU '
-                    f'threshold the AP, then the causes that cost most: cause, count -> AP '
-                    f'without them):\n{format_false_positives(fps)}')
-            print(text)
-            print(f'written to {fps_out} and {write_table(fps_out, fps, text)}')
+            report(
+                out.with_name('false_positives.json'), fps,
+                f'False positives ({stem}, {test_set}; per class and IoU threshold the AP, then '
+                f'the causes that cost most: cause, count -> AP without them)',
+                format_false_positives(fps))
     return document
 
 
