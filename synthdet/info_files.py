@@ -47,6 +47,14 @@ def room_sensor(room: dict) -> str:
     return room.get('generator', {}).get('sensor', {}).get('model', 'paper')
 
 
+def raw_room_dir(data_root: str | os.PathLike, scan_name: str) -> Path | None:
+    """The raw room folder of a converted scan ``Area_N_<room>.bin`` in the layout
+    ``tools/create_data.py --root-path D --out-dir D`` writes
+    (``D/Stanford3dDataset_v1.2_Aligned_Version/Area_N/<room>``); None for another name."""
+    match = _SCAN_NAME.match(scan_name)
+    return Path(data_root) / RAW_DIR / match[1] / match[2] if match else None
+
+
 def rooms_scanned_by(info_file: str | os.PathLike, sensor: str) -> list[int]:
     """Indices into the info pickle's ``data_list`` of the rooms that ``sensor`` scanned.
 
@@ -55,12 +63,11 @@ def rooms_scanned_by(info_file: str | os.PathLike, sensor: str) -> list[int]:
     without one (a real S3DIS room) raises ``InfoFileError`` naming it.
     """
     info_file = Path(info_file)
-    raw = info_file.parent / RAW_DIR
     selected = []
     for index, info in enumerate(load_info_pickle(info_file)['data_list']):
         name = Path(info['lidar_points']['lidar_path']).name
-        match = _SCAN_NAME.match(name)
-        meta = raw / match[1] / match[2] / 'meta.json' if match else None
+        room_dir = raw_room_dir(info_file.parent, name)
+        meta = room_dir / 'meta.json' if room_dir else None
         if meta is None or not meta.is_file():
             raise InfoFileError(f'{info_file}: room {name} has no generator meta.json '
                                 f'({meta or "not an Area_N_<room>.bin name"})')

@@ -22,8 +22,8 @@ The scans are read from the converter's layout next to the prediction's ``lidar_
 (``points/``, ``instance_mask/``, ``Stanford3dDataset_v1.2_Aligned_Version/Area_N/<room>/``).
 """
 import math
-import re
-from collections import Counter
+from collections import Counter, defaultdict
+from functools import cached_property
 from pathlib import Path
 from typing import Sequence
 
@@ -34,7 +34,7 @@ from mmdet3d.structures import BaseInstance3DBoxes
 from mmengine.evaluator import BaseMetric
 
 from synthdet.contracts import read_room
-from synthdet.info_files import RAW_DIR, InfoFileError
+from synthdet.info_files import RAW_DIR, InfoFileError, raw_room_dir
 from synthdet.room_data import annotation_class, annotation_files
 
 FALSE_POSITIVES_FORMAT = 'synthdet.false_positives/1'
@@ -43,31 +43,39 @@ CONFUSION_IOU = 0.25  # a prediction overlapping another class's true box this m
 LOOSE_IOU = 0.1  # ... its own class's true box this much, a loose box of it
 MATCHED = 'matched'
 SEPARATOR = '|'  # in metric keys: <class>|<threshold>|<cause>|<count or ap_without>
-_SCAN_STEM = re.compile(r'^(Area_\d+)_(.+)$')  # the converter's points/Area_N_<room>.bin
 
 
 class ScanFiles:
-    """The converted points, instance mask and annotation names of one scan, read once."""
+    """The converted points, instance mask and annotation names of one scan; the points and
+    the mask are read once, when a box is first looked into."""
 
     def __init__(self, lidar_path: str) -> None:
-        path = Path(lidar_path)
-        data_root = path.parent.parent
-        self.points = np.fromfile(path, dtype=np.float32).reshape(-1, 6)[:, :3]
-        mask_path = data_root / 'instance_mask' / path.name
-        if not mask_path.is_file():
-            raise InfoFileError(f'{mask_path}: no instance mask; --false-positives needs '
+        self.path = Path(lidar_path)
+        data_root = self.path.parent.parent
+        self.mask_path = data_root / 'instance_mask' / self.path.name
+        if not self.mask_path.is_file():
+            raise InfoFileError(f'{self.mask_path}: no instance mask; --false-positives needs '
                                 'the converter\'s instance_mask/ next to points/')
-        self.instances = np.fromfile(mask_path, dtype=np.int64)
-        if len(self.instances) != len(self.points):
-            raise InfoFileError(f'{mask_path}: {len(self.instances)} ids for '
-                                f'{len(self.points)} points of {path}')
-        match = _SCAN_STEM.match(path.stem)
-        annotations = data_root / RAW_DIR / match[1] / match[2] / 'Annotations' if match else None
-        if annotations is None or not annotations.is_dir():
-            raise InfoFileError(f'{annotations or path}: no S3DIS Annotations folder for '
-                                f'{path.name}; --false-positives needs the raw rooms in '
-                                f'{data_root / RAW_DIR}')
-        self.names = self._instance_names(annotations.parent)
+        room_dir = raw_room_dir(data_root, self.path.name)
+        if room_dir is None or not (room_dir / 'Annotations').is_dir():
+            raise InfoFileError(f'{room_dir / "Annotations" if room_dir else self.path}: no S3DIS '
+                                f'Annotations folder for {self.path.name}; --false-positives '
+                                f'needs the raw rooms in {data_root / RAW_DIR}')
+        self.names = self._instance_names(room_dir)
+
+    @cached_property
+    def points(self) -> np.ndarray:
+        """The scan's xyz (N, 3)."""
+        return np.fromfile(self.path, dtype=np.float32).reshape(-1, 6)[:, :3]
+
+    @cached_property
+    def instances(self) -> np.ndarray:
+        """The instance id of each point (0: none, k: the k-th annotation file)."""
+        instances = np.fromfile(self.mask_path, dtype=np.int64)
+        if len(instances) != len(self.points):
+            raise InfoFileError(f'{self.mask_path}: {len(instances)} ids for '
+                                f'{len(self.points)} points of {self.path}')
+        return instances
 
     @staticmethod
     def _instance_names(room_dir: Path) -> list[str]:
@@ -100,9 +108,9 @@ class ScanFiles:
 def match_scan(gt_boxes: BaseInstance3DBoxes, gt_labels: Sequence[int],
                pred_boxes: BaseInstance3DBoxes, pred_labels: Sequence[int],
                pred_scores: Sequence[float], iou_thr: float, min_score: float,
-               scan: ScanFiles | None) -> list[str]:
+               scan: ScanFiles) -> list[str]:
     """The outcome of each prediction of one scan at ``iou_thr``: ``matched`` or its cause
-    (see the module doc); ``scan`` None leaves the points out (cause ``unknown``)."""
+    (see the module doc)."""
     gt_labels = np.asarray(gt_labels, dtype=np.int64).reshape(-1)
     pred_labels = np.asarray(pred_labels, dtype=np.int64).reshape(-1)
     pred_scores = np.asarray(pred_scores, dtype=np.float64).reshape(-1)
@@ -133,7 +141,7 @@ def match_scan(gt_boxes: BaseInstance3DBoxes, gt_labels: Sequence[int],
         elif pred_scores[j] < min_score:
             outcomes[j] = f'score < {min_score:g}'
         else:
-            outcomes[j] = scan.content(centers[j], dims[j], float(yaws[j])) if scan else 'unknown'
+            outcomes[j] = scan.content(centers[j], dims[j], float(yaws[j]))
     return outcomes
 
 
@@ -155,13 +163,15 @@ def class_precision(scores: np.ndarray,
 def summarize(rows: list[tuple], n_truth: Counter, classes: Sequence[str]) -> dict[str, float]:
     """Flat results ``<class>|<thr>|AP`` and ``<class>|<thr>|<cause>|count`` / ``ap_without``
     from (label, score, threshold, outcome) rows; classes without true boxes are left out."""
+    grouped = defaultdict(list)
+    for label, score, thr, outcome in rows:
+        grouped[label, thr].append((score, outcome))
     results = {}
     for label, name in enumerate(classes):
         if n_truth[label] == 0:
             continue
         for thr in IOU_THRESHOLDS:
-            mine = [(score, outcome) for lab, score, t, outcome in rows
-                    if lab == label and t == thr]
+            mine = grouped[label, thr]
             scores = np.array([score for score, _ in mine], dtype=np.float64)
             outcomes = [_named(outcome, classes) for _, outcome in mine]
             key = f'{name}{SEPARATOR}{thr:.2f}'
@@ -198,18 +208,20 @@ class SynthdetFalsePositives(BaseMetric):
             truth, pred = sample['eval_ann_info'], sample['pred_instances_3d']
             labels = pred['labels_3d'].cpu().numpy()
             scores = pred['scores_3d'].cpu().numpy()
-            scan = ScanFiles(sample['lidar_path']) if len(labels) else None
-            rows = [('truth', int(label)) for label in np.asarray(truth['gt_labels_3d'])]
-            for thr in IOU_THRESHOLDS:
-                outcomes = match_scan(truth['gt_bboxes_3d'], truth['gt_labels_3d'],
-                                      pred['bboxes_3d'], labels, scores, thr, self.min_score, scan)
-                rows += [(int(lab), float(score), thr, outcome)
-                         for lab, score, outcome in zip(labels, scores, outcomes)]
-            self.results.append(rows)
+            rows = []
+            if len(labels):
+                scan = ScanFiles(sample['lidar_path'])
+                for thr in IOU_THRESHOLDS:
+                    outcomes = match_scan(truth['gt_bboxes_3d'], truth['gt_labels_3d'],
+                                          pred['bboxes_3d'], labels, scores, thr, self.min_score,
+                                          scan)
+                    rows += [(int(lab), float(score), thr, outcome)
+                             for lab, score, outcome in zip(labels, scores, outcomes)]
+            self.results.append((np.asarray(truth['gt_labels_3d']).tolist(), rows))
 
     def compute_metrics(self, results: list) -> dict[str, float]:
-        n_truth = Counter(row[1] for rows in results for row in rows if row[0] == 'truth')
-        rows = [row for rows in results for row in rows if row[0] != 'truth']
+        n_truth = Counter(int(label) for truth, _ in results for label in truth)
+        rows = [row for _, scan_rows in results for row in scan_rows]
         return summarize(rows, n_truth, self.dataset_meta['classes'])
 
 
