@@ -50,6 +50,9 @@ DEFAULTS: dict[str, Any] = {
         'chair_margin': 1.7,  # distance of the inner boundary from the walls, metres
         'wall_gap': [0.02, 0.12],  # gap between a wall item's back and its wall
         'clearance': 0.05,  # minimum free distance between any two objects
+        # probability that a table side left without a YuMi or printer gets a crate as big as
+        # a printer (a hard negative on the printers' tables)
+        'free_side_crate': 0.7,
         'clutter': [2, 8],  # inclusive range of clutter objects per room
         'clutter_size': [0.2, 0.8],  # sides of the plain boxes and cylinders
         # probability of each clutter kind (generator/clutter.py); they must sum to 1
@@ -276,6 +279,9 @@ def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
     for key in ('chair_margin', 'clearance'):
         if _number(config, 'layout', key, source) < 0:
             raise ConfigError(f'{source}: "layout.{key}" must not be negative')
+    if not 0.0 <= _number(config, 'layout', 'free_side_crate', source) <= 1.0:
+        raise ConfigError(f'{source}: "layout.free_side_crate" = '
+                          f'{layout["free_side_crate"]} is outside [0, 1]')
     _range(config, 'layout', 'wall_gap', source)
     _range(config, 'layout', 'clutter', source, integer=True)
     _range(config, 'layout', 'clutter_size', source)

@@ -427,6 +427,16 @@ def _place_on_table(rng, placer: _Placer, table: PlacedObject, side: int, item: 
     return placed is not None
 
 
+def _place_crate_on_side(rng, placer: _Placer, table: PlacedObject, side: int) -> bool:
+    """A closed crate as big as a 3D printer on the free ``side`` of ``table``'s top: a hard
+    negative for the printers, which stand on the same tables."""
+    room_above = placer.top_limit - (table.base[2] + table.spec.top_z)
+    if room_above < 0.25:
+        return False
+    crate = sample_clutter(rng, 'crate', room_above, small=True)
+    return _place_on_table(rng, placer, table, side, crate)
+
+
 def _place_openings(rng, placer: _Placer, room_cfg, layout: RoomLayout) -> None:
     polygon = layout.polygon
     lengths = np.linalg.norm(np.roll(polygon, -1, axis=0) - polygon, axis=1)
@@ -674,6 +684,7 @@ def _furnish(rng: np.random.Generator, placer: '_Placer', catalog: Catalog,
     tie_break = rng.random(len(lengths))
     walls = [int(i) for i in np.lexsort((tie_break, -np.round(lengths, 3)))
              if lengths[i] >= 1.8][:layout_cfg['wall_slots']]
+    free_sides: list[tuple[PlacedObject, int]] = []  # table sides left without an item
     for wall in walls:
         cls = _pick(rng, probs, ('table', 'sofa'))
         if cls is None or not catalog.get(cls):
@@ -704,8 +715,8 @@ def _furnish(rng: np.random.Generator, placer: '_Placer', catalog: Catalog,
         table = _place_wall_item(rng, placer, table_spec, wall, layout_cfg['wall_gap'])
         if table is None:
             continue
-        for side, item in items:
-            _place_on_table(rng, placer, table, side, item)
+        taken = {side for side, item in items if _place_on_table(rng, placer, table, side, item)}
+        free_sides += [(table, side) for side in (-1, 1) if side not in taken]
 
     # chairs: 4 evenly spaced positions on the inner boundary, random phase and rotations
     if catalog.get('chair') and layout_cfg['chair_positions'] > 0:
@@ -732,6 +743,11 @@ def _furnish(rng: np.random.Generator, placer: '_Placer', catalog: Catalog,
 
             placer.place_first_free(spec, propose, 8)
 
+    # clutter after every detection object, so that it never takes their place
+    if layout_cfg['free_side_crate'] > 0:
+        for table, side in free_sides:
+            if rng.random() < layout_cfg['free_side_crate']:
+                _place_crate_on_side(rng, placer, table, side)
     _place_clutter(rng, placer, layout_cfg)
 
 

@@ -112,7 +112,14 @@ def generator_rooms(tmp_path_factory) -> list:
     from generator.__main__ import main
     work = tmp_path_factory.mktemp('generated')
     rooms = []
-    light_clutter = {'clutter': [0, 4], 'clutter_kinds': {'box': 0.6, 'cylinder': 0.4}}
+    light_clutter = {
+        'clutter': [0, 4],
+        'clutter_kinds': {
+            'box': 0.6,
+            'cylinder': 0.4
+        },
+        'free_side_crate': 0.0
+    }
     for noisy in (False, True):
         for shape in ('box', 'L', 'U'):
             settings = {

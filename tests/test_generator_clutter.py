@@ -216,12 +216,34 @@ def test_clutter_does_not_change_the_detection_objects(catalog):
     """Clutter is placed after the detection objects: without it they are the same."""
     config = load_config()
     bare = copy.deepcopy(config)
-    bare['layout']['clutter'] = [0, 0]
+    bare['layout'].update(clutter=[0, 0], free_side_crate=0.0)
     for seed in range(20):
         full, empty = (
             layout_meta(generate_layout(np.random.default_rng([seed, 0]), catalog, c))
             for c in (config, bare))
         assert [o for o in full['objects'] if o['class'] != 'clutter'] == empty['objects']
+
+
+def test_free_table_sides_get_printer_sized_crates(catalog):
+    """With ``layout.free_side_crate`` 1 and no YuMi or printer, both sides of every table hold
+    a crate as big as a printer (where the room above the top allows one); with 0 none."""
+    config = load_config()
+    config['probabilities'].update(yumi=0.0, **{'3dprinter': 0.0})
+    config['layout']['clutter'] = [0, 0]
+    on_tables = Counter()
+    for share in (0.0, 1.0):
+        config['layout']['free_side_crate'] = share
+        for room in make_rooms(catalog, copy.deepcopy(config), range(30)):
+            tables = {o['instance'] for o in room['objects'] if o['class'] == 'table'}
+            crates = [o for o in clutter(room) if o['on'] in tables]
+            assert len(crates) == len(clutter(room)), room['name']  # no other clutter
+            for crate in crates:
+                assert crate['params']['kind'] == 'crate' and crate['params']['layers'] == 1
+                assert 0.38 <= min(crate['box']['size'][:2]) and max(crate['box']['size']) <= 0.7
+            on_tables[share, 'tables'] += len(tables)
+            on_tables[share, 'crates'] += len(crates)
+    assert on_tables[0.0, 'crates'] == 0, on_tables
+    assert on_tables[1.0, 'crates'] >= 1.5 * on_tables[1.0, 'tables'] > 0, on_tables
 
 
 @pytest.mark.parametrize('kinds, message', [({

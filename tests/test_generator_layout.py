@@ -450,6 +450,11 @@ def test_expected_counts_are_calibrated(catalog):
         }
     }, 'at most 4'),
     ({
+        'layout': {
+            'free_side_crate': 1.5
+        }
+    }, 'free_side_crate" = 1.5 is outside'),
+    ({
         'room': {
             'height': [3.5, 3.0]
         }
