@@ -427,14 +427,20 @@ def _place_on_table(rng, placer: _Placer, table: PlacedObject, side: int, item: 
     return placed is not None
 
 
+def _crate_above(rng, placer: _Placer, support: PlacedObject) -> AssetSpec | None:
+    """A crate for the top of ``support`` (as big as a 3D printer on a table), or None when
+    less than 25 cm are left under the height limit."""
+    room_above = placer.top_limit - (support.base[2] + support.spec.top_z)
+    if room_above < 0.25:
+        return None
+    return sample_clutter(rng, 'crate', room_above, small=support.cls == 'table')
+
+
 def _place_crate_on_side(rng, placer: _Placer, table: PlacedObject, side: int) -> bool:
     """A closed crate as big as a 3D printer on the free ``side`` of ``table``'s top: a hard
     negative for the printers, which stand on the same tables."""
-    room_above = placer.top_limit - (table.base[2] + table.spec.top_z)
-    if room_above < 0.25:
-        return False
-    crate = sample_clutter(rng, 'crate', room_above, small=True)
-    return _place_on_table(rng, placer, table, side, crate)
+    crate = _crate_above(rng, placer, table)
+    return crate is not None and _place_on_table(rng, placer, table, side, crate)
 
 
 def _place_openings(rng, placer: _Placer, room_cfg, layout: RoomLayout) -> None:
@@ -478,9 +484,15 @@ def _place_openings(rng, placer: _Placer, room_cfg, layout: RoomLayout) -> None:
 CONTACT = 0.0  # clutter may touch what it stands next to, never enter its box
 
 
-def _place_clutter(rng, placer: _Placer, layout_cfg) -> None:
-    """``layout.clutter`` objects of kinds drawn from ``layout.clutter_kinds``, after the
+def _place_clutter(rng, placer: _Placer, layout_cfg,
+                   free_sides: Sequence[tuple[PlacedObject, int]]) -> None:
+    """Crates on ``free_sides`` of tables (``layout.free_side_crate``), then
+    ``layout.clutter`` objects of kinds drawn from ``layout.clutter_kinds``; after the
     detection objects so that they never take their place."""
+    if layout_cfg['free_side_crate'] > 0:  # no draw at 0: the layouts of earlier versions
+        for table, side in free_sides:
+            if rng.random() < layout_cfg['free_side_crate']:
+                _place_crate_on_side(rng, placer, table, side)
     low, high = layout_cfg['clutter']
     for _ in range(int(rng.integers(low, high + 1))):
         kind = _pick(rng, layout_cfg['clutter_kinds'], CLUTTER_KINDS)
@@ -652,10 +664,10 @@ def _place_crate_on_top(rng, placer: _Placer, tries: int = 8) -> bool:
     if not supports:
         return False
     support = supports[int(rng.integers(len(supports)))]
-    top_z = support.base[2] + support.spec.top_z
-    if placer.top_limit - top_z < 0.25:
+    spec = _crate_above(rng, placer, support)
+    if spec is None:
         return False
-    spec = sample_clutter(rng, 'crate', placer.top_limit - top_z, small=support.cls == 'table')
+    top_z = support.base[2] + support.spec.top_z
     top_w, top_d = support.spec.top_size
     turns = [
         k for k in range(4)
@@ -743,12 +755,7 @@ def _furnish(rng: np.random.Generator, placer: '_Placer', catalog: Catalog,
 
             placer.place_first_free(spec, propose, 8)
 
-    # clutter after every detection object, so that it never takes their place
-    if layout_cfg['free_side_crate'] > 0:
-        for table, side in free_sides:
-            if rng.random() < layout_cfg['free_side_crate']:
-                _place_crate_on_side(rng, placer, table, side)
-    _place_clutter(rng, placer, layout_cfg)
+    _place_clutter(rng, placer, layout_cfg, free_sides)
 
 
 def _overhead_from(config: Mapping[str, Any], height: float) -> float:
