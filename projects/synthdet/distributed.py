@@ -8,6 +8,7 @@ device ids for a CPU model), so :func:`prepare_distributed` starts the gloo proc
 (the Runner then skips its own initialisation) and selects :class:`CPUDistributedDataParallel`.
 """
 import atexit
+from datetime import timedelta
 
 import torch
 from mmengine.config import Config
@@ -41,7 +42,14 @@ def prepare_distributed(cfg: Config) -> None:
 
 
 def _end_process_group() -> None:
-    """Tear the gloo group down before the interpreter exits: left to the final clean-up, its
-    threads can abort a finished process ("terminate called without an active exception")."""
-    if torch.distributed.is_initialized():
-        torch.distributed.destroy_process_group()
+    """Tear the gloo group down before the interpreter exits, all processes together: left to
+    the final clean-up, or torn down while a peer still writes its results, its threads can abort
+    a finished process ("terminate called without an active exception"). A peer that died does
+    not hold the exit up for longer than a minute."""
+    if not torch.distributed.is_initialized():
+        return
+    try:
+        torch.distributed.monitored_barrier(timeout=timedelta(seconds=60))
+    except RuntimeError:
+        pass  # a peer is gone: torchrun reports its failure, this process only has to end
+    torch.distributed.destroy_process_group()
