@@ -72,7 +72,7 @@ def test_resolved_datasets_and_pipelines(name):
 
 
 @pytest.mark.parametrize('name', ['exp2_cpu', 'tiny'])
-def test_cpu_configs_change_only_points_thinning_voxels_levels_and_nms_of_exp2(name):
+def test_cpu_configs_change_only_points_thinning_voxels_and_levels_of_exp2(name):
     exp2, cfg = load('exp2'), load(name)
     for key in ('train_pipeline', 'test_pipeline'):
         thinning = [step for step in cfg[key] if step.type == 'ThinRoomStructure']
@@ -86,10 +86,9 @@ def test_cpu_configs_change_only_points_thinning_voxels_levels_and_nms_of_exp2(n
         ]
         assert derived == original
     changed = dict(exp2.model, voxel_size=0.02)
-    if name == 'exp2_cpu':  # the 16 cm head level with the printers on it, cross-class NMS
+    if name == 'exp2_cpu':  # and the 16 cm head level, with the printers on it
         changed['neck'] = dict(exp2.model.neck, backbone_fine_level=True)
         changed['bbox_head'] = dict(exp2.model.bbox_head, label2level=(2, 1, 1, 1, 0))
-        changed['test_cfg'] = dict(exp2.model.test_cfg, cross_class_iou_thr=0.5)
     assert exp2.model.voxel_size == 0.01 and cfg.model == changed
 
 

@@ -242,23 +242,6 @@ def test_merging_drops_what_the_core_rule_and_nms_remove(hall):
     assert len(merged.boxes) == len(truth)
 
 
-def test_merging_suppresses_across_classes_like_the_head():
-    """A YuMi seen by one window and a 3D printer box at nearly the same place seen by the next
-    (their centres on either side of the core boundary) both survive the class-wise NMS; the
-    head's ``cross_class_iou_thr`` keeps the higher-scored one only, as within a window."""
-    windows = plan_windows(np.zeros(2), np.array([12.0, 4.0]), SPEC)
-    assert len(windows) == 2
-    boundary = float(windows[0].core_high[0])
-    yumi = Detections(np.array([[boundary - 0.05, 2.0, 1.0, 0.6, 0.6, 0.6, 0.0]]),
-                      np.array([0.9]), np.array([5]))
-    printer = Detections(np.array([[boundary + 0.05, 2.0, 1.0, 0.6, 0.6, 0.6, 0.0]]),
-                         np.array([0.6]), np.array([6]))
-    per_class = merge_window_detections([yumi, printer], windows, iou_thr=0.5)
-    assert per_class.labels.tolist() == [5, 6]
-    across = merge_window_detections([yumi, printer], windows, 0.5, cross_class_iou_thr=0.5)
-    assert across.labels.tolist() == [5] and across.scores.tolist() == [0.9]
-
-
 def test_room_sized_scan_is_one_window_and_the_detector_output(hall):
     """A scan within one window's size is detected once, as a whole, unchanged."""
     detector = InstanceDetector(hall['instances'], list(GENERATED_CLASSES))

@@ -5,8 +5,7 @@ import torch
 
 from projects.synthdet.core import (axis_aligned_nms3d, axis_aligned_nms3d_cpu,
                                     mmcv_nms3d_arguments, multiclass_axis_aligned_nms3d,
-                                    pairwise_bev_iou, suppress_across_classes,
-                                    uses_mmcv_kernel)
+                                    pairwise_bev_iou, uses_mmcv_kernel)
 
 
 def reference_bev_iou(a, b):
@@ -148,29 +147,3 @@ def test_multiclass_nms_nothing_above_threshold():
                                                                     torch.full((10, 3), 0.005),
                                                                     0.01, 0.5)
     assert kept_boxes.shape == (0, 6) and kept_scores.shape == (0, ) and labels.dtype == torch.long
-
-
-def test_suppress_across_classes_keeps_one_class_per_object():
-    # a printer box on a YuMi (BEV IoU 0.8), a printer next to it (no overlap) and a table
-    # under both (IoU with each <= 0.5): only the printer on the YuMi goes
-    boxes = torch.tensor([[0.0, 0.0, 1.0, 0.5, 0.5, 0.6],   # yumi
-                          [0.05, 0.0, 1.0, 0.4, 0.5, 0.5],  # 3dprinter on the yumi
-                          [1.0, 0.0, 1.0, 0.4, 0.4, 0.5],   # 3dprinter beside it
-                          [0.5, 0.0, 0.4, 1.6, 0.8, 0.75]])  # table
-    scores = torch.tensor([0.9, 0.6, 0.7, 0.95])
-    labels = torch.tensor([3, 4, 4, 0])
-    kept_boxes, kept_scores, kept_labels = suppress_across_classes(boxes, scores, labels, 0.5)
-    assert kept_labels.tolist() == [0, 3, 4]
-    assert kept_scores.tolist() == pytest.approx([0.95, 0.9, 0.7])
-    assert torch.equal(kept_boxes, boxes[[3, 0, 2]])
-
-
-@pytest.mark.parametrize('seed', range(3))
-def test_suppress_across_classes_is_class_agnostic_nms(seed):
-    boxes, scores = random_boxes(60, 200 + seed)
-    labels = torch.randint(0, 5, (60, ), generator=torch.Generator().manual_seed(seed))
-    kept_boxes, kept_scores, kept_labels = suppress_across_classes(boxes, scores, labels, 0.5)
-    expected = reference_nms(boxes, scores, 0.5)
-    assert torch.equal(kept_boxes, boxes[expected])
-    assert torch.equal(kept_labels, labels[expected])
-    assert torch.equal(kept_scores, scores[expected])

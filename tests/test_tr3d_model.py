@@ -197,32 +197,6 @@ def test_predict_returns_depth_boxes_in_metres(scenes):
         assert len(torch.unique(centres[:, :2], dim=0)) == len(centres)
 
 
-def test_cross_class_suppression_keeps_one_class_per_location(scenes):
-    """Two classes certain everywhere: per-class NMS (TR3D) keeps a box of each on every
-    location, ``cross_class_iou_thr`` only those of the higher-scored class."""
-    predictions = {}
-    for cross_class_iou_thr in (None, 0.5):
-        config = tr3d_config(voxel_size=VOXEL)
-        config['test_cfg'] = dict(config['test_cfg'], cross_class_iou_thr=cross_class_iou_thr)
-        model = MODELS.build(config)
-        model.init_weights()
-        head = model.bbox_head
-        with torch.no_grad():
-            head.conv_reg.kernel.zero_()
-            head.conv_reg.bias.copy_(torch.tensor([0, 0, 0] + [math.log(0.5)] * 3))
-            head.conv_cls.kernel.zero_()
-            head.conv_cls.bias.copy_(torch.tensor([-9.0, -9.0, 9.0, 8.0, -9.0]))
-        model.eval()
-        with torch.no_grad():
-            result = model(**make_batch(model, scenes[:1]), mode='predict')[0]
-        predictions[cross_class_iou_thr] = result.pred_instances_3d
-    per_class, across = predictions[None], predictions[0.5]
-    assert sorted(per_class.labels_3d.unique().tolist()) == [2, 3]
-    assert torch.all(across.labels_3d == 2)
-    assert len(across.bboxes_3d) == (per_class.labels_3d == 2).sum() > 0
-    assert torch.all(across.scores_3d[:-1] >= across.scores_3d[1:])
-
-
 def test_predict_on_empty_scores_gives_empty_boxes(scenes):
     model = MODELS.build(tr3d_config(voxel_size=VOXEL))
     with torch.no_grad():

@@ -14,8 +14,7 @@
 # - no structure thinning: the benchmark's models were trained and tested before exp2_cpu.py
 #   switched `ThinRoomStructure` on, and the benchmark refuses kept models whose config changed;
 # - for the same reason TR3D's two head levels (32 and 64 cm) and exp2.py's label2level, without
-#   the 16 cm level exp2_cpu.py added later, and TR3D's per-class NMS only (exp2_cpu.py added
-#   the class-agnostic one later).
+#   the 16 cm level exp2_cpu.py added later.
 # configs/tr3d/domain_shift_mixed_cpu.py is the mixed-profile model.
 _base_ = ['./exp2_cpu.py']
 from projects.synthdet.config_helpers import area_datasets, area_info_file  # noqa: E402
@@ -27,9 +26,7 @@ test_area = 21
 max_iters = 200
 robustness = False  # the robustness augmentations (domain_shift_mixed_cpu.py) are off
 model = dict(
-    neck=dict(backbone_fine_level=False),
-    bbox_head=dict(label2level=(1, 0, 1, 0, 0)),
-    test_cfg=dict(_delete_=True, nms_pre=1000, iou_thr=0.5, score_thr=0.01))
+    neck=dict(backbone_fine_level=False), bbox_head=dict(label2level=(1, 0, 1, 0, 0)))
 train_pipeline = without_structure_thinning(_base_.train_pipeline)
 test_pipeline = without_structure_thinning(_base_.test_pipeline)
 

@@ -108,13 +108,3 @@ def multiclass_axis_aligned_nms3d(boxes: Tensor, scores: Tensor, score_thr: floa
         no_labels = torch.zeros((0, ), dtype=torch.long, device=boxes.device)
         return boxes.new_zeros((0, boxes.shape[1])), scores.new_zeros((0, )), no_labels
     return torch.cat(kept_boxes), torch.cat(kept_scores), torch.cat(kept_labels)
-
-
-def suppress_across_classes(boxes: Tensor, scores: Tensor, labels: Tensor,
-                            iou_thr: float) -> tuple[Tensor, Tensor, Tensor]:
-    """Class-agnostic NMS over the survivors of a per-class NMS: where boxes of different
-    classes overlap by more than ``iou_thr`` (bird's-eye view, as :func:`axis_aligned_nms3d`),
-    only the highest-scored one stays. Returns the kept boxes, scores and labels in descending
-    score order."""
-    keep = axis_aligned_nms3d(boxes, scores, iou_thr)
-    return boxes[keep], scores[keep], labels[keep]

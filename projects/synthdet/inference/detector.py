@@ -54,12 +54,6 @@ class ModelDetector:
         """The NMS threshold of the model's head, used to merge windows alike."""
         return float(self.model.cfg.model.test_cfg.iou_thr)
 
-    @property
-    def cross_class_iou_thr(self) -> float | None:
-        """The head's class-agnostic NMS threshold (None: per-class NMS only), used alike."""
-        threshold = self.model.cfg.model.test_cfg.get('cross_class_iou_thr')
-        return None if threshold is None else float(threshold)
-
     def __call__(self, points: np.ndarray) -> Detections:
         shift = points[:, :3].min(axis=0)
         shifted = points.astype(np.float32)
@@ -79,8 +73,7 @@ class ModelDetector:
 
     def detect(self, points: np.ndarray, spec: WindowSpec, progress: bool = True) -> Detections:
         """Detect in ``points`` by windows of ``spec`` (one window for a room-sized scan)."""
-        detections, _ = detect_in_windows(points, self, spec, self.iou_thr, progress,
-                                          self.cross_class_iou_thr)
+        detections, _ = detect_in_windows(points, self, spec, self.iou_thr, progress)
         return detections
 
     def predictions(self,

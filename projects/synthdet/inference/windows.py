@@ -16,9 +16,7 @@ sampled, and the detections are merged:
   kept from the window where it is most central, at least half the overlap from its edges, hence
   whole; cut-off parts seen by a neighbour are dropped there;
 - the kept boxes of all windows go through the project's class-wise axis-aligned 3D NMS
-  (:mod:`projects.synthdet.core.nms`), which removes what is left of duplicates at the seams,
-  and, for a model whose head suppresses across classes (``cross_class_iou_thr``), through that
-  class-agnostic NMS as well.
+  (:mod:`projects.synthdet.core.nms`), which removes what is left of duplicates at the seams.
 
 A scan whose x and y extents both fit in one window is one window, detected as a whole without
 filtering or NMS (the model's own output, unchanged).
@@ -179,12 +177,9 @@ def plan_windows(xy_low: np.ndarray, xy_high: np.ndarray, spec: WindowSpec) -> l
     ]
 
 
-def merge_window_detections(per_window: list[Detections],
-                            windows: list[Window],
-                            iou_thr: float,
-                            cross_class_iou_thr: float | None = None) -> Detections:
-    """Keep each window's boxes centred in its core, then class-wise axis-aligned 3D NMS and,
-    with ``cross_class_iou_thr``, a class-agnostic one (as the model's head)."""
+def merge_window_detections(per_window: list[Detections], windows: list[Window],
+                            iou_thr: float) -> Detections:
+    """Keep each window's boxes centred in its core, then class-wise axis-aligned 3D NMS."""
     kept = []
     for found, window in zip(per_window, windows):
         centre = found.boxes[:, :2]
@@ -198,26 +193,19 @@ def merge_window_detections(per_window: list[Detections],
             torch.from_numpy(merged.boxes[rows]), torch.from_numpy(merged.scores[rows]), iou_thr)
         survivors.append(rows[keep.numpy()])
     rows = np.concatenate(survivors) if survivors else np.zeros(0, dtype=np.int64)
-    merged = merged.select(rows[np.argsort(-merged.scores[rows], kind='stable')])
-    if cross_class_iou_thr is None:
-        return merged
-    keep = axis_aligned_nms3d(  # over all classes: in descending score order again
-        torch.from_numpy(merged.boxes), torch.from_numpy(merged.scores), cross_class_iou_thr)
-    return merged.select(keep.numpy())
+    return merged.select(rows[np.argsort(-merged.scores[rows], kind='stable')])
 
 
 def detect_in_windows(points: np.ndarray,
                       detector: Detector,
                       spec: WindowSpec,
                       iou_thr: float,
-                      progress: bool = True,
-                      cross_class_iou_thr: float | None = None) -> tuple[Detections, list[Window]]:
+                      progress: bool = True) -> tuple[Detections, list[Window]]:
     """Detect objects in an ``(N, 6)`` scan window by window; boxes in the scan's frame.
 
     ``detector`` maps the points of one window (in the scan's frame) to its detections in that
-    frame. Windows without points are skipped; the windows' boxes are merged by
-    :func:`merge_window_detections` with ``iou_thr`` and ``cross_class_iou_thr``. Returns the
-    merged detections (descending score) and the windows.
+    frame. Windows without points are skipped. Returns the merged detections (descending score)
+    and the windows.
     """
     xyz = points[:, :3]
     windows = plan_windows(xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0), spec)
@@ -227,4 +215,4 @@ def detect_in_windows(points: np.ndarray,
     for window in tqdm(windows, desc='windows', unit='window', disable=not progress):
         inside = np.all((xyz[:, :2] >= window.low) & (xyz[:, :2] <= window.high), axis=1)
         per_window.append(detector(points[inside]) if inside.any() else Detections.empty())
-    return merge_window_detections(per_window, windows, iou_thr, cross_class_iou_thr), windows
+    return merge_window_detections(per_window, windows, iou_thr), windows

@@ -23,7 +23,7 @@ class TR3DDetector(Base3DDetector):
         voxel_size: voxel edge in metres.
         data_preprocessor: mmdet3d data preprocessor config.
         train_cfg: passed to the head.
-        test_cfg: passed to the head (``nms_pre``, ``iou_thr``, ``score_thr``, ``cross_class_iou_thr``).
+        test_cfg: passed to the head (``nms_pre``, ``iou_thr``, ``score_thr``).
     """
 
     def __init__(self,

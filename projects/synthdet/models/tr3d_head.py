@@ -11,7 +11,7 @@ from mmengine.structures import InstanceData
 from torch import Tensor, nn
 
 from ..core.box_ops import center_size_to_corners
-from ..core.nms import multiclass_axis_aligned_nms3d, suppress_across_classes
+from ..core.nms import multiclass_axis_aligned_nms3d
 from .tr3d_assigner import tr3d_assign
 
 PerLevelPerScene = list[list[Tensor]]
@@ -32,8 +32,7 @@ class TR3DHead(Base3DDenseHead):
     locations), uses a focal loss (summed, divided by the number of positives) for the classes
     and ``bbox_loss`` (axis-aligned DIoU by default) on decoded positive boxes. Inference keeps
     the ``nms_pre`` locations with the highest class score over all levels and runs per-class
-    NMS (``iou_thr``, ``score_thr``); with ``cross_class_iou_thr`` (not in TR3D, off by default)
-    a class-agnostic NMS then keeps one class per object where boxes of different classes overlap.
+    NMS (``iou_thr``, ``score_thr``).
 
     Args:
         num_classes: number of classes; must equal ``len(label2level)``.
@@ -45,7 +44,7 @@ class TR3DHead(Base3DDenseHead):
         bbox_loss: box loss config.
         cls_loss: classification loss config.
         train_cfg: unused, kept for the mmdet3d interface.
-        test_cfg: ``nms_pre``, ``iou_thr``, ``score_thr`` and ``cross_class_iou_thr``.
+        test_cfg: ``nms_pre``, ``iou_thr`` and ``score_thr``.
     """
 
     def __init__(self,
@@ -75,7 +74,7 @@ class TR3DHead(Base3DDenseHead):
         self.bbox_loss = MODELS.build(bbox_loss)
         self.cls_loss = MODELS.build(cls_loss)
         self.train_cfg = train_cfg
-        self.test_cfg = dict(nms_pre=1000, iou_thr=0.5, score_thr=0.01, cross_class_iou_thr=None)
+        self.test_cfg = dict(nms_pre=1000, iou_thr=0.5, score_thr=0.01)
         self.test_cfg.update(test_cfg or {})
         self.conv_reg = ME.MinkowskiConvolution(
             in_channels, num_reg_outs, kernel_size=1, bias=True, dimension=3)
@@ -175,9 +174,6 @@ class TR3DHead(Base3DDenseHead):
         boxes, box_scores, labels = multiclass_axis_aligned_nms3d(
             self.decode_boxes(locations, bbox_pred), scores, self.test_cfg['score_thr'],
             self.test_cfg['iou_thr'])
-        if self.test_cfg['cross_class_iou_thr'] is not None:
-            boxes, box_scores, labels = suppress_across_classes(
-                boxes, box_scores, labels, self.test_cfg['cross_class_iou_thr'])
         box_type = input_meta.get('box_type_3d', DepthInstance3DBoxes)
         results = InstanceData()
         results.bboxes_3d = box_type(boxes, box_dim=6, with_yaw=False, origin=(0.5, 0.5, 0.5))
