@@ -85,6 +85,9 @@ DEFAULTS: dict[str, Any] = {
             'tls': 0.33,
             'tablet': 0.33
         },
+        # every sensor model: probability that a ray passes glass (printer doors, cabinet fronts)
+        # to the surface behind it, as a laser crosses clear glass; 0: glass is opaque (paper)
+        'glass_transmission': 0.9,
         'tls': {  # terrestrial laser scanner (generator/sensors.py)
             'stations_per_cell': [1, 2],  # inclusive range of stations per grid cell / bay
             'height': [1.4, 1.7],  # tripod height, metres
@@ -291,6 +294,10 @@ def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
         value = _number(config, 'scanner', key, source)
         if not 0.0 <= value <= 1.0:
             raise ConfigError(f'{source}: "scanner.{key}" = {value} is outside [0, 1]')
+    transmission = _number(config, 'scanner', 'glass_transmission', source)
+    if not 0.0 <= transmission <= 1.0:
+        raise ConfigError(
+            f'{source}: "scanner.glass_transmission" = {transmission} is outside [0, 1]')
     if scanner['dropout'] >= 1.0:
         raise ConfigError(f'{source}: "scanner.dropout" must be below 1')
     if not isinstance(scanner['aim_at_objects'], bool):

@@ -103,7 +103,7 @@ class RoomGenerator:
         """Generate and write one room unless it exists; return (task, status, seconds)."""
         from generator.appearance import apply_appearance, draw_appearance
         from generator.layout import generate_layout, layout_meta
-        from generator.assets.palette import METAL
+        from generator.assets.palette import METAL, SEE_THROUGH
         from generator.scanner import Scanner
         from generator.scene import export_triangles
         from generator.sensors import (choose_sensor, label_stray_returns, room_geometry,
@@ -132,7 +132,7 @@ class RoomGenerator:
         # stream stays the paper sensor's
         model = choose_sensor(scan_cfg['sensors'], np.random.default_rng([task.seed, 4]))
         room = room_geometry(layout.polygon, layout.height, layout.bays, triangles, classes)
-        scanner = Scanner(triangles, threads=options.threads)
+        scanner = Scanner(triangles, options.threads, SEE_THROUGH, scan_cfg['glass_transmission'])
         scan, sensor = scan_room(scanner, room, model, options.points, options.object_ratio,
                                  rng_scan, scan_cfg, METAL)
         paper = {} if model != 'paper' else {

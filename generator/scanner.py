@@ -15,12 +15,17 @@ surface area), which is how a per-object ``ray_cast`` target is chosen; in a lar
 sphere directions hit objects with only 1-2 % of rays. ``aim_at_objects: false`` casts uniform
 directions for both phases.
 Noise models (off by default): range noise, angular jitter and per-point dropout.
+
+Glass (triangles of ``glass_colours``) lets a ray through with probability
+``glass_transmission``, drawn once per ray: a ray that passes goes on through every glass face
+on its way (both faces of a pane) to the first opaque surface behind, as a time-of-flight beam
+crosses clear glass; one that does not returns from the first glass face.
 """
 import os
 import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -137,6 +142,10 @@ def part_bounds(scene: TriangleScene, parts: np.ndarray) -> tuple[np.ndarray, np
 
 # fewer rays than this per thread are cast on one thread (starting threads would cost more)
 _MIN_SLICE = 16_384
+# a ray that passes a glass face goes on from this far (metres) behind it
+_GLASS_STEP = 1e-4
+# glass faces one ray passes at most (a pane has two)
+_MAX_GLASS_FACES = 16
 
 
 def _cast_slice(raycaster, origins: np.ndarray,
@@ -150,9 +159,19 @@ def _cast_slice(raycaster, origins: np.ndarray,
 class Scanner:
     """Casts the paper's ray scheme on a :class:`TriangleScene` with Embree scenes (embreex)."""
 
-    def __init__(self, scene: TriangleScene, threads: int = 0):
+    def __init__(self,
+                 scene: TriangleScene,
+                 threads: int = 0,
+                 glass_colours: Sequence[Sequence[int]] = (),
+                 glass_transmission: float = 0.0):
         self.scene = scene
         self.threads = threads
+        self.glass_transmission = float(glass_transmission)
+        # per triangle: glass, which a ray passes with probability glass_transmission
+        self.glass_tri = np.zeros(len(scene.triangles), dtype=bool)
+        if len(glass_colours):
+            colours = np.asarray(glass_colours, np.uint8)
+            self.glass_tri = (scene.colors[:, None, :] == colours[None]).all(axis=2).any(axis=1)
         # per triangle: does it belong to a movable part (one lookup when labelling hits)
         self.movable_tri = scene.movable[scene.part]
         self.object_tri = np.flatnonzero(self.movable_tri)
@@ -168,6 +187,9 @@ class Scanner:
         self.full_scene = self._embree(scene.triangles)
         self.object_scene = self._embree(scene.triangles[self.object_tri]) if len(
             self.object_tri) else None
+        # the glass triangles of each Embree scene, in that scene's triangle order
+        self._glass_of = [(self.full_scene, self.glass_tri),
+                          (self.object_scene, self.glass_tri[self.object_tri])]
 
     def _embree(self, triangles: np.ndarray):
         from embreex.mesh_construction import TriangleMesh
@@ -179,15 +201,46 @@ class Scanner:
         TriangleMesh(raycaster, self.scene.vertices.astype(np.float32), triangles.astype(np.int32))
         return raycaster
 
-    def cast(self, raycaster, origins: np.ndarray,
-             directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """First hits of a batch: distance (inf for a miss) and triangle index in that scene.
+    def cast(self,
+             raycaster,
+             origins: np.ndarray,
+             directions: np.ndarray,
+             rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Hits of a batch: distance (inf for a miss) and triangle index in that scene.
 
         The distance is float32 in units of the direction's length, the index uint32 (the
         largest uint32 for a miss). Each ray is cast on its own, so the result of a ray does not
         depend on the batch or on the thread count; ``threads`` > 1 (0: all cores) casts
-        contiguous slices of the batch in parallel (embreex releases the GIL).
+        contiguous slices of the batch in parallel (embreex releases the GIL). With ``rng`` and a
+        ``glass_transmission`` above 0, a ray whose first hit is glass passes it with that
+        probability (one draw per such ray) and returns from the first opaque surface behind.
         """
+        t_hit, primitive = self._first_hits(raycaster, origins, directions)
+        if rng is None or self.glass_transmission <= 0.0:
+            return t_hit, primitive
+        glass = next(mask for scene, mask in self._glass_of if scene is raycaster)
+        hit = np.isfinite(t_hit)
+        rows = np.flatnonzero(hit)
+        rows = rows[glass[primitive[rows]]]
+        rows = rows[rng.random(len(rows)) < self.glass_transmission]
+        origins = np.asarray(origins, dtype=np.float32)
+        directions = np.asarray(directions, dtype=np.float32)
+        for _ in range(_MAX_GLASS_FACES):
+            if not len(rows):
+                break
+            step = _GLASS_STEP / np.linalg.norm(directions[rows], axis=1)
+            travelled = t_hit[rows] + step
+            behind = origins[rows] + directions[rows] * travelled[:, None]
+            t_next, p_next = self._first_hits(raycaster, behind, directions[rows])
+            t_hit[rows], primitive[rows] = travelled + t_next, p_next
+            passing = np.isfinite(t_next)
+            rows = rows[passing]
+            rows = rows[glass[primitive[rows]]]
+        return t_hit, primitive
+
+    def _first_hits(self, raycaster, origins: np.ndarray,
+                    directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Embree's first hits of a batch (see :meth:`cast`), sliced over the threads."""
         origins = np.asarray(origins, dtype=np.float32)
         directions = np.asarray(directions, dtype=np.float32)
         workers = min(self.threads or os.cpu_count() or 1, max(1, len(origins) // _MIN_SLICE))
@@ -237,7 +290,7 @@ class Scanner:
                     cast_dirs = nominal + rng.standard_normal(
                         (batch, 3)) * config['angular_jitter']
                     cast_dirs /= row_norms(cast_dirs)
-                t_hit, prim = self.cast(raycaster, origins, cast_dirs)
+                t_hit, prim = self.cast(raycaster, origins, cast_dirs, rng)
                 state['rays'] += batch
                 hit = np.isfinite(t_hit)
                 if config['dropout'] > 0:

@@ -182,15 +182,16 @@ def _grid_directions(azimuth: np.ndarray, elevation: np.ndarray) -> np.ndarray:
     return np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=-1)
 
 
-def _cast_all(scanner: Scanner, origins: np.ndarray, directions: np.ndarray,
-              batch: int) -> tuple[np.ndarray, np.ndarray]:
+def _cast_all(scanner: Scanner, origins: np.ndarray, directions: np.ndarray, batch: int,
+              rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """First hits of many rays in batches: distance (inf for a miss) and triangle index (0 for a
     miss, so that per-triangle lookups of a whole grid stay in bounds; the distance tells)."""
     t_hit = np.empty(len(origins), np.float32)
     triangle = np.empty(len(origins), np.int64)
     for start in range(0, len(origins), batch):
         stop = start + batch
-        t, prim = scanner.cast(scanner.full_scene, origins[start:stop], directions[start:stop])
+        t, prim = scanner.cast(scanner.full_scene, origins[start:stop], directions[start:stop],
+                               rng)
         t_hit[start:stop], triangle[start:stop] = t, np.where(np.isfinite(t), prim, 0)
     return t_hit, triangle
 
@@ -257,7 +258,7 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
     points, triangles, owner, strays = [], [], [], []
     for index, station in enumerate(stations):
         origins = np.broadcast_to(station, directions.shape)
-        t_hit, triangle = _cast_all(scanner, origins, directions, batch)
+        t_hit, triangle = _cast_all(scanner, origins, directions, batch, rng)
         ranges = t_hit.astype(np.float64)
         ranges[(ranges < cfg['min_range']) | (ranges > cfg['max_range'])] = np.inf
         stray = np.zeros(ranges.size, dtype=bool)
@@ -443,7 +444,7 @@ def cast_tablet(
             pixel[:, 1:] * np.take(up, pose, axis=0))
         directions /= row_norms(directions)
         origins = np.take(positions, pose, axis=0)
-        t_hit, prim = scanner.cast(scanner.full_scene, origins, directions)
+        t_hit, prim = scanner.cast(scanner.full_scene, origins, directions, rng)
         rays += batch
         rows = np.flatnonzero(np.isfinite(t_hit))
         measured = t_hit[rows] + rng.standard_normal(len(rows)) * cfg['range_noise']

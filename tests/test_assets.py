@@ -13,7 +13,7 @@ import pytest
 
 from generator.assets import (ASSET_CLASSES, AssetLibrary, build_library, default_library,
                               load_library)
-from generator.assets import chair, printer3d, sofa, table, yumi
+from generator.assets import chair, palette, printer3d, sofa, table, yumi
 from generator.assets.library import instance_from_params, procedural_params
 from tests.tool_process import run_tool
 
@@ -242,6 +242,25 @@ def test_every_variant_and_option_builds_as_a_closed_solid_of_real_size():
     assert {side for v, *_, side, _ in seen['sofa'] if v == 'chaise'} == {'-1', '1'}
     yumi_kinds = {(v, pose) for v, *_, pose in seen['yumi']}
     assert yumi_kinds == set(itertools.product(yumi.VARIANTS, yumi.POSES))
+
+
+def test_only_glass_doors_have_the_colours_the_scanner_sees_through():
+    """Printer doors of glass (closed or swung open) carry a see-through colour
+    (``scanner.glass_transmission``); displays and every other asset part do not."""
+    see_through = np.array(palette.SEE_THROUGH, np.uint8)
+    doors = set()
+    for seed in (0, 1, 2):
+        for cls in ASSET_CLASSES:
+            for index in range(DEFAULT_INSTANCES):
+                variant, params = procedural_params(cls, index, seed)
+                colours = instance_from_params(cls, variant, params).mesh_arrays()[2]
+                glass = (colours[:, None] == see_through[None]).all(axis=2).any(axis=1)
+                door = params.get('door') if cls == '3dprinter' else None
+                assert glass.any() == (door in ('glass', 'swung')), (cls, variant, door)
+                if variant in ('enclosed', 'boxframe'):
+                    assert (colours == palette.DISPLAY).all(axis=1).any(), variant
+                    doors.add(door)
+    assert doors >= {'glass', 'swung', 'open', 'none'}
 
 
 def test_yumi_poses_span_the_joint_ranges_and_mountings(library):

@@ -455,6 +455,11 @@ def test_expected_counts_are_calibrated(catalog):
         }
     }, 'free_side_crate" = 1.5 is outside'),
     ({
+        'scanner': {
+            'glass_transmission': -0.1
+        }
+    }, 'glass_transmission" = -0.1 is outside'),
+    ({
         'room': {
             'height': [3.5, 3.0]
         }

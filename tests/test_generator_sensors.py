@@ -12,11 +12,11 @@ import pytest
 
 from configurator.corners import detect_corners
 from generator.__main__ import main
-from generator.assets.palette import METAL
+from generator.assets.palette import METAL, SEE_THROUGH
 from generator.config import DEFAULTS, ConfigError, load_config
 from generator.scanner import Scanner, TriangleScene
 from generator.sensors import (SENSOR_MODELS, RoomGeometry, cast_tablet, cast_tls, choose_sensor,
-                               scan_room, scan_tls, tls_grid)
+                               room_geometry, scan_room, scan_tls, tls_grid)
 from synthdet.point_text import read_point_file
 from tests.test_corners import corner_errors
 from tests.test_generator_pipeline import _same_tree, box
@@ -301,9 +301,9 @@ class RecordingScanner(Scanner):
         super().__init__(scene)
         self.directions: list[np.ndarray] = []
 
-    def cast(self, raycaster, origins, directions):
+    def cast(self, raycaster, origins, directions, rng=None):
         self.directions.append(np.array(directions))
-        return super().cast(raycaster, origins, directions)
+        return super().cast(raycaster, origins, directions, rng)
 
 
 def test_paper_profile_casts_uniform_directions():
@@ -530,3 +530,50 @@ def test_profile_option_selects_a_packaged_profile(mixed_run, capsys):
     with pytest.raises(SystemExit):
         main(['--out', str(work / 'bad'), '--profile', 'paper', '--config', 'x.json'])
     assert 'not allowed with argument' in capsys.readouterr().err
+
+
+def glass_scene() -> TriangleScene:
+    """A room with a 6 mm glass pane (printer door glass) 1 m in front of a red box."""
+    return room_scene((8, 6, 3), [((3.0, 1.0, 0.0), (3.006, 5.0, 2.5), SEE_THROUGH[-1]),
+                                  ((4.0, 2.0, 0.0), (5.0, 4.0, 2.0), (200, 0, 0))])
+
+
+@pytest.mark.parametrize('transmission', [0.0, 0.5, 1.0])
+def test_rays_pass_glass_with_the_configured_probability(transmission):
+    scanner = Scanner(glass_scene(), glass_colours=SEE_THROUGH, glass_transmission=transmission)
+    rng = np.random.default_rng(0)
+    n = 4000
+    origins = np.tile([1.0, 3.0, 1.0], (n, 1))
+    directions = np.column_stack([np.ones(n), rng.uniform(-0.1, 0.1, n), rng.uniform(-0.1, 0.1, n)])
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    for raycaster, triangle_of in ((scanner.full_scene, np.arange(len(scanner.scene.part))),
+                                   (scanner.object_scene, scanner.object_tri)):
+        t_hit, prim = scanner.cast(raycaster, origins, directions, np.random.default_rng(1))
+        part = scanner.scene.part[triangle_of[prim]]
+        assert set(np.unique(part)) <= {1, 2}  # every ray returns from the glass or the box
+        on_box = part == 2
+        assert on_box.mean() == pytest.approx(transmission, abs=0.03)
+        x = origins[:, 0] + directions[:, 0] * t_hit
+        # the box's face at x = 4 (the ray's true distance), the pane's near face at x = 3
+        assert np.allclose(x[on_box], 4.0, atol=1e-3) and np.allclose(x[~on_box], 3.0, atol=1e-3)
+    # without a random stream, and by default, glass is opaque
+    t_plain, _ = scanner.cast(scanner.full_scene, origins, directions)
+    assert np.allclose(origins[:, 0] + directions[:, 0] * t_plain, 3.0, atol=1e-3)
+    assert not Scanner(glass_scene()).glass_tri.any()
+
+
+def test_every_sensor_model_sees_through_glass():
+    """The paper path, the laser scanner and the tablet all cast through Scanner.cast: with
+    glass_transmission 1 none of them returns a point on the glass, with 0 all of them do."""
+    cfg = dict(DEFAULTS['scanner'], batch_rays=BATCH)
+    room = room_geometry(
+        np.array([[0, 0], [8, 0], [8, 6], [0, 6]], float), 3.0, [], glass_scene(),
+        ['wall', '3dprinter', 'clutter'])
+    for transmission, seen in ((1.0, False), (0.0, True)):
+        scanner = Scanner(glass_scene(), glass_colours=SEE_THROUGH,
+                          glass_transmission=transmission)
+        for model in SENSOR_MODELS:
+            scan, _ = scan_room(scanner, room, model, 20000, 0.5, np.random.default_rng(2),
+                                dict(cfg, glass_transmission=transmission), METAL)
+            assert (1 in scan.part) == seen, (model, transmission)
+            assert 2 in scan.part, model  # the box behind the glass

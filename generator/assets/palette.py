@@ -20,5 +20,11 @@ INDUSTRIAL = ((215, 215, 208), (0, 94, 160), (226, 83, 3), (40, 110, 60), (240, 
               (90, 95, 100), (160, 40, 40), (235, 235, 230))
 CARDBOARD = ((190, 150, 100), (170, 130, 85), (205, 175, 130), (150, 115, 75))
 GLASS = ((70, 90, 105), (95, 120, 130), (50, 60, 70))
+# glass doors of enclosed 3D printers; their displays are opaque
+PRINTER_GLASS = (70, 80, 85)
+DISPLAY = (28, 32, 36)
+# the colours the scanner treats as glass (``scanner.glass_transmission``); no other material
+# uses them
+SEE_THROUGH = GLASS + (PRINTER_GLASS, )
 PIPE = ((40, 120, 60), (230, 190, 20), (170, 40, 40), (40, 90, 170), (150, 150, 150),
         (200, 200, 200))

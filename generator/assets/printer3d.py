@@ -137,7 +137,7 @@ def _head(mb: MeshBuilder, x: float, y: float, z: float, body: int, frame: int) 
 
 def _enclosed(mb: MeshBuilder, params: dict) -> None:
     body, frame, bed, filament = _materials(mb, params)
-    glass = mb.material('glass', (70, 80, 85))
+    glass = mb.material('glass', palette.PRINTER_GLASS)
     w, d, h = params['width'], params['depth'], params['height']
     base_h, top_h, wall = 0.09, 0.04, 0.006
     mb.box_between((-w / 2, -d / 2, 0.0), (w / 2, d / 2, base_h), body)
@@ -160,7 +160,8 @@ def _enclosed(mb: MeshBuilder, params: dict) -> None:
         mb.box_between((-w / 2 + 0.03 - wall, -d / 2 - door_w, base_h),
                        (-w / 2 + 0.03, -d / 2, h - top_h), glass)
     # display on the base front
-    mb.box_between((-0.06, -d / 2 - 0.012, 0.015), (0.06, -d / 2, base_h - 0.015), glass)
+    mb.box_between((-0.06, -d / 2 - 0.012, 0.015), (0.06, -d / 2, base_h - 0.015),
+                   mb.material('display', palette.DISPLAY))
     # bed on a z-stage, CoreXY gantry under the roof
     inner_w, inner_d = w - 0.08, d - 0.10
     bed_side = min(inner_w, inner_d) * 0.8
@@ -427,7 +428,7 @@ def _boxframe(mb: MeshBuilder, params: dict) -> None:
     """Ultimaker-style box: closed sides, back and roof, open (or glass) front, a bed on a z
     stage, cross-rod gantry, spool holder on the back, display in the base."""
     body, frame, bed, filament = _materials(mb, params)
-    glass = mb.material('glass', (70, 80, 85))
+    glass = mb.material('glass', palette.PRINTER_GLASS)
     w, d, h = params['width'], params['depth'], params['height']
     base_h, wall = 0.06, 0.01
     mb.box_between((-w / 2, -d / 2, 0.0), (w / 2, d / 2, base_h), body)
@@ -437,7 +438,8 @@ def _boxframe(mb: MeshBuilder, params: dict) -> None:
     mb.box_between((-w / 2 + wall, d / 2 - wall, base_h), (w / 2 - wall, d / 2, h), body)
     mb.box_between((-w / 2 + wall, -d / 2, h - 0.03), (w / 2 - wall, d / 2 - wall, h - 0.02),
                    frame)
-    mb.box_between((-0.05, -d / 2 - 0.008, 0.01), (0.05, -d / 2, base_h - 0.01), glass)
+    mb.box_between((-0.05, -d / 2 - 0.008, 0.01), (0.05, -d / 2, base_h - 0.01),
+                   mb.material('display', palette.DISPLAY))  # display
     if params['door'] == 'glass':
         mb.box_between((-w / 2 + wall, -d / 2, base_h), (w / 2 - wall, -d / 2 + 0.005, h - 0.03),
                        glass)
