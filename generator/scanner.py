@@ -125,6 +125,14 @@ def row_norms(v: np.ndarray) -> np.ndarray:
     return np.sqrt((x * x + y * y) + z * z)[:, None]
 
 
+def triangles_of_colours(scene: TriangleScene, colours: Sequence[Sequence[int]]) -> np.ndarray:
+    """Per triangle (T,): is its colour one of ``colours`` (RGB triples; none: all False)."""
+    if not len(colours):
+        return np.zeros(len(scene.triangles), dtype=bool)
+    wanted = np.asarray(colours, np.uint8)
+    return (scene.colors[:, None, :] == wanted[None]).all(axis=2).any(axis=1)
+
+
 def part_bounds(scene: TriangleScene, parts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Axis-aligned bounds (P, 3) low and high of the triangles of each of ``parts``, in one
     pass over the triangles (inf / -inf for a part without triangles)."""
@@ -168,10 +176,7 @@ class Scanner:
         self.threads = threads
         self.glass_transmission = float(glass_transmission)
         # per triangle: glass, which a ray passes with probability glass_transmission
-        self.glass_tri = np.zeros(len(scene.triangles), dtype=bool)
-        if len(glass_colours):
-            colours = np.asarray(glass_colours, np.uint8)
-            self.glass_tri = (scene.colors[:, None, :] == colours[None]).all(axis=2).any(axis=1)
+        self.glass_tri = triangles_of_colours(scene, glass_colours)
         # per triangle: does it belong to a movable part (one lookup when labelling hits)
         self.movable_tri = scene.movable[scene.part]
         self.object_tri = np.flatnonzero(self.movable_tri)
@@ -187,9 +192,8 @@ class Scanner:
         self.full_scene = self._embree(scene.triangles)
         self.object_scene = self._embree(scene.triangles[self.object_tri]) if len(
             self.object_tri) else None
-        # the glass triangles of each Embree scene, in that scene's triangle order
-        self._glass_of = [(self.full_scene, self.glass_tri),
-                          (self.object_scene, self.glass_tri[self.object_tri])]
+        # the glass triangles in the objects-only scene's triangle order
+        self._object_glass_tri = self.glass_tri[self.object_tri]
 
     def _embree(self, triangles: np.ndarray):
         from embreex.mesh_construction import TriangleMesh
@@ -218,9 +222,8 @@ class Scanner:
         t_hit, primitive = self._first_hits(raycaster, origins, directions)
         if rng is None or self.glass_transmission <= 0.0:
             return t_hit, primitive
-        glass = next(mask for scene, mask in self._glass_of if scene is raycaster)
-        hit = np.isfinite(t_hit)
-        rows = np.flatnonzero(hit)
+        glass = self.glass_tri if raycaster is self.full_scene else self._object_glass_tri
+        rows = np.flatnonzero(np.isfinite(t_hit))
         rows = rows[glass[primitive[rows]]]
         rows = rows[rng.random(len(rows)) < self.glass_transmission]
         origins = np.asarray(origins, dtype=np.float32)

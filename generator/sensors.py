@@ -29,7 +29,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from generator.scanner import (ScanResult, Scanner, TriangleScene, part_bounds, row_norms,
-                               sensor_path)
+                               sensor_path, triangles_of_colours)
 from synthdet.contracts import SENSOR_MODELS
 from synthdet.geometry import grid_cells, points_in_polygon
 
@@ -422,10 +422,8 @@ def cast_tablet(
     colours = scanner.scene.colors.astype(np.float64)
     luminance = colours @ np.array([0.2126, 0.7152, 0.0722])
     loss = np.where(luminance < cfg['dark_luminance'], cfg['dark_dropout'], 0.0)
-    if len(shiny_colours):
-        shiny = (scanner.scene.colors[:, None, :] == np.asarray(shiny_colours, np.uint8)[None])
-        loss = np.where(
-            shiny.all(axis=2).any(axis=1), np.maximum(loss, cfg['shiny_dropout']), loss)
+    shiny = triangles_of_colours(scanner.scene, shiny_colours)
+    loss = np.where(shiny, np.maximum(loss, cfg['shiny_dropout']), loss)
     right = np.stack([look[:, 1], -look[:, 0], np.zeros(len(look))], axis=1)
     right /= row_norms(right) + 1e-12
     up = np.cross(right, look)
