@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 from mmengine.config import Config
 
-from projects.synthdet.config_helpers import (area_datasets, with_num_points,
-                                              with_structure_thinning,
-                                              without_structure_thinning)
+from projects.synthdet.config_helpers import (PRE_SAMPLING_STEPS, area_datasets,
+                                              with_num_points, with_structure_thinning,
+                                              with_voxel_grid_sample, without_pre_sampling)
 from projects.synthdet.inference.windows import density_from_config
 
 CONFIGS = Path(__file__).resolve().parents[1] / 'configs' / 'tr3d'
@@ -22,10 +22,11 @@ TRAIN_STEPS = [
 TEST_STEPS = ['LoadPointsFromFile', 'PointSample', 'NormalizePointsColor', 'Pack3DDetInputs']
 
 
-def thinned(steps: list[str]) -> list[str]:
-    """The step names with ``ThinRoomStructure`` right before ``PointSample``."""
+def with_pre_sampling(steps: list[str]) -> list[str]:
+    """The step names with ``VoxelGridSample`` and ``ThinRoomStructure`` right before
+    ``PointSample``."""
     index = steps.index('PointSample')
-    return steps[:index] + ['ThinRoomStructure'] + steps[index:]
+    return steps[:index] + ['VoxelGridSample', 'ThinRoomStructure'] + steps[index:]
 
 
 # config: train areas, test area, data_root, sampled points, train steps, test steps
@@ -37,7 +38,8 @@ EXPECTED = {
     'exp3': ([1, 2, 3, 4, 6, 7, 8, 9], 5, 'data/s3dis/', 100000, TRAIN_STEPS, TEST_STEPS),
     'exp3_finetune': ([1, 2, 3, 4, 6, 7, 8, 9], 5, 'data/s3dis/', 100000, TRAIN_STEPS,
                       TEST_STEPS),
-    'exp2_cpu': ([7, 8], 9, 'data/s3dis/', 40000, thinned(TRAIN_STEPS), thinned(TEST_STEPS)),
+    'exp2_cpu': ([7, 8], 9, 'data/s3dis/', 40000, with_pre_sampling(TRAIN_STEPS),
+                 with_pre_sampling(TEST_STEPS)),
     'tiny': ([1], 1, 'data/s3dis_tiny/', 10000,
              [s for s in TRAIN_STEPS if s not in AUGMENTATION], TEST_STEPS),
 }
@@ -75,10 +77,13 @@ def test_resolved_datasets_and_pipelines(name):
 def test_cpu_configs_change_only_points_thinning_voxels_and_levels_of_exp2(name):
     exp2, cfg = load('exp2'), load(name)
     for key in ('train_pipeline', 'test_pipeline'):
-        thinning = [step for step in cfg[key] if step.type == 'ThinRoomStructure']
-        assert thinning == ([dict(type='ThinRoomStructure', keep=0.1)] if name == 'exp2_cpu' else [])
+        pre_sampling = [step for step in cfg[key] if step.type in PRE_SAMPLING_STEPS]
+        assert pre_sampling == ([
+            dict(type='VoxelGridSample', voxel_size=0.02),
+            dict(type='ThinRoomStructure', keep=0.1)
+        ] if name == 'exp2_cpu' else [])
         derived = [
-            step for step in cfg[key] if step.type not in ('PointSample', 'ThinRoomStructure')
+            step for step in cfg[key] if step.type not in ('PointSample', *PRE_SAMPLING_STEPS)
         ]
         original = [
             step for step in exp2[key]
@@ -101,9 +106,17 @@ def test_helpers_copy_and_refuse_a_pipeline_without_point_sample():
     thinning = dict(type='ThinRoomStructure', keep=0.2)
     thin = with_structure_thinning(pipeline, thinning)
     assert thin == [pipeline[0], thinning, pipeline[1]] and len(pipeline) == 2
-    assert without_structure_thinning(thin) == pipeline
+    assert without_pre_sampling(thin) == pipeline
     with pytest.raises(ValueError, match='already thins'):
         with_structure_thinning(thin, thinning)
+    grid = dict(type='VoxelGridSample', voxel_size=0.03)
+    assert with_voxel_grid_sample(thin, 0.03) == [pipeline[0], grid, thinning, pipeline[1]]
+    assert with_voxel_grid_sample(pipeline, 0.03) == [pipeline[0], grid, pipeline[1]]
+    assert without_pre_sampling(with_voxel_grid_sample(thin, 0.03)) == pipeline
+    with pytest.raises(ValueError, match='already has a voxel grid'):
+        with_voxel_grid_sample(with_voxel_grid_sample(pipeline, 0.03), 0.03)
+    with pytest.raises(ValueError, match='no PointSample step'):
+        with_voxel_grid_sample(pipeline[:1], 0.03)
     with pytest.raises(ValueError, match='no PointSample step'):
         with_structure_thinning(pipeline[:1], thinning)
     template = dict(type='SynthdetS3DISDataset', data_root='d/')

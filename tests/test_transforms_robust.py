@@ -22,7 +22,7 @@ from projects.synthdet.config_helpers import with_robustness
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.datasets.transforms import (RandomColourJitter, RandomDensityFalloff,
                                                    RandomPointDropout, RandomQuarterTurn,
-                                                   ThinRoomStructure)
+                                                   ThinRoomStructure, VoxelGridSample)
 from tests.s3dis_fixtures import S3DIS_DIR
 from tests.tool_process import run_tool
 
@@ -465,3 +465,31 @@ def test_thin_room_structure_keeps_a_share_of_the_structure_and_every_object_poi
         ThinRoomStructure(keep=1.5)
     with pytest.raises(ValueError, match='cell'):
         ThinRoomStructure(cell=0.0)
+
+
+def test_voxel_grid_sample_keeps_one_random_point_per_cube_with_its_masks():
+    rng = np.random.default_rng(3)
+    # a dense patch near a sensor (500 points in one 2 cm cube) and 300 points far apart
+    dense = np.array([0.101, 0.101, 0.101]) + rng.uniform(0, 0.018, (500, 3))
+    sparse = np.column_stack([np.arange(300) * 0.05 + 1.0, np.full(300, 2.01), np.full(300, 0.51)])
+    xyz = np.concatenate([dense, sparse])
+    grid = VoxelGridSample(voxel_size=0.02)
+    assert repr(grid) == 'VoxelGridSample(voxel_size=0.02)'
+    kept_dense = set()
+    for seed in range(5):
+        np.random.seed(seed)
+        scene = make_scene(xyz, rng.integers(0, 255, xyz.shape))
+        scene['pts_instance_mask'] = np.arange(len(xyz))
+        scene['pts_semantic_mask'] = np.arange(len(xyz)) % 7
+        out = grid(scene)
+        rows = out['pts_instance_mask']
+        assert np.all(np.diff(rows) > 0)  # the points keep their order
+        assert np.array_equal(out['pts_semantic_mask'], rows % 7)
+        assert torch.equal(out['points'].tensor[:, :3], torch.tensor(xyz, dtype=torch.float32)[rows])
+        assert len(rows) == 301 and np.count_nonzero(rows < 500) == 1
+        assert np.array_equal(rows[1:], np.arange(500, 800))  # every point of its own cube stays
+        assert len(out['gt_bboxes_3d']) == len(BOXES)
+        kept_dense.add(int(rows[0]))
+    assert len(kept_dense) > 1  # the kept point of a cube is drawn at random
+    with pytest.raises(ValueError, match='voxel_size'):
+        VoxelGridSample(voxel_size=0.0)

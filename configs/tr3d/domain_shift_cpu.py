@@ -11,14 +11,15 @@
 #   5-epoch schedule did for its last epoch); mmengine's InfiniteSampler draws the rooms;
 # - no validation while training (the benchmark tests every profile afterwards with the final
 #   checkpoint); a checkpoint every quarter of the schedule, so a stopped training resumes;
-# - no structure thinning: the benchmark's models were trained and tested before exp2_cpu.py
-#   switched `ThinRoomStructure` on, and the benchmark refuses kept models whose config changed;
+# - no voxel grid and no structure thinning: the benchmark's models were trained and tested
+#   before exp2_cpu.py switched `VoxelGridSample` and `ThinRoomStructure` on, and the benchmark
+#   refuses kept models whose config changed;
 # - for the same reason TR3D's two head levels (32 and 64 cm) and exp2.py's label2level, without
 #   the 16 cm level exp2_cpu.py added later.
 # configs/tr3d/domain_shift_mixed_cpu.py is the mixed-profile model.
 _base_ = ['./exp2_cpu.py']
 from projects.synthdet.config_helpers import area_datasets, area_info_file  # noqa: E402
-from projects.synthdet.config_helpers import without_structure_thinning  # noqa: E402
+from projects.synthdet.config_helpers import without_pre_sampling  # noqa: E402
 
 data_root = 'work_dirs/domain_shift/data/'
 train_area = [11]
@@ -27,8 +28,8 @@ max_iters = 200
 robustness = False  # the robustness augmentations (domain_shift_mixed_cpu.py) are off
 model = dict(
     neck=dict(backbone_fine_level=False), bbox_head=dict(label2level=(1, 0, 1, 0, 0)))
-train_pipeline = without_structure_thinning(_base_.train_pipeline)
-test_pipeline = without_structure_thinning(_base_.test_pipeline)
+train_pipeline = without_pre_sampling(_base_.train_pipeline)
+test_pipeline = without_pre_sampling(_base_.test_pipeline)
 
 train_dataloader = dict(
     sampler=dict(type='InfiniteSampler', shuffle=True),

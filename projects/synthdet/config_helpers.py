@@ -67,9 +67,31 @@ def with_structure_thinning(pipeline: Sequence[Mapping[str, Any]],
     return steps[:index] + [dict(thinning)] + steps[index:]
 
 
-def without_structure_thinning(pipeline: Sequence[Mapping[str, Any]]) -> list[dict]:
-    """A copy of ``pipeline`` without its ``ThinRoomStructure`` steps."""
-    return [dict(step) for step in pipeline if step['type'] != 'ThinRoomStructure']
+def with_voxel_grid_sample(pipeline: Sequence[Mapping[str, Any]],
+                           voxel_size: float) -> list[dict]:
+    """A copy of ``pipeline`` with a ``VoxelGridSample`` of ``voxel_size`` right before its
+    structure thinning (or, without one, its ``PointSample``): one point per occupied cube, so
+    that the thinning and the sampling draw evenly over the scanned surfaces.
+
+    Raises ``ValueError`` if the pipeline has no ``PointSample`` or already has the grid.
+    """
+    index = _point_sample_index(pipeline)
+    types = [step['type'] for step in pipeline]
+    if 'VoxelGridSample' in types:
+        raise ValueError(f'the pipeline already has a voxel grid: {types}')
+    if 'ThinRoomStructure' in types:
+        index = min(index, types.index('ThinRoomStructure'))
+    steps = [dict(step) for step in pipeline]
+    return steps[:index] + [dict(type='VoxelGridSample', voxel_size=voxel_size)] + steps[index:]
+
+
+PRE_SAMPLING_STEPS = ('VoxelGridSample', 'ThinRoomStructure')
+
+
+def without_pre_sampling(pipeline: Sequence[Mapping[str, Any]]) -> list[dict]:
+    """A copy of ``pipeline`` without the steps that prepare its ``PointSample`` (the voxel
+    grid and the structure thinning)."""
+    return [dict(step) for step in pipeline if step['type'] not in PRE_SAMPLING_STEPS]
 
 
 def with_robustness(pipeline: Sequence[Mapping[str, Any]],
