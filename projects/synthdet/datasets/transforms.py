@@ -293,8 +293,13 @@ class VoxelGridSample(BaseTransform):
         xyz = results['points'].coord.numpy()
         if len(xyz) == 0:
             return results
+        # shuffled first, so the point a cube keeps is whichever of its points sorts first
+        # (half the time of np.unique's stable sort: benchmarks/bench_structure_thinning.py)
         order = np.random.permutation(len(xyz))
-        _, first = np.unique(self.cells(xyz)[order], return_index=True)
+        keys = self.cells(xyz)[order]
+        by_key = np.argsort(keys)
+        sorted_keys = keys[by_key]
+        first = by_key[np.concatenate(([True], sorted_keys[1:] != sorted_keys[:-1]))]
         return _keep_rows(results, np.sort(order[first]))
 
     def __repr__(self) -> str:
