@@ -1,17 +1,22 @@
 """Points on objects after sampling a room to the model's input, per sensor model: mmdet3d's
-``PointSample`` alone vs ``ThinRoomStructure`` then ``PointSample`` (the same number of points).
+``PointSample`` alone vs ``ThinRoomStructure`` then ``PointSample`` (the same number of points)
+vs ``VoxelGridSample``, ``ThinRoomStructure`` then ``PointSample`` (exp2_cpu's pipeline).
 
     .venv/bin/python benchmarks/bench_structure_thinning.py [--rooms 4] [--points 1000000]
                                                             [--sample 40000] [--keep 0.1]
+                                                            [--voxel 0.02]
 
 The generator writes ``--rooms`` rooms per sensor profile (``generator/profiles/{paper,tls,
 tablet}.json``, seed 0, area 7) into a temporary folder. Each room's instances come from its
 ``Annotations/`` files; both pipelines (mmdet3d's registered transforms on ``DepthPoints``, numpy
 seeded per room) sample ``--sample`` points, and the table gives per sensor the share of the
 sampled points on detection-class objects (table, chair, sofa, yumi, 3dprinter), the median
-and 10th-percentile sampled points per object, the share of object points that the thinning
-took for structure, and the time of each pipeline per room. The last line gives the gain in
-median points per object on the sparsest sensor. ``--pictures DIR`` also draws the first room of
+and 10th-percentile sampled points per object, the same for the ``--voxel`` cubes they occupy
+(the detector merges the points of one of its voxels, so these are what it sees), the share of
+object points that the thinning took for structure, and the time of each pipeline per room.
+Then the gain in median points per object on the sparsest sensor, the voxel grid's time per room
+against ``np.unique`` (the straightforward way to keep one point per cube), measured side by
+side, and last the gain of the voxel grid in 10th-percentile voxels per object per sensor. ``--pictures DIR`` also draws the first room of
 each sensor from above after each pipeline (``DIR/<sensor>_<pipeline>.png``, points by class,
 the true boxes).
 """
@@ -80,17 +85,43 @@ def sampled(points: np.ndarray, steps: list, seed: int) -> tuple[np.ndarray, flo
     return results['pts_instance_mask'], time.perf_counter() - start
 
 
+def occupied_voxels(xyz: np.ndarray, ids: np.ndarray, objects: int, voxel: float) -> list[int]:
+    """The number of ``voxel`` cubes that the sampled points ``xyz`` of each object occupy."""
+    on_object = ids >= 0
+    cubes = np.floor(xyz[on_object] / voxel).astype(np.int64)
+    unique = np.unique(np.column_stack([ids[on_object], cubes]), axis=0)
+    return np.bincount(unique[:, 0], minlength=objects).tolist()
+
+
+def time_grid(points: np.ndarray, grid, seed: int) -> dict[str, float]:
+    """Seconds to keep one random point per cube of ``points``: ``VoxelGridSample`` and the
+    straightforward ``np.unique`` of the shuffled cube keys; both keep the same cubes."""
+    xyz = points[:, :3].astype(np.float32)
+    kept, ours = sampled(points, [grid], seed)
+    np.random.seed(seed)
+    start = time.perf_counter()
+    order = np.random.permutation(len(xyz))
+    _, first = np.unique(grid.cells(xyz)[order], return_index=True)
+    plain = time.perf_counter() - start
+    if len(first) != len(kept):
+        raise RuntimeError(f'the two ways kept {len(kept)} and {len(first)} cubes')
+    return {'VoxelGridSample': ours, 'np.unique': plain}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rooms', type=int, default=4)
     parser.add_argument('--points', type=int, default=1_000_000)
     parser.add_argument('--sample', type=int, default=40_000)
     parser.add_argument('--keep', type=float, default=0.1)
+    parser.add_argument('--voxel', type=float, default=0.02)
     parser.add_argument('--pictures', type=Path, help='draw the first room of each sensor here')
     args = parser.parse_args()
     sample = TRANSFORMS.build(dict(type='PointSample', num_points=args.sample))
     thin = TRANSFORMS.build(dict(type='ThinRoomStructure', keep=args.keep))
-    pipelines = {'PointSample': [sample], 'thinned': [thin, sample]}
+    grid = TRANSFORMS.build(dict(type='VoxelGridSample', voxel_size=args.voxel))
+    pipelines = {'PointSample': [sample], 'thinned': [thin, sample], 'grid+thinned': [grid, thin, sample]}
+    grid_seconds = {'VoxelGridSample': [], 'np.unique': []}
     if args.pictures:
         args.pictures.mkdir(parents=True, exist_ok=True)
     rows = {}
@@ -107,7 +138,10 @@ def main() -> None:
             generator = RoomGenerator(options)
             for task in plan_tasks([7], args.rooms, 0):
                 generator.generate(task)
-            stats = {name: {'share': [], 'per_object': [], 'seconds': []} for name in pipelines}
+            stats = {
+                name: {'share': [], 'per_object': [], 'voxels': [], 'seconds': []}
+                for name in pipelines
+            }
             flagged = []
             for index, folder in enumerate(
                     sorted(p for p in Path(options.out).glob('Area_7/*') if p.is_dir())):
@@ -128,26 +162,39 @@ def main() -> None:
                     counts = np.bincount(kept[kept >= 0], minlength=ids.max() + 1)
                     stats[name]['share'].append(np.mean(kept >= 0))
                     stats[name]['per_object'].extend(counts.tolist())
+                    stats[name]['voxels'].extend(
+                        occupied_voxels(points[kept_rows, :3], kept, ids.max() + 1, args.voxel))
                     stats[name]['seconds'].append(seconds)
+                for name, seconds in time_grid(points, grid, seed=index).items():
+                    grid_seconds[name].append(seconds)
             rows[sensor] = (stats, float(np.mean(flagged)))
     print(f'{args.rooms} rooms x {args.points:,} points per sensor, {args.sample:,} sampled, '
           f'structure kept {args.keep:.0%}')
-    print(f'{"sensor":<8}{"pipeline":<13}{"on objects":>11}{"median/obj":>11}{"p10/obj":>9}'
-          f'{"s/room":>8}{"obj. thinned":>14}')
-    gains = {}
+    print(f'{"sensor":<8}{"pipeline":<14}{"on objects":>11}{"median/obj":>11}{"p10/obj":>9}'
+          f'{"voxels/obj":>11}{"p10":>6}{"s/room":>8}{"obj. thinned":>14}')
+    gains, grid_gains = {}, {}
     for sensor, (stats, flagged) in rows.items():
         for name, values in stats.items():
-            per_object = np.array(values['per_object'])
-            print(f'{sensor:<8}{name:<13}{np.mean(values["share"]):>10.1%}'
+            per_object, voxels = np.array(values['per_object']), np.array(values['voxels'])
+            print(f'{sensor:<8}{name:<14}{np.mean(values["share"]):>10.1%}'
                   f'{np.median(per_object):>11.0f}{np.percentile(per_object, 10):>9.0f}'
+                  f'{np.median(voxels):>11.0f}{np.percentile(voxels, 10):>6.0f}'
                   f'{np.median(values["seconds"]):>8.2f}'
                   f'{(f"{flagged:.1%}" if name == "thinned" else ""):>14}')
         gains[sensor] = (
             np.median(stats['thinned']['per_object']) /
             np.median(stats['PointSample']['per_object']))
+        grid_gains[sensor] = (
+            np.percentile(stats['grid+thinned']['voxels'], 10) /
+            max(np.percentile(stats['thinned']['voxels'], 10), 1))
     sparsest = min(rows, key=lambda s: np.median(rows[s][0]['PointSample']['per_object']))
     print(f'structure thinning: {gains[sparsest]:.1f}x the median points per object on {sparsest} '
           f'rooms ({", ".join(f"{s} {g:.1f}x" for s, g in gains.items())})')
+    ours, plain = (np.median(grid_seconds[name]) for name in ('VoxelGridSample', 'np.unique'))
+    print(f'voxel grid per 1M-point room: VoxelGridSample {ours:.3f} s vs np.unique {plain:.3f} s, '
+          f'x{plain / ours:.2f} faster')
+    print('voxel grid first: 10th-percentile voxels per object '
+          + ', '.join(f'{s} {g:.2f}x' for s, g in grid_gains.items()))
 
 
 if __name__ == '__main__':

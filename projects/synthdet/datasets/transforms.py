@@ -294,7 +294,7 @@ class VoxelGridSample(BaseTransform):
         if len(xyz) == 0:
             return results
         # shuffled first, so the point a cube keeps is whichever of its points sorts first
-        # (half the time of np.unique's stable sort: benchmarks/bench_structure_thinning.py)
+        # (faster than np.unique's stable sort: benchmarks/bench_structure_thinning.py times both)
         order = np.random.permutation(len(xyz))
         keys = self.cells(xyz)[order]
         by_key = np.argsort(keys)
