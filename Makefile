@@ -36,6 +36,8 @@ demo: setup
 # empty data/s3dis to regenerate them.
 EXP2_DATA ?= data/s3dis
 EXP2_WORK ?= work_dirs/exp2_cpu
+# the config trained and tested, e.g. a variant of exp2_cpu.py (configs/tr3d/exp2_cpu_voxel_grid.py)
+EXP2_CONFIG ?= configs/tr3d/exp2_cpu.py
 # One OpenMP thread per process by default: on a busy machine torch's default (all cores)
 # oversubscribes the cores. With EXP2_PROCS=1, set EXP2_THREADS=2 on an idle 2-core machine.
 EXP2_THREADS ?= 1
@@ -48,10 +50,10 @@ ifneq ($(filter-out 1 2 4,$(EXP2_PROCS)),)
 $(error EXP2_PROCS=$(EXP2_PROCS): must be 1, 2 or 4, to split the batch of 4 rooms evenly)
 endif
 ifeq ($(EXP2_PROCS),1)
-EXP2_TRAIN = $(PY) tools/train.py configs/tr3d/exp2_cpu.py
+EXP2_TRAIN = $(PY) tools/train.py $(EXP2_CONFIG)
 EXP2_BATCH_OPTIONS =
 else
-EXP2_TRAIN = PYTHON=$(PY) tools/dist_train.sh configs/tr3d/exp2_cpu.py $(EXP2_PROCS)
+EXP2_TRAIN = PYTHON=$(PY) tools/dist_train.sh $(EXP2_CONFIG) $(EXP2_PROCS)
 EXP2_BATCH_OPTIONS = train_dataloader.batch_size=$(shell expr 4 / $(EXP2_PROCS))
 endif
 # the config's data root (data/s3dis/) replaced by EXP2_DATA in every dataset
@@ -72,10 +74,10 @@ exp2-cpu: setup
 	$(EXP2_TRAIN) --work-dir $(EXP2_WORK) \
 	    $$(ls $(EXP2_WORK)/epoch_*.pth >/dev/null 2>&1 && echo --resume) \
 	    --cfg-options $(EXP2_CFG_OPTIONS) $(EXP2_BATCH_OPTIONS)
-	$(PY) tools/test.py configs/tr3d/exp2_cpu.py $$(cat $(EXP2_WORK)/last_checkpoint) \
+	$(PY) tools/test.py $(EXP2_CONFIG) $$(cat $(EXP2_WORK)/last_checkpoint) \
 	    --work-dir $(EXP2_WORK)/test --box-fit --false-positives --cfg-options $(EXP2_CFG_OPTIONS)
 	for sensor in paper tls tablet; do \
-	    $(PY) tools/test.py configs/tr3d/exp2_cpu.py $$(cat $(EXP2_WORK)/last_checkpoint) \
+	    $(PY) tools/test.py $(EXP2_CONFIG) $$(cat $(EXP2_WORK)/last_checkpoint) \
 	        --sensor $$sensor --work-dir $(EXP2_WORK)/test_$$sensor --box-fit \
 	        --cfg-options $(EXP2_CFG_OPTIONS) || exit 1; \
 	done

@@ -22,11 +22,14 @@ TRAIN_STEPS = [
 TEST_STEPS = ['LoadPointsFromFile', 'PointSample', 'NormalizePointsColor', 'Pack3DDetInputs']
 
 
-def with_pre_sampling(steps: list[str]) -> list[str]:
-    """The step names with ``VoxelGridSample`` and ``ThinRoomStructure`` right before
-    ``PointSample``."""
+def with_pre_sampling(steps: list[str], *pre_sampling: str) -> list[str]:
+    """The step names with ``pre_sampling`` right before ``PointSample``."""
     index = steps.index('PointSample')
-    return steps[:index] + ['VoxelGridSample', 'ThinRoomStructure'] + steps[index:]
+    return steps[:index] + list(pre_sampling) + steps[index:]
+
+
+THINNING = ('ThinRoomStructure', )
+GRID_AND_THINNING = ('VoxelGridSample', 'ThinRoomStructure')
 
 
 # config: train areas, test area, data_root, sampled points, train steps, test steps
@@ -38,8 +41,11 @@ EXPECTED = {
     'exp3': ([1, 2, 3, 4, 6, 7, 8, 9], 5, 'data/s3dis/', 100000, TRAIN_STEPS, TEST_STEPS),
     'exp3_finetune': ([1, 2, 3, 4, 6, 7, 8, 9], 5, 'data/s3dis/', 100000, TRAIN_STEPS,
                       TEST_STEPS),
-    'exp2_cpu': ([7, 8], 9, 'data/s3dis/', 40000, with_pre_sampling(TRAIN_STEPS),
-                 with_pre_sampling(TEST_STEPS)),
+    'exp2_cpu': ([7, 8], 9, 'data/s3dis/', 40000, with_pre_sampling(TRAIN_STEPS, *THINNING),
+                 with_pre_sampling(TEST_STEPS, *THINNING)),
+    'exp2_cpu_voxel_grid': ([7, 8], 9, 'data/s3dis/', 40000,
+                            with_pre_sampling(TRAIN_STEPS, *GRID_AND_THINNING),
+                            with_pre_sampling(TEST_STEPS, *GRID_AND_THINNING)),
     'tiny': ([1], 1, 'data/s3dis_tiny/', 10000,
              [s for s in TRAIN_STEPS if s not in AUGMENTATION], TEST_STEPS),
 }
@@ -73,15 +79,22 @@ def test_resolved_datasets_and_pipelines(name):
     assert _num_points(cfg.test_pipeline) == [num_points]
 
 
-@pytest.mark.parametrize('name', ['exp2_cpu', 'tiny'])
+PRE_SAMPLING = {
+    'exp2_cpu': [dict(type='ThinRoomStructure', keep=0.1)],
+    'exp2_cpu_voxel_grid': [
+        dict(type='VoxelGridSample', voxel_size=0.02),
+        dict(type='ThinRoomStructure', keep=0.1)
+    ],
+    'tiny': []
+}
+
+
+@pytest.mark.parametrize('name', sorted(PRE_SAMPLING))
 def test_cpu_configs_change_only_points_thinning_voxels_and_levels_of_exp2(name):
     exp2, cfg = load('exp2'), load(name)
     for key in ('train_pipeline', 'test_pipeline'):
         pre_sampling = [step for step in cfg[key] if step.type in PRE_SAMPLING_STEPS]
-        assert pre_sampling == ([
-            dict(type='VoxelGridSample', voxel_size=0.02),
-            dict(type='ThinRoomStructure', keep=0.1)
-        ] if name == 'exp2_cpu' else [])
+        assert pre_sampling == PRE_SAMPLING[name]
         derived = [
             step for step in cfg[key] if step.type not in ('PointSample', *PRE_SAMPLING_STEPS)
         ]
@@ -91,7 +104,7 @@ def test_cpu_configs_change_only_points_thinning_voxels_and_levels_of_exp2(name)
         ]
         assert derived == original
     changed = dict(exp2.model, voxel_size=0.02)
-    if name == 'exp2_cpu':  # and the 16 cm head level, with the printers on it
+    if name.startswith('exp2_cpu'):  # and the 16 cm head level, with the printers on it
         changed['neck'] = dict(exp2.model.neck, backbone_fine_level=True)
         changed['bbox_head'] = dict(exp2.model.bbox_head, label2level=(2, 1, 1, 1, 0))
     assert exp2.model.voxel_size == 0.01 and cfg.model == changed

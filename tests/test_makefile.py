@@ -47,3 +47,13 @@ def test_uneven_split_is_refused():
     proc = _dry_run('EXP2_PROCS=3')
     assert proc.returncode != 0
     assert 'EXP2_PROCS=3: must be 1, 2 or 4' in proc.stderr
+
+
+def test_a_variant_config_is_trained_and_tested():
+    variant = 'configs/tr3d/exp2_cpu_voxel_grid.py'
+    proc = _dry_run(f'EXP2_CONFIG={variant}')
+    assert proc.returncode == 0, proc.stderr
+    assert f'tools/dist_train.sh {variant} 2 ' in _train_command(proc.stdout)
+    tests = [line for line in proc.stdout.replace('\\\n', ' ').splitlines() if 'tools/test.py' in line]
+    assert len(tests) == 2  # all of area 9, then the loop over the sensors
+    assert all(f'tools/test.py {variant} ' in line for line in tests)

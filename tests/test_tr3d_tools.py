@@ -43,6 +43,7 @@ EXPERIMENTS = {
     'exp3_finetune': ([1, 2, 3, 4, 6, 7, 8, 9], 5, SYNTHETIC_CLASSES),
     'exp2_paper': ([1, 2, 3, 7, 8], 9, SYNTHETIC_CLASSES),  # the paper's Table 2 lists these
     'exp2_cpu': ([7, 8], 9, SYNTHETIC_CLASSES),
+    'exp2_cpu_voxel_grid': ([7, 8], 9, SYNTHETIC_CLASSES),
 }
 # configs with TR3D's published S3DIS settings
 FULL_SCALE = ('exp1', 'exp2', 'exp3', 'exp2_paper', 'exp3_finetune')
@@ -95,7 +96,7 @@ def test_registry_builds_the_model_of_every_config(path: Path) -> None:
     assert model.bbox_head.num_classes == len(cfg.model.bbox_head.label2level)
     # The paper reports its best epoch; the CPU-scale configs test their final one (exp2_cpu's
     # area 9 validates and tests; the domain-shift models do not validate).
-    final = ('exp2_cpu', 'domain_shift_cpu', 'domain_shift_mixed_cpu')
+    final = ('exp2_cpu', 'exp2_cpu_voxel_grid', 'domain_shift_cpu', 'domain_shift_mixed_cpu')
     best_metric = None if path.stem in final else 'mAP_0.25'
     assert cfg.default_hooks.checkpoint.save_best == best_metric
     assert cfg.optim_wrapper.optimizer == dict(type='AdamW', lr=0.001, weight_decay=0.0001)
@@ -121,7 +122,7 @@ def test_registry_builds_the_model_of_every_config(path: Path) -> None:
         assert cfg.model.voxel_size == model.bbox_head.voxel_size == 0.01
         assert cfg.train_dataloader.batch_size == 16 and cfg.train_dataloader.dataset.times == 13
         assert cfg.train_cfg.max_epochs == 5 and cfg.train_cfg.val_interval == 1
-    if path.stem == 'exp2_cpu':  # the documented CPU-scale differences, TR3D's 1x schedule
+    if path.stem.startswith('exp2_cpu'):  # the documented CPU-scale differences, TR3D's 1x schedule
         assert cfg.model.voxel_size == model.bbox_head.voxel_size == 0.02
         assert cfg.train_dataloader.batch_size == 4 and cfg.train_dataloader.dataset.times == 5
         assert cfg.param_scheduler.milestones == [8, 11] and cfg.param_scheduler.end == 12
@@ -134,6 +135,7 @@ def test_registry_builds_the_model_of_every_config(path: Path) -> None:
     }
     expected_points = {
         'exp2_cpu': 40000,
+        'exp2_cpu_voxel_grid': 40000,
         'domain_shift_cpu': 40000,
         'domain_shift_mixed_cpu': 40000,
         'tiny': 10000

@@ -13,11 +13,6 @@
 #   in training and testing (on a laser-scanned room 90 % of the points lie on the structure, so
 #   40,000 sampled points left its objects a median of 71 points; thinned, 519:
 #   benchmarks/bench_structure_thinning.py);
-# - before that, `VoxelGridSample` keeps one random point per occupied 2 cm cube (the model's
-#   voxels), in training and testing: a scanner's density falls with the square of the range,
-#   so random sampling spent the points on surfaces near the sensor. On the generated area 9 the
-#   tenth percentile of a 3D printer's occupied voxels after sampling rises from 51 to 119 in
-#   laser-scanner rooms and from 54 to 116 in tablet rooms (docs/results.md);
 # - the training areas are repeated 5 times per epoch instead of 13, for 12 epochs instead of 5:
 #   TR3D's published 1x schedule, the learning rate dropping 10x after epochs 8 and 11 (exp2.py
 #   stops at 5, before the first drop). 12 epochs x 125 iterations of batch 4 show the model
@@ -35,7 +30,6 @@
 _base_ = ['./exp2.py']
 from projects.synthdet.config_helpers import area_datasets, with_num_points  # noqa: E402
 from projects.synthdet.config_helpers import with_structure_thinning  # noqa: E402
-from projects.synthdet.config_helpers import with_voxel_grid_sample  # noqa: E402
 
 num_points = 40000
 voxel_size = 0.02
@@ -45,10 +39,9 @@ model = dict(
     bbox_head=dict(label2level=(2, 1, 1, 1, 0)))
 
 train_pipeline, test_pipeline = (
-    with_voxel_grid_sample(
-        with_structure_thinning(
-            with_num_points(pipeline, num_points), dict(type='ThinRoomStructure', keep=0.1)),
-        voxel_size) for pipeline in (_base_.train_pipeline, _base_.test_pipeline))
+    with_structure_thinning(
+        with_num_points(pipeline, num_points), dict(type='ThinRoomStructure', keep=0.1))
+    for pipeline in (_base_.train_pipeline, _base_.test_pipeline))
 train_dataloader = dict(
     batch_size=4,
     num_workers=1,
