@@ -2,8 +2,7 @@
 # size) before the structure thinning and the sampling, in training and testing: a scanner's
 # density falls with the square of the range, so random sampling spends the 40,000 points on the
 # surfaces near the sensor (docs/training.md, "One point per 2 cm cube first"). Not the default:
-# the sampled points then fill more voxels (about 40,000 against 28,000 per room), and training
-# took about 6 s per iteration against about 4 s, while the first 3 epochs showed no gain
+# its run was stopped after 3 of 12 epochs, which showed no gain over exp2_cpu.py
 # (docs/results.md, "A voxel grid before the sampling"). Trained like exp2_cpu.py:
 #   make exp2-cpu EXP2_CONFIG=configs/tr3d/exp2_cpu_voxel_grid.py EXP2_WORK=work_dirs/exp2_cpu_voxel_grid
 _base_ = ['./exp2_cpu.py']
