@@ -6,16 +6,13 @@
 # (docs/results.md, "A voxel grid before the sampling"). Trained like exp2_cpu.py:
 #   make exp2-cpu EXP2_CONFIG=configs/tr3d/exp2_cpu_voxel_grid.py EXP2_WORK=work_dirs/exp2_cpu_voxel_grid
 _base_ = ['./exp2_cpu.py']
-from projects.synthdet.config_helpers import area_datasets, with_voxel_grid_sample  # noqa: E402
+from projects.synthdet.config_helpers import area_loaders, with_voxel_grid_sample  # noqa: E402
 
 train_pipeline, test_pipeline = (
     with_voxel_grid_sample(pipeline, _base_.voxel_size)
     for pipeline in (_base_.train_pipeline, _base_.test_pipeline))
-train_dataloader = dict(
-    dataset=dict(
-        dataset=dict(
-            datasets=area_datasets(
-                dict(_base_.train_area_dataset, pipeline=train_pipeline), _base_.train_area,
-                _base_.metainfo))))
-val_dataloader = dict(dataset=dict(pipeline=test_pipeline))
+train_dataloader, val_dataloader = area_loaders(
+    dict(_base_.train_area_dataset, pipeline=train_pipeline), _base_.train_area, _base_.test_area,
+    _base_.metainfo)
+val_dataloader['dataset']['pipeline'] = test_pipeline
 test_dataloader = val_dataloader
