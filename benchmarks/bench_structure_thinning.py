@@ -1,6 +1,6 @@
 """Points on objects after sampling a room to the model's input, per sensor model: mmdet3d's
 ``PointSample`` alone vs ``ThinRoomStructure`` then ``PointSample`` (the same number of points)
-vs ``VoxelGridSample``, ``ThinRoomStructure`` then ``PointSample`` (exp2_cpu's pipeline).
+vs ``VoxelGridSample``, ``ThinRoomStructure`` then ``PointSample`` (exp2_cpu_voxel_grid.py).
 
     .venv/bin/python benchmarks/bench_structure_thinning.py [--rooms 4] [--points 1000000]
                                                             [--sample 40000] [--keep 0.1]
@@ -16,9 +16,9 @@ and 10th-percentile sampled points per object, the same for the ``--voxel`` cube
 object points that the thinning took for structure, and the time of each pipeline per room.
 Then the gain in median points per object on the sparsest sensor, the voxel grid's time per room
 against ``np.unique`` (the straightforward way to keep one point per cube), measured side by
-side, and last the gain of the voxel grid in 10th-percentile voxels per object per sensor. ``--pictures DIR`` also draws the first room of
-each sensor from above after each pipeline (``DIR/<sensor>_<pipeline>.png``, points by class,
-the true boxes).
+side, and last the gain of the voxel grid in 10th-percentile voxels per object per sensor.
+``--pictures DIR`` also draws the first room of each sensor from above after each pipeline
+(``DIR/<sensor>_<pipeline>.png``, points by class, the true boxes).
 """
 import argparse
 import sys
@@ -120,7 +120,11 @@ def main() -> None:
     sample = TRANSFORMS.build(dict(type='PointSample', num_points=args.sample))
     thin = TRANSFORMS.build(dict(type='ThinRoomStructure', keep=args.keep))
     grid = TRANSFORMS.build(dict(type='VoxelGridSample', voxel_size=args.voxel))
-    pipelines = {'PointSample': [sample], 'thinned': [thin, sample], 'grid+thinned': [grid, thin, sample]}
+    pipelines = {
+        'PointSample': [sample],
+        'thinned': [thin, sample],
+        'grid+thinned': [grid, thin, sample]
+    }
     grid_seconds = {'VoxelGridSample': [], 'np.unique': []}
     if args.pictures:
         args.pictures.mkdir(parents=True, exist_ok=True)
@@ -191,8 +195,8 @@ def main() -> None:
     print(f'structure thinning: {gains[sparsest]:.1f}x the median points per object on {sparsest} '
           f'rooms ({", ".join(f"{s} {g:.1f}x" for s, g in gains.items())})')
     ours, plain = (np.median(grid_seconds[name]) for name in ('VoxelGridSample', 'np.unique'))
-    print(f'voxel grid per 1M-point room: VoxelGridSample {ours:.3f} s vs np.unique {plain:.3f} s, '
-          f'x{plain / ours:.2f} faster')
+    print(f'voxel grid per 1M-point room: VoxelGridSample {ours:.3f} s vs np.unique '
+          f'{plain:.3f} s, x{plain / ours:.2f} faster')
     print('voxel grid first: 10th-percentile voxels per object '
           + ', '.join(f'{s} {g:.2f}x' for s, g in grid_gains.items()))
 

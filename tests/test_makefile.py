@@ -54,6 +54,7 @@ def test_a_variant_config_is_trained_and_tested():
     proc = _dry_run(f'EXP2_CONFIG={variant}')
     assert proc.returncode == 0, proc.stderr
     assert f'tools/dist_train.sh {variant} 2 ' in _train_command(proc.stdout)
-    tests = [line for line in proc.stdout.replace('\\\n', ' ').splitlines() if 'tools/test.py' in line]
+    lines = proc.stdout.replace('\\\n', ' ').splitlines()
+    tests = [line for line in lines if 'tools/test.py' in line]
     assert len(tests) == 2  # all of area 9, then the loop over the sensors
     assert all(f'tools/test.py {variant} ' in line for line in tests)

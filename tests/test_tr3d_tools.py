@@ -122,7 +122,7 @@ def test_registry_builds_the_model_of_every_config(path: Path) -> None:
         assert cfg.model.voxel_size == model.bbox_head.voxel_size == 0.01
         assert cfg.train_dataloader.batch_size == 16 and cfg.train_dataloader.dataset.times == 13
         assert cfg.train_cfg.max_epochs == 5 and cfg.train_cfg.val_interval == 1
-    if path.stem.startswith('exp2_cpu'):  # the documented CPU-scale differences, TR3D's 1x schedule
+    if path.stem.startswith('exp2_cpu'):  # the documented CPU-scale differences, 1x schedule
         assert cfg.model.voxel_size == model.bbox_head.voxel_size == 0.02
         assert cfg.train_dataloader.batch_size == 4 and cfg.train_dataloader.dataset.times == 5
         assert cfg.param_scheduler.milestones == [8, 11] and cfg.param_scheduler.end == 12

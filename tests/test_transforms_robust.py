@@ -485,7 +485,8 @@ def test_voxel_grid_sample_keeps_one_random_point_per_cube_with_its_masks():
         rows = out['pts_instance_mask']
         assert np.all(np.diff(rows) > 0)  # the points keep their order
         assert np.array_equal(out['pts_semantic_mask'], rows % 7)
-        assert torch.equal(out['points'].tensor[:, :3], torch.tensor(xyz, dtype=torch.float32)[rows])
+        xyz_kept = torch.tensor(xyz, dtype=torch.float32)[rows]
+        assert torch.equal(out['points'].tensor[:, :3], xyz_kept)
         assert len(rows) == 301 and np.count_nonzero(rows < 500) == 1
         assert np.array_equal(rows[1:], np.arange(500, 800))  # every point of its own cube stays
         assert len(out['gt_bboxes_3d']) == len(BOXES)

@@ -68,7 +68,7 @@ WHAT = {
     'uniform, TLS, tablet)',
     'structure_thinning':
     'points and 2 cm voxels on objects among 40,000 sampled per room and sensor: `PointSample` '
-    'alone vs `ThinRoomStructure` first vs `VoxelGridSample` before both (exp2_cpu)',
+    'alone vs `ThinRoomStructure` first vs `VoxelGridSample` before both (exp2_cpu_voxel_grid)',
     'dist_train':
     'exp2_cpu training speed: 2 processes x 1 thread (`tools/dist_train.sh`, gloo) vs 1 '
     'process x 2 threads, batch of 4 rooms',

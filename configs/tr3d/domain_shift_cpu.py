@@ -11,9 +11,9 @@
 #   5-epoch schedule did for its last epoch); mmengine's InfiniteSampler draws the rooms;
 # - no validation while training (the benchmark tests every profile afterwards with the final
 #   checkpoint); a checkpoint every quarter of the schedule, so a stopped training resumes;
-# - no voxel grid and no structure thinning: the benchmark's models were trained and tested
-#   before exp2_cpu.py switched `VoxelGridSample` and `ThinRoomStructure` on, and the benchmark
-#   refuses kept models whose config changed;
+# - no structure thinning (nor a voxel grid): the benchmark's models were trained and tested
+#   before exp2_cpu.py switched `ThinRoomStructure` on, and the benchmark refuses kept models
+#   whose config changed;
 # - for the same reason TR3D's two head levels (32 and 64 cm) and exp2.py's label2level, without
 #   the 16 cm level exp2_cpu.py added later.
 # configs/tr3d/domain_shift_mixed_cpu.py is the mixed-profile model.

@@ -4,7 +4,8 @@
 # surfaces near the sensor (docs/training.md, "One point per 2 cm cube first"). Not the default:
 # its run was stopped after 3 of 12 epochs, which showed no gain over exp2_cpu.py
 # (docs/results.md, "A voxel grid before the sampling"). Trained like exp2_cpu.py:
-#   make exp2-cpu EXP2_CONFIG=configs/tr3d/exp2_cpu_voxel_grid.py EXP2_WORK=work_dirs/exp2_cpu_voxel_grid
+#   make exp2-cpu EXP2_CONFIG=configs/tr3d/exp2_cpu_voxel_grid.py \
+#       EXP2_WORK=work_dirs/exp2_cpu_voxel_grid
 _base_ = ['./exp2_cpu.py']
 from projects.synthdet.config_helpers import area_loaders, with_voxel_grid_sample  # noqa: E402
 
