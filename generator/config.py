@@ -94,6 +94,11 @@ DEFAULTS: dict[str, Any] = {
             'wall_clearance': 0.5,  # station distance from its cell's sides, metres
             'object_clearance': 0.5,  # station distance from any object's bounds, metres
             'angular_step_deg': None,  # beam grid step; null: from the point budget
+            'oversample': 8.0,  # the budget rule's beams per point of the budget
+            'min_angular_step_deg': 0.1,  # the finest step the budget rule goes to
+            # the export's point spacing: one return per cube of this side (metres) of the
+            # stations' merged returns, before the budget's random subset; null: every return
+            'point_spacing': 0.01,
             'min_elevation_deg': -60.0,  # the tripod hides the cone below
             'min_range': 0.6,
             'max_range': 60.0,
@@ -352,11 +357,18 @@ def _validate_sensors(scanner: dict[str, Any], source: str) -> None:
     tls, tablet = scanner['tls'], scanner['tablet']
     if tls['stations_per_cell'][0] < 1:
         raise ConfigError(f'{source}: "scanner.tls.stations_per_cell" must be at least 1')
-    step = tls['angular_step_deg']
-    if step is not None and (isinstance(step, bool) or not isinstance(step, (int, float))
-                             or not 0.0 < step <= 10.0):
-        raise ConfigError(f'{source}: "scanner.tls.angular_step_deg" must be null or a number '
-                          f'in (0, 10], got {step!r}')
+    for key, largest in (('angular_step_deg', 10.0), ('point_spacing', 1.0)):
+        value = tls[key]
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))
+                                  or not 0.0 < value <= largest):
+            raise ConfigError(f'{source}: "scanner.tls.{key}" must be null or a number in '
+                              f'(0, {largest:g}], got {value!r}')
+    if _number({'scanner.tls': tls}, 'scanner.tls', 'oversample', source) < 1.0:
+        raise ConfigError(f'{source}: "scanner.tls.oversample" must be at least 1')
+    finest = _number({'scanner.tls': tls}, 'scanner.tls', 'min_angular_step_deg', source)
+    if not 0.0 < finest <= 10.0:
+        raise ConfigError(f'{source}: "scanner.tls.min_angular_step_deg" must be in (0, 10], '
+                          f'got {finest!r}')
     elevation = _number({'scanner.tls': tls}, 'scanner.tls', 'min_elevation_deg', source)
     if not -90.0 <= elevation < 90.0:
         raise ConfigError(f'{source}: "scanner.tls.min_elevation_deg" must be in [-90, 90)')

@@ -9,7 +9,8 @@ is what the geometry gives.
 
 - TLS: stations on a tripod (one or more per grid cell or hall bay, away from objects), beams on a
   regular azimuth x elevation grid of ``angular_step_deg`` (chosen from the point budget when not
-  set), a range window, range noise of std ``a + b * d`` and mixed pixels at depth edges (where
+  set), the merged returns thinned to one per ``point_spacing`` cube (the export's spacing
+  filter), a range window, range noise of std ``a + b * d`` and mixed pixels at depth edges (where
   a neighbouring beam's hit lies more than ``edge_jump`` off the plane of a beam's hit, a share
   of the returns lands between the foreground and the background). Those mixed returns lie in
   the air, on no surface: they are marked ``stray`` and annotated as a clutter instance of their
@@ -32,6 +33,7 @@ from generator.scanner import (ScanResult, Scanner, TriangleScene, part_bounds, 
                                sensor_path, triangles_of_colours)
 from synthdet.contracts import SENSOR_MODELS
 from synthdet.geometry import grid_cells, points_in_polygon
+from synthdet.voxels import VoxelFilter
 
 # the room's structure; every other part is an object (kept clear of, edges for mixed pixels)
 ROOM_STRUCTURE = ('floor', 'ceiling', 'wall', 'door', 'window')
@@ -111,7 +113,8 @@ def scan_room(
             'angular_step_deg': step,
             **{
                 k: cfg[k]
-                for k in ('min_elevation_deg', 'min_range', 'max_range', 'range_noise', 'mixed_pixels', 'edge_jump')
+                for k in ('min_elevation_deg', 'min_range', 'max_range', 'range_noise', 'mixed_pixels',
+                          'edge_jump', 'oversample', 'point_spacing')
             }
         }
     if model == 'tablet':
@@ -249,12 +252,17 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
     """All returns of the stations' grids: points (N, 3), triangles (N,), station index (N,)
     and whether each is a mixed pixel between two surfaces (N,).
 
-    ``on_object`` (T,) marks the triangles of objects, where depth edges can be.
+    ``on_object`` (T,) marks the triangles of objects, where depth edges can be. With a
+    ``point_spacing``, the export's spacing filter keeps one return per cube of that side: each
+    station's returns in a random order, the first in a cube kept, station by station (memory
+    grows with the kept cubes, not with the beams).
     """
     azimuth, elevation = tls_grid(step_deg, cfg['min_elevation_deg'])
     grid = (len(elevation), len(azimuth))
     directions = _grid_directions(azimuth, elevation).reshape(-1, 3)
     a, b = cfg['range_noise']
+    spacing = cfg['point_spacing']
+    cubes = VoxelFilter(spacing, stations[0]) if spacing else None
     points, triangles, owner, strays = [], [], [], []
     for index, station in enumerate(stations):
         origins = np.broadcast_to(station, directions.shape)
@@ -270,7 +278,12 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
         measured = ranges[rows]
         if a > 0 or b > 0:
             measured = measured + rng.standard_normal(len(rows)) * (a + b * measured)
-        points.append(station + directions[rows] * measured[:, None])
+        xyz = station + directions[rows] * measured[:, None]
+        if cubes is not None:
+            shuffled = rng.permutation(len(rows))
+            kept = np.sort(shuffled[cubes.new_points(xyz[shuffled])])
+            rows, xyz = rows[kept], xyz[kept]
+        points.append(xyz)
         triangles.append(triangle[rows])
         owner.append(np.full(len(rows), index))
         strays.append(stray[rows])
@@ -283,25 +296,34 @@ def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int,
              on_object: np.ndarray) -> tuple[ScanResult, float]:
     """A TLS scan of ``n_points`` and its angular step (degrees).
 
-    Without a configured ``angular_step_deg`` the step is the one whose grids (over all stations)
-    give about ``n_points`` beams, refined (smaller) until the returns reach ``n_points``; a
-    uniform random subset of the returns meets the count exactly. A configured step is used as
-    is: fewer returns than requested are written with a warning.
+    A laser scanner records far more returns than a room's file keeps, and its export thins them
+    with a spacing filter: the stations' returns keep one per cube of ``point_spacing`` metres
+    (:func:`cast_tls`; ``null``: every return), then a uniform random subset meets the count
+    exactly. Without the filter a room's points crowd the floor and walls next to the tripods
+    and its far objects keep a few dozen; with it, every surface the beams sample finer than the
+    spacing gets the same density. Without a configured ``angular_step_deg`` the step is the
+    one whose grids (over all stations) give about ``oversample`` x ``n_points`` beams, not
+    finer than ``min_angular_step_deg``, refined (smaller, down to that limit) until the kept
+    returns reach ``n_points``. A configured step is used as is. Fewer returns than requested
+    are written with a warning.
     """
     fixed = cfg['angular_step_deg']
+    finest = 360.0 / math.floor(360.0 / cfg['min_angular_step_deg'] + 1e-9)
     span = 90.0 - cfg['min_elevation_deg']
-    beams = 1.05 * n_points  # a closed room returns nearly every beam; refined below
-    step = fixed or 360.0 / math.ceil(360.0 / math.sqrt(360.0 * span * len(stations) / beams))
+    # a closed room returns nearly every beam; refined below
+    beams = 1.05 * cfg['oversample'] * n_points
+    step = fixed or max(
+        finest, 360.0 / math.ceil(360.0 / math.sqrt(360.0 * span * len(stations) / beams)))
     rays = 0
     for _ in range(8):
         xyz, triangle, owner, stray = cast_tls(scanner, stations, step, rng, cfg, batch,
                                                on_object)
         azimuth, elevation = tls_grid(step, cfg['min_elevation_deg'])
         rays += len(stations) * len(azimuth) * len(elevation)
-        if fixed or len(xyz) >= n_points:
+        if fixed or len(xyz) >= n_points or step <= finest * (1 + 1e-9):
             break
         finer = math.ceil(360.0 / step * math.sqrt(n_points / max(len(xyz), 1)) * 1.02)
-        step = 360.0 / max(finer, int(round(360.0 / step)) + 1)
+        step = max(finest, 360.0 / max(finer, int(round(360.0 / step)) + 1))
     if len(xyz) > n_points:
         keep = np.sort(rng.choice(len(xyz), n_points, replace=False))
         xyz, triangle, owner, stray = xyz[keep], triangle[keep], owner[keep], stray[keep]

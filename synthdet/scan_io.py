@@ -33,6 +33,7 @@ import numpy as np
 
 from synthdet.ply import read_ply_vertices, write_ply
 from synthdet.point_text import PointFileError, format_lines, read_point_blocks
+from synthdet.voxels import VoxelFilter
 
 CHUNK_POINTS = 1_000_000  # default points per chunk: about 50 MB of float64 rows
 MAX_HEIGHT = 200.0  # metres; a taller scan (robust extent) is taken to be in other units
@@ -665,45 +666,6 @@ class LoadedScan:
     points_read: int = 0  # points in the file, before the voxel filter
 
 
-class _VoxelFilter:
-    """Keeps the first point of every voxel, across chunks: a sorted array of the kept voxels'
-    keys grows by each chunk's new voxels, so memory grows with the occupied voxels only."""
-
-    def __init__(self, voxel: float, origin: np.ndarray):
-        self.voxel = voxel
-        self.origin_key = np.floor(origin / voxel)
-        self.seen = np.zeros(0, dtype=np.int64)
-        self.wide: set[tuple[int, int, int]] = set()  # voxels beyond the packed key range
-
-    def new_points(self, xyz: np.ndarray) -> np.ndarray:
-        """Indices (ascending) of the points of ``xyz`` (scan coordinates) in voxels not seen
-        before, one per voxel: its first point."""
-        keys = (np.floor(xyz / self.voxel) - self.origin_key).astype(np.int64)
-        packable = (np.abs(keys) < 2**20).all(axis=1)
-        packed = ((keys[:, 0] + 2**20) << 42) | ((keys[:, 1] + 2**20) << 21) | (keys[:, 2] + 2**20)
-        packed = np.where(packable, packed, -1)
-        _, first = np.unique(packed, return_index=True)
-        first = first[packed[first] >= 0]
-        fresh = first[~_sorted_contains(self.seen, packed[first])]
-        self.seen = np.insert(self.seen, np.searchsorted(self.seen, packed[fresh]),
-                              np.sort(packed[fresh]))
-        far = []
-        for index in np.flatnonzero(~packable):  # points kilometres away: rare, kept exact
-            key = tuple(int(value) for value in keys[index])
-            if key not in self.wide:
-                self.wide.add(key)
-                far.append(index)
-        return np.sort(np.concatenate([fresh, np.array(far, dtype=np.int64)]))
-
-
-def _sorted_contains(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
-    """Whether each of ``keys`` is in the sorted array ``sorted_keys``."""
-    if len(sorted_keys) == 0:
-        return np.zeros(len(keys), dtype=bool)
-    position = np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)
-    return sorted_keys[position] == keys
-
-
 def load_scan(path: str | os.PathLike,
               voxel: float | None = None,
               columns: str | Sequence[str] | None = None,
@@ -726,7 +688,7 @@ def load_scan(path: str | os.PathLike,
     for chunk in read_scan_chunks(path, chunk_points, columns, notes):
         if origin is None:
             origin = np.floor(np.median(chunk[:1000, :3], axis=0))
-            voxel_filter = _VoxelFilter(voxel, origin) if voxel else None
+            voxel_filter = VoxelFilter(voxel, origin) if voxel else None
         total += len(chunk)
         if voxel_filter is not None:
             chunk = chunk[voxel_filter.new_points(chunk[:, :3])]

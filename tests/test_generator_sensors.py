@@ -18,12 +18,16 @@ from generator.scanner import Scanner, TriangleScene
 from generator.sensors import (SENSOR_MODELS, RoomGeometry, cast_tablet, cast_tls, choose_sensor,
                                room_geometry, scan_room, scan_tls, tls_grid)
 from synthdet.point_text import read_point_file
+from synthdet.voxels import cube_keys
 from tests.test_corners import corner_errors
 from tests.test_generator_pipeline import _same_tree, box
+from synthdet.annotation_check import object_fit
+from synthdet.geometry import rotation_z
 from tools.check_annotations import main as check_annotations
 
 REPO = Path(__file__).resolve().parents[1]
-TLS = dict(DEFAULTS['scanner']['tls'], mixed_pixels=0.0, range_noise=[0.0, 0.0])
+# the raw scanner: no noise, no mixed pixels, no export spacing filter (each tested on its own)
+TLS = dict(DEFAULTS['scanner']['tls'], mixed_pixels=0.0, range_noise=[0.0, 0.0], point_spacing=None)
 TABLET = DEFAULTS['scanner']['tablet']
 BATCH = 65536
 
@@ -96,6 +100,26 @@ def test_tls_directions_lie_on_the_angular_grid_of_its_step():
     assert len(xyz) == len(azimuth) * len(elevation)  # a closed room returns every beam
     cells = np.round(grid_position(xyz, station[0], 2.0)).astype(int)
     assert len(np.unique(cells, axis=0)) == len(xyz)
+
+
+def test_tls_export_keeps_one_return_per_cube_and_gives_far_objects_their_share():
+    """The default export (8 beams per point of the budget, one return per 1 cm cube, then the
+    budget) against every return of a scan at the budget's own step: the floor and walls next
+    to the tripod no longer take the points a far object needs."""
+    scanner = Scanner(room_scene((8, 5, 3), [((7, 2, 0), (7.4, 2.4, 0.4), (200, 0, 0))]))
+    station = np.array([[1.0, 2.0, 1.5]])
+    on_far_cube = {}
+    for spacing, oversample in ((None, 1.0), (0.01, 8.0)):
+        cfg = dict(TLS, point_spacing=spacing, oversample=oversample)
+        scan, step = scan_tls(scanner, station, 200000, np.random.default_rng(0), cfg, BATCH,
+                              objects(scanner))
+        assert len(scan.xyz) == 200000
+        on_far_cube[spacing] = int((scan.part == 1).sum())
+        position = grid_position(scan.xyz, station[0], step)  # still the scanner's beams
+        assert np.abs(position - np.round(position)).max() < 1e-4
+    keys = cube_keys(scan.xyz.astype(np.float64), 0.01)
+    assert len(np.unique(keys)) == len(keys)  # one return per 1 cm cube
+    assert on_far_cube[0.01] > 1.5 * on_far_cube[None] > 30
 
 
 def test_tls_beams_escaping_an_open_room_are_lost_without_error():
@@ -374,6 +398,20 @@ def test_sensor_configuration_errors_name_the_file_and_key(tmp_path):
         ({
             'scanner': {
                 'tls': {
+                    'point_spacing': -0.01
+                }
+            }
+        }, 'scanner.tls.point_spacing'),
+        ({
+            'scanner': {
+                'tls': {
+                    'oversample': 0.5
+                }
+            }
+        }, 'scanner.tls.oversample'),
+        ({
+            'scanner': {
+                'tls': {
                     'stations': 2
                 }
             }
@@ -480,6 +518,22 @@ def test_tls_mixed_pixels_are_clutter_not_part_of_the_object(mixed_run):
     assert checked >= 2
 
 
+def test_object_fit_measures_the_share_of_a_turned_box_an_annotation_covers():
+    box = {'center': [2.0, 1.0, 0.5], 'size': [1.0, 0.5, 0.4], 'yaw': np.radians(30.0)}
+    rng = np.random.default_rng(0)
+    # seen from one side only: the front half of the box's depth (local y from -0.25 to 0)
+    local = rng.uniform([-0.5, -0.25, -0.2], [0.5, 0.0, 0.2], size=(20000, 3))
+    world = local @ rotation_z(box['yaw']).T + box['center']
+    ratio, outside, coverage = object_fit(world, box, tolerance=0.05)
+    assert ratio == pytest.approx(1.0, abs=0.01) and outside == 0.0
+    assert coverage == pytest.approx(0.5, abs=0.01)
+    # a point 0.3 m beyond the box's side counts as outside and does not raise the coverage
+    stray = np.array([[0.8, -0.1, 0.0]]) @ rotation_z(box['yaw']).T + box['center']
+    ratio, outside, coverage = object_fit(np.vstack([world, stray]), box, tolerance=0.05)
+    assert ratio == pytest.approx(1.3, abs=0.01) and outside == pytest.approx(1 / 20001)
+    assert coverage == pytest.approx(0.5, abs=0.01)
+
+
 def test_check_annotations_passes_the_rooms_and_catches_points_given_to_an_object(
         mixed_run, tmp_path, capsys):
     work, _ = mixed_run
@@ -488,6 +542,7 @@ def test_check_annotations_passes_the_rooms_and_catches_points_given_to_an_objec
     assert {row['sensor'] for row in rows} == set(SENSOR_MODELS)
     assert all(row['objects_with_points_outside'] == 0 for row in rows)
     assert all(row['extent_median'] <= 1.1 for row in rows)  # tablet noise: about 1 cm
+    assert all(0.0 < row['coverage_median'] <= 1.0 for row in rows)
     # the labelling before the fix: the TLS room's mixed pixels given to one of its objects
     copy = tmp_path / 'raw'
     shutil.copytree(work / 'out', copy)

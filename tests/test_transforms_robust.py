@@ -354,19 +354,21 @@ def _dataset(data_root: Path, pipeline: list[dict]):
             pipeline=pipeline)), cfg
 
 
-def _check_sample(sample: dict, num_points: int, n_boxes: int) -> tuple[torch.Tensor, int]:
-    """Sampled points and boxes as training expects them; returns the colours and the count."""
+def _check_sample(sample: dict, num_points: int, n_boxes: int,
+                  objects_kept: float = 1.0) -> tuple[torch.Tensor, int]:
+    """Sampled points and boxes as training expects them, at least ``objects_kept`` of the
+    objects with points in their box; returns the colours and the count."""
     points = sample['inputs']['points']
     assert points.shape[1] == 6 and 2000 <= len(points) <= num_points
     colours = points[:, 3:]
     assert colours.min() >= 0 and colours.max() <= 1
     boxes = sample['data_samples'].gt_instances_3d.bboxes_3d
     assert len(boxes) == n_boxes and not boxes.with_yaw and not boxes.tensor[:, 6].any()
-    # every object still has points in its box (2 cm: the xyz jitter is clipped at 1.5 cm)
+    # objects keep points in their box (2 cm: the xyz jitter is clipped at 1.5 cm)
     low, high = box_bounds(boxes)
     inside = ((points[:, None, :3] >= low[None] - 0.02) &
               (points[:, None, :3] <= high[None] + 0.02)).all(dim=2)
-    assert inside.any(dim=0).all()
+    assert inside.any(dim=0).float().mean() >= objects_kept
     return colours, len(points)
 
 
@@ -387,7 +389,9 @@ def test_robust_pipeline_runs_on_a_generated_room(generated_room):
         generated_room,
         with_robustness(cfg.train_pipeline, at_full_strength(cfg.robust_augmentations)))
     set_random_seed(0)
-    colours, count = _check_sample(strong[0], num_points, n_boxes)
+    # the room is a laser scan of 50,000 points, whose far objects hold a dozen: at full
+    # strength the density falloff keeps 10 % of them and the dropout half the rest
+    colours, count = _check_sample(strong[0], num_points, n_boxes, objects_kept=0.8)
     assert not colours.any() and count < 0.9 * num_points
 
 

@@ -10,7 +10,9 @@ object's box in its own axes (``synthdet/annotation_check.py``). The table has a
 model and class: objects, the median and 90th percentile of the largest horizontal extent of the
 points as a ratio of the box's (1.00: the true box the converter computes is the object's), the
 median and 90th percentile of the share of points outside the box grown by ``--tolerance``
-metres, and how many objects have any. Exit 1 when an object has more than ``--max-outside`` of
+metres, how many objects have any, the median coverage (the share of the box's volume the points'
+extents enclose: below 1 where the sensor saw part of an object) and the share of objects covered
+less than half. Exit 1 when an object has more than ``--max-outside`` of
 its points outside (a labelling rule gives objects points that are not theirs), 2 for unreadable
 input, 0 otherwise.
 """
@@ -72,7 +74,8 @@ def main(argv: list[str] | None = None) -> int:
     rows = summarize(fits)
     bad = offenders(fits, args.max_outside)
     print(f'{len(fits)} objects in {len(rooms)} rooms; extent: largest horizontal extent of the '
-          f'points / the box\'s; outside: share of points beyond the box + {args.tolerance:g} m')
+          f'points / the box\'s; outside: share of points beyond the box + {args.tolerance:g} m; '
+          f'coverage: share of the box inside the points\' extents')
     print(format_summary(rows))
     for fit in bad[:10]:
         print(f'  {describe(fit)}')

@@ -17,6 +17,8 @@ import numpy as np
 from mmcv.transforms import BaseTransform
 from mmdet3d.registry import TRANSFORMS
 
+from synthdet.voxels import cube_keys, one_point_per_cube
+
 # one counter-clockwise quarter turn of (x, y) row vectors: (x, y) -> (-y, x)
 QUARTER_TURN_T = np.array([[0, 1], [-1, 0]])
 
@@ -282,10 +284,7 @@ class VoxelGridSample(BaseTransform):
 
     def cells(self, xyz: np.ndarray) -> np.ndarray:
         """One int64 key per point of ``xyz`` (N, 3): equal keys share a cube."""
-        index = np.floor(xyz / self.voxel_size).astype(np.int64)
-        index -= index.min(axis=0)
-        extent = index.max(axis=0) + 1
-        return (index[:, 0] * extent[1] + index[:, 1]) * extent[2] + index[:, 2]
+        return cube_keys(xyz, self.voxel_size)
 
     def transform(self, results: dict) -> dict:
         """Keep one random point per cube of ``points`` (and the same rows of the point
@@ -293,14 +292,7 @@ class VoxelGridSample(BaseTransform):
         xyz = results['points'].coord.numpy()
         if len(xyz) == 0:
             return results
-        # shuffled first, so the point a cube keeps is whichever of its points sorts first
-        # (faster than np.unique's stable sort: benchmarks/bench_structure_thinning.py times both)
-        order = np.random.permutation(len(xyz))
-        keys = self.cells(xyz)[order]
-        by_key = np.argsort(keys)
-        sorted_keys = keys[by_key]
-        first = by_key[np.concatenate(([True], sorted_keys[1:] != sorted_keys[:-1]))]
-        return _keep_rows(results, np.sort(order[first]))
+        return _keep_rows(results, one_point_per_cube(xyz, self.voxel_size, np.random))
 
     def __repr__(self) -> str:
         return f'{type(self).__name__}(voxel_size={self.voxel_size})'

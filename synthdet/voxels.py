@@ -1,0 +1,68 @@
+"""One point per cube (voxel): the voxel filter of scan reading (``synthdet.scan_io``) and of the
+generator's laser-scanner export, and the voxel grid of the training pipeline
+(``VoxelGridSample``)."""
+import numpy as np
+
+
+def cube_keys(xyz: np.ndarray, side: float) -> np.ndarray:
+    """One int64 key per point of ``xyz`` (N >= 1, 3): equal keys share a cube of ``side``
+    metres (cubes on a grid through the origin)."""
+    index = np.floor(xyz / side).astype(np.int64)
+    index -= index.min(axis=0)
+    extent = index.max(axis=0) + 1
+    return (index[:, 0] * extent[1] + index[:, 1]) * extent[2] + index[:, 2]
+
+
+def one_point_per_cube(xyz: np.ndarray, side: float, rng) -> np.ndarray:
+    """Ascending indices of one point of ``xyz`` (N, 3) per occupied cube of ``side`` metres,
+    the point drawn at random by ``rng`` (a ``np.random.Generator``, or ``np.random`` itself)."""
+    if len(xyz) == 0:
+        return np.zeros(0, dtype=np.int64)
+    # shuffled first, so the point a cube keeps is whichever of its points the sort puts first
+    # (benchmarks/bench_structure_thinning.py times this against np.unique)
+    order = rng.permutation(len(xyz))
+    keys = cube_keys(xyz, side)[order]
+    by_key = np.argsort(keys)
+    sorted_keys = keys[by_key]
+    first = by_key[np.concatenate(([True], sorted_keys[1:] != sorted_keys[:-1]))]
+    return np.sort(order[first])
+
+
+class VoxelFilter:
+    """Keeps the first point of every voxel, across chunks (a scan read in pieces, a laser
+    scanner's stations one after the other): a sorted array of the kept voxels' keys grows by
+    each chunk's new voxels, so memory grows with the occupied voxels only."""
+
+    def __init__(self, voxel: float, origin: np.ndarray):
+        self.voxel = voxel
+        self.origin_key = np.floor(origin / voxel)
+        self.seen = np.zeros(0, dtype=np.int64)
+        self.wide: set[tuple[int, int, int]] = set()  # voxels beyond the packed key range
+
+    def new_points(self, xyz: np.ndarray) -> np.ndarray:
+        """Indices (ascending) of the points of ``xyz`` (scan coordinates) in voxels not seen
+        before, one per voxel: its first point."""
+        keys = (np.floor(xyz / self.voxel) - self.origin_key).astype(np.int64)
+        packable = (np.abs(keys) < 2**20).all(axis=1)
+        packed = ((keys[:, 0] + 2**20) << 42) | ((keys[:, 1] + 2**20) << 21) | (keys[:, 2] + 2**20)
+        packed = np.where(packable, packed, -1)
+        _, first = np.unique(packed, return_index=True)
+        first = first[packed[first] >= 0]
+        fresh = first[~_sorted_contains(self.seen, packed[first])]
+        self.seen = np.insert(self.seen, np.searchsorted(self.seen, packed[fresh]),
+                              np.sort(packed[fresh]))
+        far = []
+        for index in np.flatnonzero(~packable):  # points kilometres away: rare, kept exact
+            key = tuple(int(value) for value in keys[index])
+            if key not in self.wide:
+                self.wide.add(key)
+                far.append(index)
+        return np.sort(np.concatenate([fresh, np.array(far, dtype=np.int64)]))
+
+
+def _sorted_contains(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
+    """Whether each of ``keys`` is in the sorted array ``sorted_keys``."""
+    if len(sorted_keys) == 0:
+        return np.zeros(len(keys), dtype=bool)
+    position = np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)
+    return sorted_keys[position] == keys
