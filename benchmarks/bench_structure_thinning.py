@@ -49,7 +49,7 @@ from synthdet.room_data import (
     boxes_from_meta)
 from synthdet.scan_io import read_scan  # noqa: E402
 from synthdet.topview import draw_top_view  # noqa: E402
-from synthdet.voxels import one_point_per_cube  # noqa: E402
+from synthdet.voxels import cube_keys, one_point_per_cube  # noqa: E402
 
 SENSORS = ('paper', 'tls', 'tablet')
 
@@ -107,7 +107,7 @@ def time_grid(points: np.ndarray, grid, seed: int) -> dict[str, float]:
     np.random.seed(seed)
     start = time.perf_counter()
     order = np.random.permutation(len(xyz))
-    _, first = np.unique(grid.cells(xyz)[order], return_index=True)
+    _, first = np.unique(cube_keys(xyz, grid.voxel_size)[order], return_index=True)
     plain = time.perf_counter() - start
     if len(first) != len(kept):
         raise RuntimeError(f'the two ways kept {len(kept)} and {len(first)} cubes')

@@ -17,7 +17,7 @@ import numpy as np
 from mmcv.transforms import BaseTransform
 from mmdet3d.registry import TRANSFORMS
 
-from synthdet.voxels import cube_keys, one_point_per_cube
+from synthdet.voxels import one_point_per_cube
 
 # one counter-clockwise quarter turn of (x, y) row vectors: (x, y) -> (-y, x)
 QUARTER_TURN_T = np.array([[0, 1], [-1, 0]])
@@ -281,10 +281,6 @@ class VoxelGridSample(BaseTransform):
         if voxel_size <= 0:
             raise ValueError(f'voxel_size must be > 0, got {voxel_size}')
         self.voxel_size = voxel_size
-
-    def cells(self, xyz: np.ndarray) -> np.ndarray:
-        """One int64 key per point of ``xyz`` (N, 3): equal keys share a cube."""
-        return cube_keys(xyz, self.voxel_size)
 
     def transform(self, results: dict) -> dict:
         """Keep one random point per cube of ``points`` (and the same rows of the point
