@@ -76,6 +76,8 @@ exp2-cpu: setup
 	    --cfg-options $(EXP2_CFG_OPTIONS) $(EXP2_BATCH_OPTIONS)
 	$(PY) tools/test.py $(EXP2_CONFIG) $$(cat $(EXP2_WORK)/last_checkpoint) \
 	    --work-dir $(EXP2_WORK)/test --box-fit --false-positives --cfg-options $(EXP2_CFG_OPTIONS)
+	$(PY) tools/test.py $(EXP2_CONFIG) $$(cat $(EXP2_WORK)/last_checkpoint) --tta \
+	    --work-dir $(EXP2_WORK)/test_tta --box-fit --false-positives --cfg-options $(EXP2_CFG_OPTIONS)
 	for sensor in paper tls tablet; do \
 	    $(PY) tools/test.py $(EXP2_CONFIG) $$(cat $(EXP2_WORK)/last_checkpoint) \
 	        --sensor $$sensor --work-dir $(EXP2_WORK)/test_$$sensor --box-fit \

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 from mmengine.config import Config
 
-from projects.synthdet.config_helpers import (PRE_SAMPLING_STEPS, area_datasets,
-                                              with_num_points, with_structure_thinning,
+from projects.synthdet.config_helpers import (PRE_SAMPLING_STEPS, area_datasets, with_num_points,
+                                              with_structure_thinning, with_test_time_augmentation,
                                               with_voxel_grid_sample, without_pre_sampling)
 from projects.synthdet.inference.windows import density_from_config
 
@@ -137,6 +137,33 @@ def test_helpers_copy_and_refuse_a_pipeline_without_point_sample():
         dict(template, ann_file=f's3dis_infos_Area_{a}.pkl', metainfo=dict(classes=('sofa', )))
         for a in (2, 9)
     ]
+
+
+@pytest.mark.parametrize('name', sorted(EXPECTED))
+def test_every_tta_version_runs_the_test_pipeline_of_its_config(name):
+    cfg = load(name)
+    load_step, augment = cfg.tta_pipeline
+    test_pipeline = cfg.test_dataloader.dataset.pipeline
+    assert load_step == test_pipeline[0] and augment['type'] == 'TestTimeAug'
+    flips, *steps = augment['transforms']
+    assert [(f['flip_ratio_bev_horizontal'], f['flip_ratio_bev_vertical']) for f in flips] == [
+        (0, 0), (0, 1), (1, 0), (1, 1)]
+    # two random point samples per flip: eight versions of every scene
+    assert steps == [[step] * (2 if step['type'] == 'PointSample' else 1)
+                     for step in test_pipeline[1:]]
+    assert cfg.tta_model == dict(type='SynthdetTTAModel', fusion_iou_thr=0.5)
+
+
+def test_tta_pipeline_draws_several_point_samples_per_flip():
+    pipeline = [dict(type='LoadPointsFromFile'), dict(type='ThinRoomStructure'),
+                dict(type='PointSample', num_points=5), dict(type='Pack3DDetInputs')]
+    load_step, augment = with_test_time_augmentation(pipeline, draws=3)
+    assert load_step == pipeline[0]
+    assert augment['transforms'][1:] == [[pipeline[1]], [pipeline[2]] * 3, [pipeline[3]]]
+    with pytest.raises(ValueError, match='at least 1'):
+        with_test_time_augmentation(pipeline, draws=0)
+    with pytest.raises(ValueError, match='no PointSample step'):
+        with_test_time_augmentation(pipeline[:1])
 
 
 @pytest.mark.parametrize('name', sorted(EXPECTED))

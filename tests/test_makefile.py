@@ -56,5 +56,6 @@ def test_a_variant_config_is_trained_and_tested():
     assert f'tools/dist_train.sh {variant} 2 ' in _train_command(proc.stdout)
     lines = proc.stdout.replace('\\\n', ' ').splitlines()
     tests = [line for line in lines if 'tools/test.py' in line]
-    assert len(tests) == 2  # all of area 9, then the loop over the sensors
+    # all of area 9 in one pass and with test-time augmentation, then the loop over the sensors
+    assert len(tests) == 3 and ['--tta' in line for line in tests] == [False, True, False]
     assert all(f'tools/test.py {variant} ' in line for line in tests)

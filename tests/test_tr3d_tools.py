@@ -256,6 +256,21 @@ def test_test_tool_prints_and_writes_table3(tiny: dict, capsys: pytest.CaptureFi
     assert lines[header + 2].split()[0] == 'mAP@0.5'
 
 
+def test_test_tool_tta_tests_the_fused_passes(tiny: dict, tmp_path: Path) -> None:
+    checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
+    document = load_tool('test').main([
+        str(TINY),
+        str(checkpoint), '--work-dir',
+        str(tmp_path), '--tta', '--cfg-options', *data_options(tiny['data'])
+    ])
+    assert document == json.loads((tmp_path / 'table3.json').read_text())
+    assert all(0.0 <= row[c] <= 1.0 for row in document['rows'].values() for c in TINY_CLASSES)
+    cfg = Config.fromfile(TINY)
+    cfg.pop('tta_pipeline')
+    with pytest.raises(ValueError, match='--tta needs tta_model and tta_pipeline'):
+        load_tool('test').use_test_time_augmentation(cfg)
+
+
 def test_best_fit_is_the_closest_prediction_of_the_same_class() -> None:
     from mmdet3d.structures import DepthInstance3DBoxes
 

@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's 
 
 from mmengine.config import Config  # noqa: E402
 from mmengine.dist import is_main_process  # noqa: E402
-from mmengine.model import is_model_wrapper  # noqa: E402
+from mmengine.model import BaseTTAModel, is_model_wrapper  # noqa: E402
 from mmengine.runner import Runner  # noqa: E402
 
 from projects.synthdet.bootstrap import (  # noqa: E402
@@ -72,6 +72,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         action='store_true',
         help='also tabulate how well the predicted boxes fit the true ones (box_fit.json)')
     parser.add_argument(
+        '--tta',
+        action='store_true',
+        help="test-time augmentation: the config's tta_pipeline and tta_model (flips and "
+        'point samples, fused)')
+    parser.add_argument(
         '--false-positives',
         action='store_true',
         help='also tabulate what the false positives hit, per class (false_positives.json)')
@@ -93,6 +98,15 @@ def add_metric(cfg: Config, metric: type) -> None:
     evaluators = cfg.test_evaluator
     evaluators = list(evaluators) if isinstance(evaluators, (list, tuple)) else [evaluators]
     cfg.test_evaluator = [*evaluators, dict(type=metric.__name__)]
+
+
+def use_test_time_augmentation(cfg: Config) -> None:
+    """Test with the config's ``tta_pipeline`` and its ``tta_model`` wrapped around the
+    ``model``, as mmdet3d's test tool does; ``ValueError`` if the config has neither."""
+    if 'tta_model' not in cfg or 'tta_pipeline' not in cfg:
+        raise ValueError(f'{cfg.filename}: --tta needs tta_model and tta_pipeline in the config')
+    cfg.test_dataloader.dataset.pipeline = cfg.tta_pipeline
+    cfg.model = dict(cfg.tta_model, module=cfg.model)
 
 
 def select_sensor(cfg: Config, sensor: str | None) -> str:
@@ -126,10 +140,12 @@ def main(argv: list[str] | None = None) -> dict:
         add_metric(cfg, SynthdetBoxFit)
     if args.false_positives:
         add_metric(cfg, SynthdetFalsePositives)
+    if args.tta:
+        use_test_time_augmentation(cfg)
     test_set = select_sensor(cfg, args.sensor)
     runner = Runner.from_cfg(cfg)
-    load_model_weights(
-        runner.model.module if is_model_wrapper(runner.model) else runner.model, args.checkpoint)
+    model = runner.model.module if is_model_wrapper(runner.model) else runner.model
+    load_model_weights(model.module if isinstance(model, BaseTTAModel) else model, args.checkpoint)
     metrics = runner.test()
     classes = list(runner.test_dataloader.dataset.metainfo['classes'])
     document = table3(metrics, classes, str(args.config), str(args.checkpoint), test_set)

@@ -19,6 +19,7 @@
 # configs/tr3d/domain_shift_mixed_cpu.py is the mixed-profile model.
 _base_ = ['./exp2_cpu.py']
 from projects.synthdet.config_helpers import area_datasets, area_info_file  # noqa: E402
+from projects.synthdet.config_helpers import with_test_time_augmentation  # noqa: E402
 from projects.synthdet.config_helpers import without_pre_sampling  # noqa: E402
 
 data_root = 'work_dirs/domain_shift/data/'
@@ -30,6 +31,7 @@ model = dict(
     neck=dict(backbone_fine_level=False), bbox_head=dict(label2level=(1, 0, 1, 0, 0)))
 train_pipeline = without_pre_sampling(_base_.train_pipeline)
 test_pipeline = without_pre_sampling(_base_.test_pipeline)
+tta_pipeline = with_test_time_augmentation(test_pipeline)
 
 train_dataloader = dict(
     sampler=dict(type='InfiniteSampler', shuffle=True),

@@ -30,6 +30,7 @@
 _base_ = ['./exp2.py']
 from projects.synthdet.config_helpers import area_datasets, with_num_points  # noqa: E402
 from projects.synthdet.config_helpers import with_structure_thinning  # noqa: E402
+from projects.synthdet.config_helpers import with_test_time_augmentation  # noqa: E402
 
 num_points = 40000
 voxel_size = 0.02
@@ -42,6 +43,7 @@ train_pipeline, test_pipeline = (
     with_structure_thinning(
         with_num_points(pipeline, num_points), dict(type='ThinRoomStructure', keep=0.1))
     for pipeline in (_base_.train_pipeline, _base_.test_pipeline))
+tta_pipeline = with_test_time_augmentation(test_pipeline)
 train_dataloader = dict(
     batch_size=4,
     num_workers=1,

@@ -8,10 +8,12 @@
 #       EXP2_WORK=work_dirs/exp2_cpu_voxel_grid
 _base_ = ['./exp2_cpu.py']
 from projects.synthdet.config_helpers import area_loaders, with_voxel_grid_sample  # noqa: E402
+from projects.synthdet.config_helpers import with_test_time_augmentation  # noqa: E402
 
 train_pipeline, test_pipeline = (
     with_voxel_grid_sample(pipeline, _base_.voxel_size)
     for pipeline in (_base_.train_pipeline, _base_.test_pipeline))
+tta_pipeline = with_test_time_augmentation(test_pipeline)
 train_dataloader, val_dataloader = area_loaders(
     dict(_base_.train_area_dataset, pipeline=train_pipeline), _base_.train_area, _base_.test_area,
     _base_.metainfo)

@@ -11,6 +11,7 @@
 _base_ = ['./exp2.py']
 from projects.synthdet.config_helpers import area_datasets, area_info_file  # noqa: E402
 from projects.synthdet.config_helpers import with_num_points  # noqa: E402
+from projects.synthdet.config_helpers import with_test_time_augmentation  # noqa: E402
 
 data_root = 'data/s3dis_tiny/'
 train_area = [1]
@@ -24,6 +25,7 @@ train_pipeline = [
     if step['type'] not in ('RandomFlip3D', 'GlobalRotScaleTrans')
 ]
 test_pipeline = with_num_points(_base_.test_pipeline, num_points)
+tta_pipeline = with_test_time_augmentation(test_pipeline)
 train_dataloader = dict(
     batch_size=1,
     num_workers=0,

@@ -43,6 +43,10 @@ model = dict(
         cls_loss=dict(type='mmdet.FocalLoss', reduction='none')),
     train_cfg=dict(),
     test_cfg=dict(nms_pre=1000, iou_thr=0.5, score_thr=0.01))
+# `tools/test.py --tta`: the config's tta_pipeline (every scene flipped four ways, each with its
+# own point sample) predicted by the model above, the passes fused per class
+# (projects/synthdet/models/tta.py). Not in TR3D's published evaluation.
+tta_model = dict(type='SynthdetTTAModel', fusion_iou_thr=0.5)
 
 optim_wrapper = dict(
     type='OptimWrapper',

@@ -113,3 +113,30 @@ def with_robustness(pipeline: Sequence[Mapping[str, Any]],
         raise ValueError(f'the pipeline already has {repeated}: {types}')
     steps = [dict(step) for step in pipeline]
     return steps[:index + 1] + [dict(step) for step in augmentations] + steps[index + 1:]
+
+
+BEV_FLIPS = tuple(
+    dict(
+        type='RandomFlip3D',
+        sync_2d=False,
+        flip_ratio_bev_horizontal=horizontal,
+        flip_ratio_bev_vertical=vertical) for horizontal in (0.0, 1.0) for vertical in (0.0, 1.0))
+
+
+def with_test_time_augmentation(pipeline: Sequence[Mapping[str, Any]],
+                                draws: int = 2) -> list[dict]:
+    """The ``tta_pipeline`` of a test ``pipeline``: after its first step (the loading), every
+    scene goes through the rest in ``4 * draws`` versions, the four flips in x and y (identity
+    included) times ``draws`` random point samples each (mmcv's ``TestTimeAug``), for the
+    ``SynthdetTTAModel`` to fuse.
+
+    Raises ``ValueError`` if the pipeline has no ``PointSample`` or ``draws`` is below 1.
+    """
+    index = _point_sample_index(pipeline)
+    if draws < 1:
+        raise ValueError(f'draws must be at least 1, got {draws}')
+    load, *steps = [dict(step) for step in pipeline]
+    transforms = [[dict(flip) for flip in BEV_FLIPS]]
+    for position, step in enumerate(steps, start=1):
+        transforms.append([dict(step) for _ in range(draws)] if position == index else [step])
+    return [load, dict(type='TestTimeAug', transforms=transforms)]

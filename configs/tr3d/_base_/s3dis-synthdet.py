@@ -9,6 +9,7 @@
 # val/test_dataloader. Configs that sample another number of points derive the pipelines with
 # `with_num_points(_base_.train_pipeline, n)`.
 _base_ = ['mmdet3d::_base_/datasets/s3dis-3d.py']
+from projects.synthdet.config_helpers import with_test_time_augmentation  # noqa: E402
 
 dataset_type = 'SynthdetS3DISDataset'
 data_root = 'data/s3dis/'
@@ -46,6 +47,9 @@ test_pipeline = [
     dict(type='NormalizePointsColor', color_mean=None),
     dict(type='Pack3DDetInputs', keys=['points'])
 ]
+# `tools/test.py --tta` (tta_model in tr3d.py); every config that changes the test pipeline
+# derives this from its own.
+tta_pipeline = with_test_time_augmentation(test_pipeline)
 
 # Robustness to real scans (issue #16), switched on by none of the experiments yet: a config
 # adds them with `train_pipeline = with_robustness(_base_.train_pipeline,

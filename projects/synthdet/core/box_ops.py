@@ -53,3 +53,16 @@ def aligned_diou_3d(corners_a: Tensor, corners_b: Tensor, eps: float = 1e-6) -> 
     enclose_high = torch.maximum(corners_a[:, 3:], corners_b[:, 3:])
     diag2 = (enclose_high - enclose_low).pow(2).sum(dim=-1)
     return iou - center_dist2 / diag2.clamp(min=eps)
+
+
+def pairwise_iou_3d(boxes_a: Tensor, boxes_b: Tensor, eps: float = 1e-6) -> Tensor:
+    """3D IoU of every centre-size box in ``boxes_a`` (N, >=6) with every box in ``boxes_b``
+    (M, >=6), axis-aligned (a yaw column is ignored); returns an (N, M) tensor."""
+    a = center_size_to_corners(boxes_a[:, :6])
+    b = center_size_to_corners(boxes_b[:, :6])
+    low = torch.maximum(a[:, None, :3], b[None, :, :3])
+    high = torch.minimum(a[:, None, 3:], b[None, :, 3:])
+    inter = (high - low).clamp(min=0).prod(dim=-1)
+    vol_a = boxes_a[:, 3:6].prod(dim=-1)[:, None]
+    vol_b = boxes_b[:, 3:6].prod(dim=-1)[None, :]
+    return inter / (vol_a + vol_b - inter).clamp(min=eps)

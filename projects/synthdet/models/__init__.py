@@ -5,8 +5,9 @@ from .tr3d import TR3DDetector
 from .tr3d_assigner import tr3d_assign
 from .tr3d_head import TR3DHead
 from .tr3d_neck import TR3DNeck
+from .tta import SynthdetTTAModel
 
 __all__ = [
     'TR3DAxisAlignedIoULoss', 'TR3DMinkResNet', 'TR3DDetector', 'tr3d_assign', 'TR3DHead',
-    'TR3DNeck'
+    'TR3DNeck', 'SynthdetTTAModel'
 ]
