@@ -9,6 +9,8 @@ run in this process with command-line arguments.
 import importlib.util
 import json
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 from types import ModuleType
 
@@ -265,10 +267,13 @@ def test_test_tool_tta_tests_the_fused_passes(tiny: dict, tmp_path: Path) -> Non
     ])
     assert document == json.loads((tmp_path / 'table3.json').read_text())
     assert all(0.0 <= row[c] <= 1.0 for row in document['rows'].values() for c in TINY_CLASSES)
-    cfg = Config.fromfile(TINY)
-    cfg.pop('tta_pipeline')
-    with pytest.raises(ValueError, match='--tta needs tta_model and tta_pipeline'):
-        load_tool('test').use_test_time_augmentation(cfg)
+    without = tmp_path / 'without_tta.py'
+    without.write_text(f"_base_ = ['{TINY}']\ntta_model = None\n")
+    proc = subprocess.run([sys.executable, 'tools/test.py', str(without), str(checkpoint), '--tta'],
+                          cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines()[-1] == (
+        f'test.py: error: {without}: --tta needs tta_model and tta_pipeline in the config')
 
 
 def test_best_fit_is_the_closest_prediction_of_the_same_class() -> None:
@@ -406,6 +411,28 @@ def test_predict_writes_detections_in_each_scan_frame(tiny: dict) -> None:
     assert [d['class'] for d in raw] == [d['class'] for d in shifted]
     np.testing.assert_allclose([d['score'] for d in raw], [d['score'] for d in shifted], atol=1e-5)
     np.testing.assert_allclose(centres('office_1') - shift, centres('office_1_shifted'), atol=1e-4)
+
+
+def test_predict_tta_boxes_come_back_into_each_scan_frame(tiny: dict, tmp_path: Path) -> None:
+    room_txt = tiny['raw'] / 'office_1' / 'office_1.txt'
+    points = read_scan(room_txt)
+    room_min, room_max = points[:, :3].min(axis=0), points[:, :3].max(axis=0)
+    shift = np.floor(room_min)
+    shifted_bin = tmp_path / 'office_1_shifted.bin'
+    write_scan(shifted_bin, np.column_stack([points[:, :3] - shift, points[:, 3:]]))
+    checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
+    load_tool('predict').main([
+        str(TINY), str(checkpoint), str(room_txt), str(shifted_bin), '--out', str(tmp_path),
+        '--tta', '--score-thr', '0', '--cfg-options', 'model.test_cfg.score_thr=0.0'
+    ])
+    raw, shifted = (json.loads((tmp_path / f'{name}.pred.json').read_text())['detections']
+                    for name in ('office_1', 'office_1_shifted'))
+    assert raw and [d['class'] for d in raw] == [d['class'] for d in shifted]
+    centres = np.array([d['center'] for d in raw])
+    # a box left flipped would lie mirrored about the room's corner, metres outside it
+    assert np.all(centres > room_min - 2.0) and np.all(centres < room_max + 2.0)
+    np.testing.assert_allclose(centres - shift, [d['center'] for d in shifted], atol=1e-4)
+    np.testing.assert_allclose([d['score'] for d in raw], [d['score'] for d in shifted], atol=1e-5)
 
 
 def test_count_table_counts_correct_and_incorrect_detections(tmp_path: Path) -> None:

@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> list[Path]:
     except ValueError as error:
         raise BadInput(str(error)) from None
     try:
-        model = load_model(cfg, args.checkpoint, args.device)
+        model = load_model(cfg, args.checkpoint, args.device, args.tta)
     except ValueError as error:  # CheckpointError
         raise BadInput(str(error)) from None
     detector = ModelDetector(model, args.score_thr, args.seed)

@@ -71,7 +71,7 @@ def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
     for line in prepared.report:
         report(f'prepare: {line}')
     detector = ModelDetector(
-        load_model(cfg, args.checkpoint, args.device), args.score_thr, args.seed)
+        load_model(cfg, args.checkpoint, args.device, args.tta), args.score_thr, args.seed)
     predictions = detector.predictions(prepared, spec, Path(args.config).stem)
     write_predictions(predictions_path, predictions)
     report(f'detect: {len(predictions["detections"])} objects -> {predictions_path}')

@@ -2,7 +2,7 @@
 
 Usage: python tools/test.py CONFIG CHECKPOINT [--work-dir DIR] [--out JSON] [--cfg-options k=v ...]
                             [--show-dir DIR [--score-thr T]] [--sensor {paper,tls,tablet}]
-                            [--box-fit] [--false-positives]
+                            [--box-fit] [--false-positives] [--tta]
                             [--launcher {none,pytorch,slurm,mpi}]
 
 The numbers are mmdet3d's IndoorMetric (per-class average precision at 3D IoU 0.25 and 0.5 and
@@ -20,6 +20,9 @@ is a ``--sensor`` whose rooms cannot be found (exit 2). ``--box-fit`` adds a tab
 the predicted boxes fit the true ones per class (median best IoU, the share below IoU 0.25 and
 0.5, size ratios per axis and centre distance; ``projects/synthdet/evaluation/box_fit.py``),
 printed and written to ``box_fit.json`` / ``box_fit.txt`` next to Table 3.
+``--tta`` tests the config's ``tta_pipeline`` (every scene flipped four ways, two point samples
+each) with its ``tta_model`` around the model, which fuses the passes per class
+(``projects/synthdet/models/tta.py``); the config must have both (exit 2 otherwise).
 ``--false-positives`` adds, per class and IoU threshold, what the false positives hit (a
 duplicate, another class, a loose box, or the annotation of the scan's points inside them, e.g.
 ``clutter/crate``) with the AP the class would have without each cause
@@ -37,7 +40,7 @@ from mmengine.model import BaseTTAModel, is_model_wrapper  # noqa: E402
 from mmengine.runner import Runner  # noqa: E402
 
 from projects.synthdet.bootstrap import (  # noqa: E402
-    add_runner_arguments, parse_runner_args, run_tool, runner_config)
+    TTAConfigError, add_runner_arguments, parse_runner_args, run_tool, runner_config, tta_settings)
 from projects.synthdet.checkpoint import CheckpointError, load_model_weights  # noqa: E402
 from projects.synthdet.evaluation.box_fit import (  # noqa: E402
     SynthdetBoxFit, box_fit_document, format_box_fit)
@@ -102,11 +105,10 @@ def add_metric(cfg: Config, metric: type) -> None:
 
 def use_test_time_augmentation(cfg: Config) -> None:
     """Test with the config's ``tta_pipeline`` and its ``tta_model`` wrapped around the
-    ``model``, as mmdet3d's test tool does; ``ValueError`` if the config has neither."""
-    if 'tta_model' not in cfg or 'tta_pipeline' not in cfg:
-        raise ValueError(f'{cfg.filename}: --tta needs tta_model and tta_pipeline in the config')
-    cfg.test_dataloader.dataset.pipeline = cfg.tta_pipeline
-    cfg.model = dict(cfg.tta_model, module=cfg.model)
+    ``model``, as mmdet3d's test tool does; ``TTAConfigError`` if the config lacks one."""
+    tta_model, tta_pipeline = tta_settings(cfg)
+    cfg.test_dataloader.dataset.pipeline = tta_pipeline
+    cfg.model = dict(tta_model, module=cfg.model)
 
 
 def select_sensor(cfg: Config, sensor: str | None) -> str:
@@ -172,4 +174,4 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 if __name__ == '__main__':
-    run_tool(main, 'test.py', bad_input=(CheckpointError, InfoFileError))
+    run_tool(main, 'test.py', bad_input=(CheckpointError, InfoFileError, TTAConfigError))

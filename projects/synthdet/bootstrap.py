@@ -45,7 +45,7 @@ def add_cfg_options(parser: argparse.ArgumentParser) -> None:
 
 def add_detection_arguments(parser: argparse.ArgumentParser, voxel: float | None) -> None:
     """Add the options of detecting in scans (``predict.py``, ``scan2cad.py``): ``--score-thr``,
-    ``--device``, ``--seed`` and the reading options ``--voxel`` (default ``voxel``; None keeps
+    ``--device``, ``--seed``, ``--tta`` and the reading options ``--voxel`` (default ``voxel``; None keeps
     every point) and ``--columns``."""
     import torch
     parser.add_argument(
@@ -56,12 +56,28 @@ def add_detection_arguments(parser: argparse.ArgumentParser, voxel: float | None
     parser.add_argument('--device', default='cuda:0' if torch.cuda.is_available() else 'cpu')
     parser.add_argument('--seed', type=int, default=0, help='seed of the point sampling')
     parser.add_argument(
+        '--tta',
+        action='store_true',
+        help="test-time augmentation: the config's tta_pipeline and tta_model (8x the time)")
+    parser.add_argument(
         '--voxel',
         type=float,
         default=voxel,
         help='keep one point per voxel of this size (m) while reading (default: %(default)s)')
     parser.add_argument('--columns', help='text scans: the columns, e.g. x,y,z,r,g,b or x,y,z,i')
     add_cfg_options(parser)
+
+
+class TTAConfigError(ValueError):
+    """``--tta`` with a config that lacks ``tta_model`` or ``tta_pipeline``."""
+
+
+def tta_settings(cfg: Config) -> tuple[dict, list]:
+    """The config's ``tta_model`` (without its ``module``) and ``tta_pipeline`` for ``--tta``;
+    ``TTAConfigError`` naming the config file if it lacks one."""
+    if not cfg.get('tta_model') or not cfg.get('tta_pipeline'):
+        raise TTAConfigError(f'{cfg.filename}: --tta needs tta_model and tta_pipeline in the config')
+    return dict(cfg.tta_model), list(cfg.tta_pipeline)
 
 
 def add_runner_arguments(parser: argparse.ArgumentParser, work_dir_help: str) -> None:

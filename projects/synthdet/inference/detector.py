@@ -6,31 +6,45 @@ that their minimum is at the origin like the converted training data, and shifts
 """
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import torch
 from mmdet3d.apis import inference_detector, init_model
+from mmdet3d.registry import MODELS
 from mmengine.config import Config
 from mmengine.runner import set_random_seed
 
+from projects.synthdet.bootstrap import tta_settings
 from projects.synthdet.checkpoint import CheckpointError, load_model_weights
 from projects.synthdet.inference.windows import Detections, WindowSpec, detect_in_windows
 from synthdet.contracts import PREDICTIONS_FORMAT
 from synthdet.prepare import PreparedScan
 
 
-def load_model(cfg: Config, checkpoint: str, device: str) -> torch.nn.Module:
-    """The config's model with the checkpoint's weights, loaded weights-only.
+def load_model(cfg: Config, checkpoint: str, device: str, tta: bool = False) -> torch.nn.Module:
+    """The config's model with the checkpoint's weights, loaded weights-only; with ``tta``
+    wrapped in the config's ``tta_model`` and predicting through its ``tta_pipeline``
+    (test-time augmentation, as ``tools/test.py --tta``).
 
     Raises :class:`CheckpointError` (naming the file) for a checkpoint that is refused, does not
-    fit the model or names no classes.
+    fit the model or names no classes, and ``TTAConfigError`` for ``tta`` with a config that
+    has no test-time augmentation.
     """
+    tta_model, tta_pipeline = tta_settings(cfg) if tta else (None, None)
     model = init_model(cfg, None, device=device)
     meta = load_model_weights(model, checkpoint)
     if not isinstance(meta.get('dataset_meta'), dict) or 'classes' not in meta['dataset_meta']:
         raise CheckpointError(f'{checkpoint}: the checkpoint\'s meta names no classes '
                               '(dataset_meta)')
     model.dataset_meta = meta['dataset_meta']
-    return model
+    if not tta:
+        return model
+    wrapper = MODELS.build(dict(tta_model, module=model))
+    wrapper.cfg = copy.deepcopy(model.cfg)  # mmdet3d's inference_detector runs its test pipeline
+    wrapper.cfg.test_dataloader.dataset.pipeline = tta_pipeline
+    wrapper.dataset_meta = model.dataset_meta
+    return wrapper.eval()
 
 
 class ModelDetector:
