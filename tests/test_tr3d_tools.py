@@ -269,8 +269,11 @@ def test_test_tool_tta_tests_the_fused_passes(tiny: dict, tmp_path: Path) -> Non
     assert all(0.0 <= row[c] <= 1.0 for row in document['rows'].values() for c in TINY_CLASSES)
     without = tmp_path / 'without_tta.py'
     without.write_text(f"_base_ = ['{TINY}']\ntta_model = None\n")
-    proc = subprocess.run([sys.executable, 'tools/test.py', str(without), str(checkpoint), '--tta'],
-                          cwd=REPO, capture_output=True, text=True, timeout=300)
+    proc = subprocess.run([sys.executable, 'tools/test.py', without, checkpoint, '--tta'],
+                          cwd=REPO,
+                          capture_output=True,
+                          text=True,
+                          timeout=300)
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines()[-1] == (
         f'test.py: error: {without}: --tta needs tta_model and tta_pipeline in the config')

@@ -45,8 +45,8 @@ def add_cfg_options(parser: argparse.ArgumentParser) -> None:
 
 def add_detection_arguments(parser: argparse.ArgumentParser, voxel: float | None) -> None:
     """Add the options of detecting in scans (``predict.py``, ``scan2cad.py``): ``--score-thr``,
-    ``--device``, ``--seed``, ``--tta`` and the reading options ``--voxel`` (default ``voxel``; None keeps
-    every point) and ``--columns``."""
+    ``--device``, ``--seed``, ``--tta`` and the reading options ``--voxel`` (default ``voxel``;
+    None keeps every point) and ``--columns``."""
     import torch
     parser.add_argument(
         '--score-thr',
@@ -76,7 +76,8 @@ def tta_settings(cfg: Config) -> tuple[dict, list]:
     """The config's ``tta_model`` (without its ``module``) and ``tta_pipeline`` for ``--tta``;
     ``TTAConfigError`` naming the config file if it lacks one."""
     if not cfg.get('tta_model') or not cfg.get('tta_pipeline'):
-        raise TTAConfigError(f'{cfg.filename}: --tta needs tta_model and tta_pipeline in the config')
+        raise TTAConfigError(
+            f'{cfg.filename}: --tta needs tta_model and tta_pipeline in the config')
     return dict(cfg.tta_model), list(cfg.tta_pipeline)
 
 
