@@ -1,9 +1,10 @@
 """Test-time augmentation for the TR3D detector: several passes over each scene, fused."""
 import torch
 from mmdet3d.registry import MODELS
-from mmdet3d.structures import bbox3d_mapping_back
+from mmdet3d.structures import Det3DDataSample, bbox3d_mapping_back
 from mmengine.model import BaseTTAModel
 from mmengine.structures import InstanceData
+from torch import nn
 
 from ..core.box_fusion import fuse_passes
 
@@ -18,11 +19,12 @@ class SynthdetTTAModel(BaseTTAModel):
     scene's frame and fused per class (:func:`projects.synthdet.core.box_fusion.fuse_passes`).
 
     Args:
-        module: the detector config (``tools/test.py`` puts the config's ``model`` here).
+        module: the detector, or its config (``tools/test.py`` puts the config's ``model``
+            here; ``tools/predict.py`` the loaded detector).
         fusion_iou_thr: 3D IoU above which boxes of one class from the passes are fused.
     """
 
-    def __init__(self, module: dict, fusion_iou_thr: float = 0.5, **kwargs) -> None:
+    def __init__(self, module: dict | nn.Module, fusion_iou_thr: float = 0.5, **kwargs) -> None:
         super().__init__(module=module, **kwargs)
         self.fusion_iou_thr = fusion_iou_thr
 
@@ -30,7 +32,7 @@ class SynthdetTTAModel(BaseTTAModel):
         """One data sample per scene with the fused ``pred_instances_3d`` of its passes."""
         return [self._merge_scene(list(samples)) for samples in data_samples_list]
 
-    def _merge_scene(self, samples: list):
+    def _merge_scene(self, samples: list) -> Det3DDataSample:
         boxes, scores, labels, passes = [], [], [], []
         for index, sample in enumerate(samples):
             pred = sample.pred_instances_3d
