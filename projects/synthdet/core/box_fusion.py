@@ -52,11 +52,11 @@ def fuse_passes(boxes: Tensor, scores: Tensor, labels: Tensor, passes: Tensor, n
     for label in labels.unique(sorted=True):
         order = torch.nonzero(labels == label).squeeze(1)
         order = order[torch.argsort(scores[order], descending=True, stable=True)]
-        group = _group(boxes[order], iou_thr)
+        ordered = boxes[order]
+        group = _group(ordered, iou_thr)
         groups = int(group.max()) + 1
         weights = scores[order]
-        box_sums = boxes.new_zeros((groups, 6)).index_add_(0, group,
-                                                           boxes[order, :6] * weights[:, None])
+        box_sums = boxes.new_zeros((groups, 6)).index_add_(0, group, ordered * weights[:, None])
         weight_sums = weights.new_zeros(groups).index_add_(0, group, weights)
         best_per_pass = scores.new_zeros(groups * num_passes).scatter_reduce_(
             0, group * num_passes + passes[order], weights, reduce='amax')

@@ -30,12 +30,12 @@ def pairwise_bev_iou(boxes_a: Tensor, boxes_b: Tensor) -> Tensor:
 
 
 def aligned_iou_3d(corners_a: Tensor, corners_b: Tensor, eps: float = 1e-6) -> Tensor:
-    """Element-wise 3D IoU of two (N, 6) tensors of corner-form boxes."""
-    low = torch.maximum(corners_a[:, :3], corners_b[:, :3])
-    high = torch.minimum(corners_a[:, 3:], corners_b[:, 3:])
+    """Element-wise 3D IoU of two (..., 6) tensors of corner-form boxes (broadcast)."""
+    low = torch.maximum(corners_a[..., :3], corners_b[..., :3])
+    high = torch.minimum(corners_a[..., 3:], corners_b[..., 3:])
     inter = (high - low).clamp(min=0).prod(dim=-1)
-    vol_a = (corners_a[:, 3:] - corners_a[:, :3]).prod(dim=-1)
-    vol_b = (corners_b[:, 3:] - corners_b[:, :3]).prod(dim=-1)
+    vol_a = (corners_a[..., 3:] - corners_a[..., :3]).prod(dim=-1)
+    vol_b = (corners_b[..., 3:] - corners_b[..., :3]).prod(dim=-1)
     return inter / (vol_a + vol_b - inter).clamp(min=eps)
 
 
@@ -58,11 +58,5 @@ def aligned_diou_3d(corners_a: Tensor, corners_b: Tensor, eps: float = 1e-6) -> 
 def pairwise_iou_3d(boxes_a: Tensor, boxes_b: Tensor, eps: float = 1e-6) -> Tensor:
     """3D IoU of every centre-size box in ``boxes_a`` (N, >=6) with every box in ``boxes_b``
     (M, >=6), axis-aligned (a yaw column is ignored); returns an (N, M) tensor."""
-    a = center_size_to_corners(boxes_a[:, :6])
-    b = center_size_to_corners(boxes_b[:, :6])
-    low = torch.maximum(a[:, None, :3], b[None, :, :3])
-    high = torch.minimum(a[:, None, 3:], b[None, :, 3:])
-    inter = (high - low).clamp(min=0).prod(dim=-1)
-    vol_a = boxes_a[:, 3:6].prod(dim=-1)[:, None]
-    vol_b = boxes_b[:, 3:6].prod(dim=-1)[None, :]
-    return inter / (vol_a + vol_b - inter).clamp(min=eps)
+    return aligned_iou_3d(center_size_to_corners(boxes_a[:, None, :6]),
+                          center_size_to_corners(boxes_b[None, :, :6]), eps)
