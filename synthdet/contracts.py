@@ -2,7 +2,9 @@
 
 - ``synthdet.room/1``: a generated room's ground truth (``meta.json``, written by the generator);
 - ``synthdet.predictions/1``: a scan's detections (``<scan>.pred.json``, from tools/predict.py);
-- ``synthdet.corners/1``: a scan's room outline (``<scan>.corners.json``, from the corners CLI).
+- ``synthdet.corners/1``: a scan's room outline (``<scan>.corners.json``, from the corners CLI);
+- ``synthdet.labels/1``: a real scan's true boxes (``<scan stem>.labels.json``, written by a
+  person), read by the evaluation of labelled scans (``tools/eval_scans.py``).
 
 docs/architecture.md describes the files. Each contract has one validator with one set of rules;
 every reader and writer of the project goes through it. Errors are ``SchemaError`` with one line
@@ -25,6 +27,7 @@ from synthdet.geometry import first_self_crossing, signed_area
 ROOM_FORMAT = 'synthdet.room/1'
 PREDICTIONS_FORMAT = 'synthdet.predictions/1'
 CORNERS_FORMAT = 'synthdet.corners/1'
+LABELS_FORMAT = 'synthdet.labels/1'
 # the generator's sensor models, recorded in a room's meta.json as generator.sensor.model
 SENSOR_MODELS = ('paper', 'tls', 'tablet')
 
@@ -59,6 +62,8 @@ def load_json(path: str | os.PathLike) -> object:
     except json.JSONDecodeError as error:
         raise SchemaError(
             f'{path}:{error.lineno}:{error.colno}: invalid JSON: {error.msg}') from None
+    except RecursionError:  # no contract nests deeper than a few levels
+        raise SchemaError(f'{path}: invalid JSON: arrays or objects nested too deeply') from None
 
 
 def write_json_atomic(path: str | os.PathLike, data: object, indent: int | None = 1) -> None:
@@ -68,11 +73,19 @@ def write_json_atomic(path: str | os.PathLike, data: object, indent: int | None 
 
 
 def _write_text_atomic(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` under a temporary name beside ``path`` and rename it into place; nothing
+    is left behind if encoding or writing fails."""
     path = os.fspath(path)
+    data = text.encode('utf-8')  # before any file exists: text that is not Unicode fails here
     temporary = f'{path}.tmp{os.getpid()}'
-    with open(temporary, 'w', encoding='utf-8') as stream:
-        stream.write(text)
-    os.replace(temporary, path)
+    try:
+        with open(temporary, 'wb') as stream:
+            stream.write(data)
+        os.replace(temporary, path)
+    except BaseException:
+        if os.path.lexists(temporary):
+            os.unlink(temporary)
+        raise
 
 
 # --------------------------------------------------------------------------- value checks
@@ -297,6 +310,45 @@ def validate_room(data: object, source: str = '<room>') -> dict:
     return data
 
 
+def validate_labels(data: object, source: str = '<labels>') -> dict:
+    """Check a ``synthdet.labels/1`` document: the scan's name, the distinct labelled
+    ``classes`` (at least one) and boxes of those classes; returns a normalised copy.
+
+    Class names may be any name (a model may know classes this project does not); a box of a
+    class missing from ``classes`` is refused: ``classes`` says what was labelled. Other keys
+    (``source``, ``frame``) are kept as they are.
+    """
+    data = _document(data, LABELS_FORMAT, source, ('scan', 'classes', 'boxes'))
+    classes = data['classes']
+    if not isinstance(classes, list) or not classes:
+        fail(source, 'classes', f'expected a non-empty list of names, got {_describe(classes)}')
+    names = [_name(name, source, f'classes[{i}]') for i, name in enumerate(classes)]
+    for index, name in enumerate(names):
+        if name in names[:index]:
+            fail(source, f'classes[{index}]', f'class {name!r} is listed twice')
+    boxes = data['boxes']
+    if not isinstance(boxes, list):
+        fail(source, 'boxes', f'expected a list, got {_describe(boxes)}')
+    if len(boxes) > MAX_OBJECTS:
+        fail(source, 'boxes', f'more than {MAX_OBJECTS} boxes')
+    checked = []
+    for index, box in enumerate(boxes):
+        where = f'boxes[{index}]'
+        box = expect_object(box, source, where, ('class', 'center', 'size'))
+        cls = _name(box['class'], source, f'{where}.class')
+        if cls not in names:
+            fail(source, f'{where}.class', f'class {cls!r} is not in "classes" '
+                 f'({", ".join(names)})')
+        checked.append({'class': cls, **_box(box, source, where)})
+    return {
+        **data,
+        'format': LABELS_FORMAT,
+        'scan': _name(data['scan'], source, 'scan'),
+        'classes': names,
+        'boxes': checked,
+    }
+
+
 def read_predictions(path: str | os.PathLike) -> dict:
     """Load and validate a ``synthdet.predictions/1`` file; returns the normalised document."""
     return validate_predictions(load_json(path), os.fspath(path))
@@ -310,6 +362,11 @@ def read_corners(path: str | os.PathLike) -> dict:
 def read_room(path: str | os.PathLike) -> dict:
     """Load and validate a ``synthdet.room/1`` file (a ``meta.json``); returns the document."""
     return validate_room(load_json(path), os.fspath(path))
+
+
+def read_labels(path: str | os.PathLike) -> dict:
+    """Load and validate a ``synthdet.labels/1`` file; returns the normalised document."""
+    return validate_labels(load_json(path), os.fspath(path))
 
 
 def write_predictions(path: str | os.PathLike, document: dict) -> None:
@@ -327,3 +384,8 @@ def write_corners(path: str | os.PathLike, document: dict) -> None:
 def write_room(path: str | os.PathLike, document: dict) -> None:
     """Validate a ``synthdet.room/1`` document and write it atomically."""
     write_json_atomic(path, validate_room(document, os.fspath(path)), indent=1)
+
+
+def write_labels(path: str | os.PathLike, document: dict) -> None:
+    """Validate a ``synthdet.labels/1`` document and write it atomically."""
+    write_json_atomic(path, validate_labels(document, os.fspath(path)), indent=1)
