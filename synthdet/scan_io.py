@@ -29,16 +29,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable, Iterator, Sequence
 
+import numba
 import numpy as np
 
 from synthdet.ply import read_ply_vertices, write_ply
-from synthdet.point_text import PointFileError, format_lines, read_point_blocks
+from synthdet.point_text import PointFileError, format_lines, read_point_file
 from synthdet.voxels import VoxelFilter
 
 CHUNK_POINTS = 1_000_000  # default points per chunk: about 50 MB of float64 rows
 MAX_HEIGHT = 200.0  # metres; a taller scan (robust extent) is taken to be in other units
 MAX_WIDTH = 20_000.0  # metres
 COLUMN_NAMES = ('x', 'y', 'z', 'r', 'g', 'b', 'i')
+MAX_LINE_BYTES = 1 << 20  # longest text line read (1 MiB); a longer one is refused
+TEXT_BYTES_PER_POINT = 48  # text blocks hold about this many bytes per chunk point
 
 
 class ScanFormatError(ValueError):
@@ -136,7 +139,7 @@ def _text_layout(path: Path, columns: tuple[str, ...] | None) -> tuple[str, int,
     starts the data: a PTS point count or a CSV title line before it is a header.
     """
     with open(path, 'rb') as stream:
-        head = [stream.readline() for _ in range(64)]
+        head = [_read_line(stream, path, number) for number in range(1, 65)]
     lines = [line for line in head if line.strip()]
     if not lines:
         raise ScanFormatError(f'{path}: the scan holds no points')
@@ -164,26 +167,71 @@ def _read_text_columns(path: Path, chunk_points: int, columns: tuple[str, ...] |
     delimiter, header_lines, count = _text_layout(path, columns)
     names = columns or DEFAULT_COLUMNS[count]
     yield from _parse_text_blocks(path, _text_blocks(path, header_lines, chunk_points), names,
-                                  delimiter, notes)
+                                  delimiter, chunk_points, notes)
 
 
-def _text_blocks(path: Path, skip: int, chunk_lines: int) -> Iterator[tuple[int, list[bytes]]]:
-    """Blocks of up to ``chunk_lines`` lines after ``skip`` header lines, with the 1-based
-    number of each block's first line."""
+def _long_line(path: Path, number: int) -> ScanFormatError:
+    return ScanFormatError(f'{path}:{number}: line longer than {MAX_LINE_BYTES:,} bytes; a '
+                           f'text scan holds one point a line')
+
+
+def _read_line(stream: io.BufferedReader, path: Path, number: int) -> bytes:
+    """The next line (line ``number`` of the file), read no further than ``MAX_LINE_BYTES``."""
+    line = stream.readline(MAX_LINE_BYTES + 1)
+    if len(line) > MAX_LINE_BYTES and not line.endswith(b'\n'):
+        raise _long_line(path, number)
+    return line
+
+
+@numba.njit(cache=True, nogil=True)
+def _first_long_line(text: np.ndarray, limit: int) -> int:
+    """Index of the first line of ``text`` (uint8) longer than ``limit`` bytes, or -1."""
+    start = 0
+    line = 0
+    for i in range(text.shape[0]):
+        if text[i] == 10:
+            if i - start > limit:
+                return line
+            start = i + 1
+            line += 1
+    return line if text.shape[0] - start > limit else -1
+
+
+def _text_blocks(path: Path, skip: int, chunk_points: int) -> Iterator[tuple[int, bytes]]:
+    """Blocks of whole lines, about ``TEXT_BYTES_PER_POINT * chunk_points`` bytes each, after
+    ``skip`` header lines, with the 1-based number of each block's first line.
+
+    Memory stays one block plus one line: a line longer than ``MAX_LINE_BYTES`` raises
+    ``ScanFormatError`` naming the file and the line, wherever it is.
+    """
+    block_bytes = TEXT_BYTES_PER_POINT * chunk_points
     with open(path, 'rb') as stream:
-        for _ in range(skip):
-            stream.readline()
-        number = skip + 1
+        for number in range(1, skip + 1):
+            _read_line(stream, path, number)
+        number, rest = skip + 1, b''
         while True:
-            block = list(itertools.islice(stream, chunk_lines))
-            if not block:
+            data = stream.read(block_bytes)
+            if data and b'\n' not in data:  # the line goes on: keep it, up to the limit
+                rest += data
+                if len(rest) > MAX_LINE_BYTES:
+                    raise _long_line(path, number)
+                continue
+            cut = data.rfind(b'\n') + 1 if data else len(rest)
+            block, rest = rest + data[:cut], data[cut:]
+            if len(block) > MAX_LINE_BYTES:
+                long = _first_long_line(np.frombuffer(block, dtype=np.uint8), MAX_LINE_BYTES)
+                if long >= 0:
+                    raise _long_line(path, number + long)
+            if block:
+                yield number, block
+                number += block.count(b'\n')
+            if not data:
                 return
-            yield number, block
-            number += len(block)
 
 
-def _parse_text_blocks(path: Path, blocks: Iterable[tuple[int, list[bytes]]], names: Sequence[str],
-                       delimiter: str, notes: list[str]) -> Iterator[np.ndarray]:
+def _parse_text_blocks(path: Path, blocks: Iterable[tuple[int, bytes]], names: Sequence[str],
+                       delimiter: str, chunk_points: int,
+                       notes: list[str]) -> Iterator[np.ndarray]:
     """Parse blocks of text lines holding the columns ``names`` into ``(n, 6)`` chunks."""
     index = {name: i for i, name in enumerate(names) if name != '_'}
     has_colour, has_intensity = 'r' in index, 'i' in index
@@ -193,7 +241,7 @@ def _parse_text_blocks(path: Path, blocks: Iterable[tuple[int, list[bytes]]], na
     for first_line, block in blocks:
         try:
             values = np.loadtxt(
-                io.BytesIO(b''.join(block)),
+                io.BytesIO(block),
                 delimiter=None if delimiter == ' ' else delimiter,
                 ndmin=2,
                 dtype=np.float64)
@@ -203,18 +251,20 @@ def _parse_text_blocks(path: Path, blocks: Iterable[tuple[int, list[bytes]]], na
         if values.shape[1] != len(names):
             raise ScanFormatError(f'{path}:{first_line}: expected {len(names)} values per line '
                                   f'({",".join(names)}), found {values.shape[1]}')
-        chunk = np.zeros((len(values), 6))
-        chunk[:, :3] = values[:, [index['x'], index['y'], index['z']]]
-        if has_colour:
-            chunk[:, 3:] = colour_scale(values[:, [index['r'], index['g'], index['b']]])
-        elif has_intensity:
-            chunk[:, 3:] = _grey(intensity_scale(values[:, index['i']]))
-        yield chunk
+        for start in range(0, len(values), chunk_points):
+            part = values[start:start + chunk_points]
+            chunk = np.zeros((len(part), 6))
+            chunk[:, :3] = part[:, [index['x'], index['y'], index['z']]]
+            if has_colour:
+                chunk[:, 3:] = colour_scale(part[:, [index['r'], index['g'], index['b']]])
+            elif has_intensity:
+                chunk[:, 3:] = _grey(intensity_scale(part[:, index['i']]))
+            yield chunk
 
 
-def _bad_line(block: list[bytes], count: int, delimiter: str) -> int:
+def _bad_line(block: bytes, count: int, delimiter: str) -> int:
     """Offset in the block of its first line that is not ``count`` numbers (0 if none)."""
-    for offset, line in enumerate(block):
+    for offset, line in enumerate(block.split(b'\n')):
         tokens = _split(line, delimiter)
         if tokens and (len(tokens) != count or not all(_NUMBER.match(t) for t in tokens)):
             return offset
@@ -236,19 +286,26 @@ def _read_txt(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
     count = _s3dis_columns(path)
     if count == 3:
         notes.append(_no_colour_note(path, False))
-    try:  # ~48 bytes a line: blocks of about chunk_points lines, split to at most that many
-        for block in read_point_blocks(path, 48 * chunk_points, columns=count):
-            for start in range(0, len(block), chunk_points):
-                part = block[start:start + chunk_points]
-                yield part if count == 6 else np.hstack([part, np.zeros((len(part), 3))])
-    except PointFileError as error:
-        raise ScanFormatError(str(error)) from None
+    for first_line, block in _text_blocks(path, 0, chunk_points):
+        if not block.strip():
+            continue
+        try:
+            values, _ = read_point_file(path, data=block, columns=count)
+        except PointFileError as error:  # its line counts from the block's first
+            raise ScanFormatError(
+                f'{path}:{first_line + error.line - 1}: {error.reason}') from None
+        for start in range(0, len(values), chunk_points):
+            part = values[start:start + chunk_points]
+            yield part if count == 6 else np.hstack([part, np.zeros((len(part), 3))])
 
 
 def _s3dis_columns(path: Path) -> int:
     """The number of values on the first non-blank line: 6 (x y z r g b) or 3 (x y z)."""
     with open(path, 'rb') as stream:
-        for number, line in enumerate(stream, start=1):
+        for number in itertools.count(1):
+            line = _read_line(stream, path, number)
+            if not line:
+                break
             count = len(line.split())
             if count in (3, 6):
                 return count
@@ -337,8 +394,10 @@ def _read_las(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
         if not has_colour:
             notes.append(_no_colour_note(path, True))
         colour_scale, intensity_scale = _Scale(), _Scale()
+        total = 0
         try:
             for points in reader.chunk_iterator(chunk_points):
+                total += len(points)
                 chunk = np.empty((len(points), 6))
                 chunk[:, 0] = points.x  # scale and offset applied in float64
                 chunk[:, 1] = points.y
@@ -349,8 +408,12 @@ def _read_las(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
                 else:
                     chunk[:, 3:] = _grey(intensity_scale(points.intensity))
                 yield chunk
-        except (OSError, ValueError, RuntimeError) as error:
-            raise ScanFormatError(f'{path}: cannot decode the points ({_short(error)})') from None
+        except (OSError, ValueError, RuntimeError) as error:  # a record cut short, too
+            raise ScanFormatError(f'{path}: cannot decode the {reader.header.point_count:,} '
+                                  f'points its header counts ({_short(error)})') from None
+        if total != reader.header.point_count:
+            raise ScanFormatError(f'{path}: the header counts {reader.header.point_count:,} '
+                                  f'points but the data holds {total:,}')
 
 
 def _read_e57(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
@@ -483,24 +546,23 @@ class _PcdHeader:
     data: str
     offset: int  # bytes before the data
     lines: int  # header lines
+    declared: bool  # the header gives the point count (POINTS, or WIDTH and HEIGHT)
 
 
 def _pcd_header(path: Path) -> _PcdHeader:
     entries: dict[str, list[str]] = {}
     offset = lines = 0
     with open(path, 'rb') as stream:
-        for raw in stream:
+        while lines < 50 and 'DATA' not in entries:
+            raw = stream.readline(MAX_LINE_BYTES + 1)
+            if not raw or len(raw) > MAX_LINE_BYTES:
+                break
             offset += len(raw)
             lines += 1
             words = raw.decode('ascii', errors='replace').split()
-            if not words or words[0].startswith('#'):
-                continue
-            entries[words[0].upper()] = words[1:]
-            if words[0].upper() == 'DATA':
-                break
-            if lines > 50:
-                break
-    if 'DATA' not in entries or 'FIELDS' not in entries:
+            if words and not words[0].startswith('#'):
+                entries[words[0].upper()] = words[1:]
+    if not entries.get('DATA') or 'FIELDS' not in entries:
         raise ScanFormatError(f'{path}: not a PCD file (no FIELDS or DATA line in its header)')
     fields = entries['FIELDS']
     sizes = entries.get('SIZE', ['4'] * len(fields))
@@ -510,14 +572,27 @@ def _pcd_header(path: Path) -> _PcdHeader:
         raise ScanFormatError(f'{path}: PCD header FIELDS, SIZE, TYPE and COUNT differ in length')
     layout = []
     for name, size, kind, count in zip(fields, sizes, types, counts):
-        code = _PCD_TYPES.get((kind.upper(), int(size)))
+        code = _PCD_TYPES.get((kind.upper(), _pcd_number(path, 'SIZE', size)))
         if code is None:
             raise ScanFormatError(f'{path}: PCD field {name} has unknown type {kind}{size}')
-        layout.append((name, code, (int(count), )) if int(count) > 1 else (name, code))
-    width = int(entries.get('WIDTH', ['0'])[0])
-    height = int(entries.get('HEIGHT', ['1'])[0])
-    points = int(entries.get('POINTS', [str(width * height)])[0])
-    return _PcdHeader(fields, np.dtype(layout), points, entries['DATA'][0].lower(), offset, lines)
+        count = _pcd_number(path, 'COUNT', count)
+        layout.append((name, code, (count, )) if count != 1 else (name, code))
+    try:
+        dtype = np.dtype(layout)
+    except (TypeError, ValueError) as error:  # a field named twice, a count of zero
+        raise ScanFormatError(f'{path}: PCD fields {fields}: {_short(error)}') from None
+    width = _pcd_number(path, 'WIDTH', entries.get('WIDTH', ['0'])[0])
+    height = _pcd_number(path, 'HEIGHT', entries.get('HEIGHT', ['1'])[0])
+    points = _pcd_number(path, 'POINTS', entries.get('POINTS', [str(width * height)])[0])
+    declared = 'POINTS' in entries or 'WIDTH' in entries
+    return _PcdHeader(fields, dtype, points, entries['DATA'][0].lower(), offset, lines, declared)
+
+
+def _pcd_number(path: Path, key: str, text: str) -> int:
+    """A whole number >= 0 of the PCD header's ``key`` line."""
+    if not text.isdigit() or len(text) > 18:
+        raise ScanFormatError(f'{path}: PCD header {key} {text[:20]!r} is not a whole number')
+    return int(text)
 
 
 def _pcd_colours(packed: np.ndarray) -> np.ndarray:
@@ -533,58 +608,239 @@ def _read_pcd(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
     intensity = 'intensity' if 'intensity' in header.fields else None
     if not {'x', 'y', 'z'} <= set(header.fields):
         raise ScanFormatError(f'{path}: PCD fields need x, y and z, got {header.fields}')
+    wanted = ['x', 'y', 'z'] + [name for name in (colour or intensity, ) if name]
     if header.data == 'binary':
-        expected = header.offset + header.points * header.dtype.itemsize
-        if path.stat().st_size < expected:
-            raise ScanFormatError(f'{path}: {path.stat().st_size} bytes, the header promises '
-                                  f'{header.points} points ({expected} bytes)')
-        if header.points == 0:
-            return
-        table = np.memmap(
-            path, dtype=header.dtype, mode='r', offset=header.offset, shape=(header.points, ))
+        blocks = _pcd_binary_tables(path, header, chunk_points)
+    elif header.data == 'binary_compressed':
+        blocks = _pcd_compressed_tables(path, header, wanted, chunk_points)
     elif header.data == 'ascii':
-        table = None
+        blocks = (_pcd_ascii_rows(path, first, block, header)
+                  for first, block in _text_blocks(path, header.lines, chunk_points))
     else:
-        raise ScanFormatError(f'{path}: PCD data {header.data!r} is not supported; save it as '
-                              f'binary or ascii')
+        raise ScanFormatError(f'{path}: PCD data {header.data!r} is not one of ascii, binary '
+                              f'and binary_compressed')
     if colour is None:
         notes.append(_no_colour_note(path, intensity is not None))
     intensity_scale = _Scale()
-    if table is not None:
-        blocks = ((start, table[start:start + chunk_points])
-                  for start in range(0, len(table), chunk_points))
-    else:
-        blocks = ((first, _pcd_ascii_rows(path, first, block, header))
-                  for first, block in _text_blocks(path, header.lines, chunk_points))
-    for _, part in blocks:
-        chunk = np.zeros((len(part), 6))
-        for i, name in enumerate('xyz'):
-            chunk[:, i] = part[name]
-        if colour is not None:
-            chunk[:, 3:] = _pcd_colours(part[colour])
-        elif intensity is not None:
-            chunk[:, 3:] = _grey(intensity_scale(part[intensity]))
-        yield chunk
+    total = 0
+    for block in blocks:
+        total += len(block)
+        for start in range(0, len(block), chunk_points):
+            part = block[start:start + chunk_points]
+            chunk = np.zeros((len(part), 6))
+            for i, name in enumerate('xyz'):
+                chunk[:, i] = part[name]
+            if colour is not None:
+                chunk[:, 3:] = _pcd_colours(part[colour])
+            elif intensity is not None:
+                chunk[:, 3:] = _grey(intensity_scale(part[intensity]))
+            yield chunk
+    if header.data == 'ascii' and header.declared and total != header.points:
+        raise ScanFormatError(f'{path}: the header counts {header.points:,} points but the data '
+                              f'holds {total:,} lines of points')
 
 
-def _pcd_ascii_rows(path: Path, first_line: int, block: list[bytes],
-                    header: _PcdHeader) -> np.ndarray:
-    """Parse a block of ASCII PCD lines into the header's structured dtype."""
-    floats = np.dtype([(name, '<f8' if header.dtype[name].kind == 'f' else '<i8')
-                       for name in header.fields if header.dtype[name].shape == ()])
+def _pcd_binary_tables(path: Path, header: _PcdHeader, chunk_points: int) -> Iterator[np.ndarray]:
+    """The points of ``DATA binary`` (one record after the other), memory-mapped."""
+    expected = header.offset + header.points * header.dtype.itemsize
+    if path.stat().st_size < expected:
+        raise ScanFormatError(f'{path}: {path.stat().st_size} bytes, the header promises '
+                              f'{header.points:,} points ({expected:,} bytes)')
+    if header.points == 0:
+        return
+    table = np.memmap(
+        path, dtype=header.dtype, mode='r', offset=header.offset, shape=(header.points, ))
+    for start in range(0, len(table), chunk_points):
+        yield table[start:start + chunk_points]
+
+
+def _pcd_ascii_rows(path: Path, first_line: int, block: bytes, header: _PcdHeader) -> np.ndarray:
+    """Parse a block of ASCII PCD lines into the header's structured dtype (fields of one value;
+    fields of several values are left zero)."""
+    widths = [int(np.prod(header.dtype[name].shape)) for name in header.fields]
+    starts = np.concatenate([[0], np.cumsum(widths)[:-1]]).tolist()
+    single = [name for name, width in zip(header.fields, widths) if header.dtype[name].shape == ()]
+    numbers = np.dtype([(name, '<f8' if header.dtype[name].kind == 'f' else '<i8')
+                        for name in single])
     try:
         rows = np.loadtxt(
-            io.BytesIO(b''.join(block)),
-            dtype=floats,
+            io.BytesIO(block),
+            dtype=numbers,
             ndmin=1,
-            usecols=[i for i, name in enumerate(header.fields) if header.dtype[name].shape == ()])
+            usecols=[starts[header.fields.index(name)] for name in single])
     except ValueError as error:
-        raise ScanFormatError(f'{path}:{first_line + _bad_line(block, len(header.fields), " ")}'
+        raise ScanFormatError(f'{path}:{first_line + _bad_line(block, sum(widths), " ")}'
                               f': {_short(error)}') from None
     table = np.zeros(len(rows), header.dtype)
-    for name in floats.names:
+    for name in single:
         table[name] = rows[name]
     return table
+
+
+# ------------------------------------------------------------------ PCD binary_compressed (LZF)
+#
+# ``DATA binary_compressed`` (PCL's and Open3D's compressed PCD) is two little-endian uint32,
+# the compressed and the uncompressed size, then one LZF stream of the points stored field by
+# field: every point's x, then every point's y, and so on. An LZF stream is a sequence of
+# instructions: a control byte below 32 copies the next control + 1 bytes; any other is a back
+# reference that repeats 3 to 264 bytes of the output from at most LZF_WINDOW bytes back. So a
+# decoder needs only the last LZF_WINDOW bytes of its output: the points are read a chunk at a
+# time with one such decoder per field, each started from the state a first pass over the whole
+# stream (which also checks it) recorded at the start of its field.
+
+LZF_WINDOW = 8192  # an LZF back reference reaches at most this many bytes back
+LZF_LONGEST = 264  # bytes one LZF instruction writes at most
+LZF_BLOCK = 1 << 22  # bytes the first pass decodes per call
+_LZF_PROBLEMS = {
+    1: 'the data ends inside an instruction',
+    2: 'a back reference before the start of the data',
+}
+
+
+@numba.njit(cache=True, nogil=True)
+def _lzf_decode(source: np.ndarray, position: int, out: np.ndarray, written: int, stop: int,
+                overshoot: bool) -> tuple[int, int, int]:
+    """Decode LZF instructions from ``source[position:]`` into ``out[written:]`` while
+    ``written < stop`` (``out[:written]`` ends with the output so far, at least its last
+    ``LZF_WINDOW`` bytes). Without ``overshoot`` it stops before an instruction that would
+    write past ``stop``; ``out`` needs ``LZF_LONGEST`` bytes beyond ``stop``.
+
+    Returns the new position and written count and 0, or a key of ``_LZF_PROBLEMS``.
+    """
+    end = source.shape[0]
+    while position < end and written < stop:
+        control = np.int64(source[position])
+        if control < 32:  # a literal run
+            length = control + 1
+            if position + 1 + length > end:
+                return position, written, 1
+            if written + length > stop and not overshoot:
+                break
+            out[written:written + length] = source[position + 1:position + 1 + length]
+            position += 1 + length
+        else:  # a back reference: length in the top 3 bits (7: one more byte), then distance
+            length = control >> 5
+            step = 2
+            if length == 7:
+                if position + 1 >= end:
+                    return position, written, 1
+                length += np.int64(source[position + 1])
+                step = 3
+            if position + step > end:
+                return position, written, 1
+            distance = ((control & 31) << 8) + np.int64(source[position + step - 1]) + 1
+            length += 2
+            if distance > written:
+                return position, written, 2
+            if written + length > stop and not overshoot:
+                break
+            for k in range(length):  # byte by byte: the copy may overlap what it writes
+                out[written + k] = out[written - distance + k]
+            position += step
+        written += length
+    return position, written, 0
+
+
+def _lzf_error(path: Path, problem: int, position: int) -> ScanFormatError:
+    return ScanFormatError(f'{path}: corrupt binary_compressed data ({_LZF_PROBLEMS[problem]}, '
+                           f'compressed byte {position:,})')
+
+
+def _lzf_field_states(path: Path, source: np.ndarray, starts: Sequence[int],
+                      size: int) -> list[tuple[int, int, np.ndarray]]:
+    """Decode the whole stream once, checking that it is ``size`` bytes long; returns for each
+    output offset of ``starts`` (increasing) the decoder's state at the last instruction that
+    starts there or before: (source position, output offset, the output's last bytes)."""
+    states = []
+    buffer = np.empty(LZF_WINDOW + LZF_BLOCK + LZF_LONGEST, dtype=np.uint8)
+    position = produced = kept = 0
+    for target in [*starts, None]:
+        while target is None or produced < target:
+            room = LZF_BLOCK + LZF_WINDOW - kept
+            want = room if target is None else min(room, target - produced)
+            position, written, problem = _lzf_decode(source, position, buffer, kept,
+                                                     kept + want, target is None)
+            if problem:
+                raise _lzf_error(path, problem, position)
+            produced += written - kept
+            if produced > size:
+                raise ScanFormatError(f'{path}: binary_compressed data longer than the '
+                                      f'{size:,} bytes its header gives')
+            keep = min(LZF_WINDOW, written)
+            buffer[:keep] = buffer[written - keep:written]
+            progress, kept = written - kept, keep
+            if progress == 0:
+                break
+        if target is not None:
+            states.append((position, produced, buffer[:kept].copy()))
+    if produced != size:
+        raise ScanFormatError(f'{path}: binary_compressed data of {produced:,} bytes where the '
+                              f'header gives {size:,}')
+    return states
+
+
+def _lzf_field_blocks(path: Path, source: np.ndarray, state: tuple[int, int, np.ndarray],
+                      start: int, item_bytes: int, points: int,
+                      chunk_points: int) -> Iterator[np.ndarray]:
+    """The bytes of one field (``points`` items of ``item_bytes`` from output offset
+    ``start``), ``chunk_points`` items at a time, decoded from ``state`` on."""
+    position, produced, window = state
+    buffer = np.empty(LZF_WINDOW + chunk_points * item_bytes + 2 * LZF_LONGEST, dtype=np.uint8)
+    kept = len(window)
+    buffer[:kept] = window
+    for first in range(0, points, chunk_points):
+        begin = start + first * item_bytes
+        end = begin + min(chunk_points, points - first) * item_bytes
+        if end > produced:
+            position, written, problem = _lzf_decode(source, position, buffer, kept,
+                                                     kept + end - produced, True)
+            if problem or written < kept + end - produced:
+                raise _lzf_error(path, problem or 1, position)
+            produced += written - kept
+            kept = written
+        stop = kept - (produced - end)  # buffer[:kept] ends at output offset ``produced``
+        yield buffer[stop - (end - begin):stop]
+        keep = min(LZF_WINDOW, kept)
+        buffer[:keep] = buffer[kept - keep:kept]
+        kept = keep
+
+
+def _pcd_compressed_tables(path: Path, header: _PcdHeader, wanted: Sequence[str],
+                           chunk_points: int) -> Iterator[np.ndarray]:
+    """The ``wanted`` fields of ``DATA binary_compressed``, ``chunk_points`` points at a time,
+    in memory bounded by the chunk: the file is memory-mapped, the fields decoded as above."""
+    file_size = path.stat().st_size
+    sizes = np.fromfile(path, dtype='<u4', count=2, offset=header.offset) \
+        if file_size >= header.offset + 8 else np.zeros(0)
+    if len(sizes) < 2 or file_size < header.offset + 8 + int(sizes[0]):
+        raise ScanFormatError(f'{path}: {file_size:,} bytes, shorter than the binary_compressed '
+                              f'data its header announces')
+    compressed, size = int(sizes[0]), int(sizes[1])
+    if size != header.points * header.dtype.itemsize:
+        raise ScanFormatError(f'{path}: the header counts {header.points:,} points '
+                              f'({header.points * header.dtype.itemsize:,} bytes) but the '
+                              f'binary_compressed data holds {size:,} bytes')
+    if header.points == 0:
+        return
+    source = np.zeros(0, dtype=np.uint8) if compressed == 0 else np.asarray(
+        np.memmap(path, dtype=np.uint8, mode='r', offset=header.offset + 8, shape=(compressed, )))
+    field_bytes = [header.dtype[name].itemsize for name in header.fields]
+    field_starts = np.concatenate([[0], np.cumsum(field_bytes)[:-1]]) * header.points
+    starts = {name: int(field_starts[header.fields.index(name)]) for name in wanted}
+    ordered = sorted(wanted, key=starts.get)
+    states = dict(zip(ordered, _lzf_field_states(path, source, [starts[n] for n in ordered],
+                                                 size)))
+    fields = [
+        _lzf_field_blocks(path, source, states[name], starts[name], header.dtype[name].itemsize,
+                          header.points, chunk_points) for name in wanted
+    ]
+    dtype = np.dtype([(name, header.dtype[name]) for name in wanted])
+    for blocks in zip(*fields):
+        table = np.empty(len(blocks[0]) // dtype[0].itemsize, dtype)
+        for name, block in zip(wanted, blocks):
+            table[name] = block.view(header.dtype[name].base).reshape(
+                (len(table), ) + header.dtype[name].shape)
+        yield table
 
 
 # suffix -> generator of (n, 6) float64 chunks: reader(path, chunk_points, columns, notes)

@@ -176,7 +176,8 @@ def test_pcd_ascii_and_binary_with_packed_colours_and_intensity(tmp_path):
     assert 'intensity as grey' in notes[0]
     compressed = binary.replace('DATA binary', 'DATA binary_compressed')
     (tmp_path / 'c.pcd').write_bytes(compressed.encode() + b'\0' * 8)
-    with pytest.raises(ScanFormatError, match=r"c\.pcd: PCD data 'binary_compressed' is not"):
+    with pytest.raises(ScanFormatError, match=r'c\.pcd: the header counts 2 points \(32 bytes\) '
+                       r'but the binary_compressed data holds 0 bytes'):
         read_scan(tmp_path / 'c.pcd')
 
 
