@@ -145,6 +145,11 @@ HALL_DEFAULTS: dict[str, Any] = {
     'windows': [0, 6],  # inclusive range of windows in the outer walls
 }
 
+# Room kinds (generator/room_kinds.py): a configuration file's ``room_kinds`` maps each to its
+# probability (missing kinds are 0, the sum is 1). Without it every room is a factory room and
+# nothing is drawn, so the rooms of earlier versions come out unchanged.
+ROOM_KINDS = ('factory', 'office', 'meeting', 'living', 'bedroom', 'lab')
+
 # mappings a user file replaces as a whole, named by what they map (missing keys are 0)
 _DISTRIBUTIONS = {'shapes': 'room shape', 'clutter_kinds': 'clutter kind', 'sensors': 'sensor model'}
 _SUM_GROUPS = (('probabilities', ('table', 'sofa')), ('probabilities', ('yumi', '3dprinter')))
@@ -177,7 +182,10 @@ def load_config(path: str | Path | None = None) -> dict[str, Any]:
         if not isinstance(user, dict):
             raise ConfigError(f'{path}: top level must be a mapping, got {type(user).__name__}')
         hall = user.pop('hall', None)
+        kinds = user.pop('room_kinds', None)
         _merge(config, user, DEFAULTS, source, '')
+        if kinds is not None:
+            config['room_kinds'] = _room_kinds(kinds, source)
         if hall is not None:
             if not isinstance(hall, dict):
                 raise ConfigError(f'{source}: "hall" must be a mapping')
@@ -185,6 +193,17 @@ def load_config(path: str | Path | None = None) -> dict[str, Any]:
             _merge(config['hall'], hall, HALL_DEFAULTS, source, 'hall.')
     validate_config(config, source)
     return config
+
+
+def _room_kinds(value: Any, source: str) -> dict[str, float]:
+    """A user's ``room_kinds`` as a probability per kind of :data:`ROOM_KINDS`."""
+    if not isinstance(value, dict):
+        raise ConfigError(f'{source}: "room_kinds" must be a mapping of room kind -> probability')
+    for name in value:
+        if name not in ROOM_KINDS:
+            raise ConfigError(f'{source}: unknown room kind "{name}" in "room_kinds" '
+                              f'(known: {", ".join(ROOM_KINDS)})')
+    return {kind: value.get(kind, 0.0) for kind in ROOM_KINDS}
 
 
 def _merge(target: dict, user: dict, reference: dict, source: str, prefix: str) -> None:
@@ -236,14 +255,17 @@ def _range(config: dict, section: str, key: str, source: str, integer: bool = Fa
         raise ConfigError(f'{source}: "{section}.{key}" has min > max: {value!r}')
 
 
-def _distribution(config: dict, section: str, key: str, source: str) -> None:
-    probs = config[section][key]
+def _distribution(config: dict, section: str, key: str | None, source: str) -> None:
+    """Check the distribution ``config[section][key]`` (``config[section]`` when ``key`` is
+    None)."""
+    probs = config[section] if key is None else config[section][key]
+    where = section if key is None else f'{section}.{key}'
     for name, p in probs.items():
         if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0.0 <= p <= 1.0:
-            raise ConfigError(f'{source}: "{section}.{key}.{name}" must be a probability in '
+            raise ConfigError(f'{source}: "{where}.{name}" must be a probability in '
                               f'[0, 1], got {p!r}')
     if abs(sum(probs.values()) - 1.0) > 1e-6:
-        raise ConfigError(f'{source}: "{section}.{key}" probabilities sum to '
+        raise ConfigError(f'{source}: "{where}" probabilities sum to '
                           f'{sum(probs.values()):g}, not 1')
 
 
@@ -314,6 +336,11 @@ def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
     _validate_sensors(scanner, source)
     if 'hall' in config:
         _validate_hall(config, source)
+    if 'room_kinds' in config:
+        if 'hall' in config:
+            raise ConfigError(f'{source}: "room_kinds" applies to rooms; the bays of a hall are '
+                              f'furnished as factory rooms')
+        _distribution(config, 'room_kinds', None, source)
     for key in ('path_steps', 'batch_rays', 'max_object_rays'):
         value = scanner[key]
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:

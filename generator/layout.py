@@ -28,6 +28,7 @@ import numpy as np
 
 from generator.clutter import (CLUTTER_KINDS, PRIMITIVE_KINDS, WALL_KINDS, sample_clutter,
                                sample_pipe_run, sample_primitive)
+from generator.config import ROOM_KINDS
 from synthdet.classes import GENERATED_CLASSES
 from synthdet.geometry import (box_corners_xy, edges_cross, points_in_polygon, rotation2d,
                                signed_area)
@@ -140,6 +141,7 @@ class RoomLayout:
     openings: list[Opening] = field(default_factory=list)
     bays: list[np.ndarray] = field(default_factory=list)
     partitions: list[Partition] = field(default_factory=list)
+    kind: str | None = None  # the room kind, when the configuration has ``room_kinds``
 
     def counts(self) -> dict[str, int]:
         result = {cls: 0 for cls in GENERATED_CLASSES}
@@ -770,15 +772,25 @@ def generate_layout(rng: np.random.Generator, catalog: Catalog,
     if 'hall' in config:
         return generate_hall_layout(rng, catalog, config)
     room_cfg, probs, layout_cfg = config['room'], config['probabilities'], config['layout']
+    kind = None  # without ``room_kinds`` nothing is drawn: the factory rooms of earlier versions
+    if 'room_kinds' in config:
+        kind = _pick(rng, config['room_kinds'], ROOM_KINDS) or 'factory'
+    if kind not in (None, 'factory'):
+        from generator.room_kinds import kind_room_config  # its rules use this module's placer
+        room_cfg = kind_room_config(room_cfg, kind)
     shape, polygon, height = sample_room(rng, room_cfg)
-    layout = RoomLayout(shape, polygon, height)
+    layout = RoomLayout(shape, polygon, height, kind=kind)
     # objects stay below the sensor (and the ceiling), so the sensor path never runs through one
     top_limit = min(height - 0.05, float(config['scanner']['sensor_height']) * height - 0.1)
     placer = _Placer(polygon, top_limit, float(layout_cfg['clearance']), height,
                      _overhead_from(config, height))
     _place_openings(rng, placer, room_cfg, layout)
 
-    _furnish(rng, placer, catalog, probs, layout_cfg)
+    if kind in (None, 'factory'):
+        _furnish(rng, placer, catalog, probs, layout_cfg)
+    else:
+        from generator.room_kinds import furnish_kind
+        furnish_kind(rng, placer, catalog, layout, kind)
     layout.objects = placer.objects
     return layout
 
@@ -863,6 +875,8 @@ def layout_meta(layout: RoomLayout) -> dict[str, Any]:
             'z': [o.z0, o.z1]
         } for name, o in zip(names, layout.openings)]
     }
+    if layout.kind is not None:
+        room['kind'] = layout.kind
     if layout.shape == 'hall':
         room['bays'] = [[[float(x), float(y)] for x, y in bay] for bay in layout.bays]
         room['partitions'] = [{

@@ -14,9 +14,9 @@ from typing import Callable, Sequence
 import bpy
 import numpy as np
 
+from generator.household import is_procedural, procedural_mesh
 from generator.layout import RoomLayout
 from generator.scanner import TriangleScene
-from generator.clutter import clutter_mesh
 from generator.structure import structure_parts
 
 COLLECTION = 'synthdet_room'
@@ -94,8 +94,8 @@ class RoomScene:
                                     part.colors)
             self._add_object(part.instance, part.cls, mesh)
         for placed in layout.objects:
-            if placed.cls == 'clutter':  # sized per room: a mesh of its own
-                mesh = mesh_from_arrays(f'room:{placed.instance}', *clutter_mesh(placed.spec))
+            if is_procedural(placed.spec):  # sized per room: a mesh of its own
+                mesh = mesh_from_arrays(f'room:{placed.instance}', *procedural_mesh(placed.spec))
             else:
                 mesh = self._asset_mesh(placed.cls, placed.spec.name)
             self._add_object(placed.instance, placed.cls, mesh, placed.base, placed.yaw)
