@@ -47,6 +47,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
 
 from projects.synthdet.datasets.s3dis_converter import S3DIS_DIR, convert_s3dis  # noqa: E402
+from synthdet.room_data import annotation_files  # noqa: E402  (the converter's file order)
 from tests.s3dis_fixtures import write_synthetic_area  # noqa: E402
 
 S3DIS_CLASSES_13 = ('ceiling', 'floor', 'wall', 'beam', 'column', 'window', 'door', 'table',
@@ -135,11 +136,6 @@ def run_synthdet(root: Path, out_dir: Path, area: int, workers: int) -> Timer:
     return timer
 
 
-def natural_file_order(anno_path: Path) -> list[str]:
-    from projects.synthdet.datasets.s3dis_converter import _natural_key
-    return [str(p) for p in sorted(anno_path.glob('*.txt'), key=lambda p: _natural_key(p.name))]
-
-
 def check_identical(root: Path, area: int, out_dir: Path, mm_root: Path, mm_infos: list,
                     mm_orders: dict[str, list[str]]) -> int:
     """Compare every room; returns the number of boxes compared."""
@@ -160,7 +156,7 @@ def check_identical(root: Path, area: int, out_dir: Path, mm_root: Path, mm_info
         our_id = {
             Path(p).name: k
             for k, p in enumerate(
-                natural_file_order(root / S3DIS_DIR / f'Area_{area}' / room / 'Annotations'),
+                annotation_files(root / S3DIS_DIR / f'Area_{area}' / room / 'Annotations'),
                 start=1)
         }
         assert mm_id.keys() == our_id.keys(), room

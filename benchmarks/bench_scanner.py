@@ -1,10 +1,16 @@
-"""Ray casting speed on one generated room: the batched Embree scanner (``Scanner.cast``, embreex
-``EmbreeScene``) against the per-ray loops a bpy user would write, on the same scene and rays.
+"""Ray casting speed on one generated room with glass: the batched Embree scanner against the
+per-ray loops a bpy user would write, on the same scene and rays, and the default sensor models'
+scans with each ray engine.
 
     .venv/bin/python benchmarks/bench_scanner.py [--rays 1000000] [--slow-rays 20000]
+        [--scan-points 1000000] [--repeats 3] [--seed 11]
 
-Every method turns the same numpy rays (origins, unit directions) into numpy hit distances and
-triangle (face) indices, the input of labelling:
+The room is layout seed ``--seed`` of the default configuration (seed 11: a box room whose 3D
+printer and one clutter cabinet have glass), scanned as the generator scans it: glass passes
+with the default ``glass_transmission`` (0.9), one thread.
+
+Part 1, bare ray casting: every method turns the same numpy rays (origins, unit directions) into
+numpy hit distances and triangle (face) indices, the input of labelling:
 
 - ``BVHTree.ray_cast`` loop: one ``mathutils.bvhtree.BVHTree`` of all world triangles, one call
   per ray (the fastest bpy loop);
@@ -13,30 +19,42 @@ triangle (face) indices, the input of labelling:
 - ``scene.ray_cast`` loop: one call per ray on the scene (the previous baseline).
 
 Beside them, Open3D's ``RaycastingScene.cast_rays`` (Embree in robust mode, the scanner's
-previous engine), called as the previous ``Scanner.cast`` did: what the switch to embreex gains,
-and whether the two Embree modes find the same hits.
-
-Equal treatment: one warm-up pass on the first 1000 rays, then the median of ``--repeats`` timed
+previous engine): what the switch to embreex gains, and whether the two Embree modes find the
+same hits. One warm-up pass on the first 1000 rays, then the median of ``--repeats`` timed
 passes with the garbage collector off, the passes going round the methods in turn; the slow
 loops (``Object`` and ``scene``) take the first ``--slow-rays`` rays. Each loop's hits are
 checked against Embree's. All methods run on one thread (bpy's ray casts are single-threaded);
 Embree on all cores is printed beside it.
 
-Then full 1M-point scans (``Scanner.scan``: ray generation, casting, labelling, colours) with
-Embree (one thread, all cores) and with the ``BVHTree`` loop as the ray engine in the same
-scan code, with the share of the time spent casting. The last line gives the one-thread ratios
-against the fastest bpy loop (ray casting, the headline, and the full scan), the all-core
-ratios beside them.
+Part 2, the sensor models at their defaults (``generator.sensors.scan_room``: the paper's
+crossing path with aimed object rays, the terrestrial laser scanner, the tablet), each a scan of
+``--scan-points`` labelled points, with Embree and with the ``BVHTree`` loop as the ray engine of
+the same scan code (glass passes included), one thread each, the median of ``--repeats`` scans
+going round the engines in turn. Rays per second count the rays a scan casts (``rays_cast``; its
+glass passes are extra work within them). Where the Embree scan's time goes is timed inside it:
+the first hits of its ray batches (casting), the glass passes (their casts and bookkeeping), the
+noise models (range-error draws and mixed pixels), the laser scanner's spacing filter, and the
+rest (ray generation, labelling); writing the room's files (``generator.writer.write_room``)
+is timed after the scan. The physical bound is the bare Embree cast of exactly the ray batches
+the scan cast, first hits and glass passes (recorded in one more scan): "our scan / bare cast"
+is what is left to win.
+
+The last line gives, one thread each: the rays per second of the default sensors' scans against
+the same scans on the ``BVHTree`` loop (over the three models, and per model), the bare ray
+casting ratio on the random rays, and our scan / bare cast.
 """
 import argparse
+import contextlib
 import gc
 import os
+import shutil
 import statistics
 import sys
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator, Sequence
 
 import bpy
 import numpy as np
@@ -45,12 +63,19 @@ from mathutils.bvhtree import BVHTree
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's generator
 
+from generator import sensors  # noqa: E402
+from generator.assets.palette import METAL, SEE_THROUGH  # noqa: E402
 from generator.config import load_config  # noqa: E402
-from generator.layout import catalog_from_library, generate_layout  # noqa: E402
+from generator.layout import catalog_from_library, generate_layout, layout_meta  # noqa: E402
 from generator.pipeline import RunOptions, open_library  # noqa: E402
 from generator.scanner import (  # noqa: E402
-    Scanner, TriangleScene, random_directions, sensor_path)
+    ScanResult, Scanner, TriangleScene, _cast_slice, random_directions, sensor_path,
+    triangles_of_colours)
 from generator.scene import COLLECTION, RoomScene, export_triangles  # noqa: E402
+from generator.sensors import (  # noqa: E402
+    RoomGeometry, label_stray_returns, room_geometry, scan_room)
+from generator.writer import write_room  # noqa: E402
+from synthdet.contracts import ROOM_FORMAT, SENSOR_MODELS  # noqa: E402
 
 Caster = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
@@ -164,60 +189,191 @@ def timed(methods: dict[str, tuple[Caster, int]], origins: np.ndarray, direction
 
 
 class BVHTreeScanner(Scanner):
-    """The scanner's own scan scheme with the per-ray ``BVHTree.ray_cast`` loop as ray engine."""
+    """The scanner with the per-ray ``BVHTree.ray_cast`` loop as its ray engine: the same ray
+    generation, glass passes, noise and labelling around it."""
 
-    def __init__(self, scene: TriangleScene):
-        super().__init__(scene, threads=1)
+    def __init__(self, scene: TriangleScene, glass_colors: Sequence, glass_transmission: float):
+        super().__init__(scene, 1, glass_colors, glass_transmission)
         self.loops = {
             id(self.full_scene): bvhtree_caster(scene.vertices, scene.triangles),
             id(self.object_scene): bvhtree_caster(scene.vertices,
                                                   scene.triangles[self.object_tri]),
         }
 
-    def cast(self, raycaster, origins: np.ndarray,
-             directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        distance, face = self.loops[id(raycaster)](origins, directions)
-        return distance.astype(np.float32), face
+    def _first_hits(self, raycaster, origins: np.ndarray,
+                    directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        distance, face = self.loops[id(raycaster)](np.asarray(origins, dtype=np.float32),
+                                                   np.asarray(directions, dtype=np.float32))
+        return distance.astype(np.float32), face.astype(np.int32).view(np.uint32)
 
 
-def time_scans(scanners: dict[str, Scanner], path: np.ndarray, points: int, config: dict,
-               repeats: int) -> dict[str, tuple[float, float, int]]:
-    """Per scanner: median seconds of a full scan, the share of it in ``cast``, rays cast.
+class ProfiledScanner(Scanner):
+    """The Embree scanner timing its first hits and glass passes, optionally keeping every ray
+    batch it casts (for the bare cast of the same rays)."""
 
-    One warm-up scan of 10,000 points each; the timed scans go round the scanners in turn.
-    """
-    seconds = {label: [] for label in scanners}
-    cast_seconds = {label: [] for label in scanners}
-    rays = {}
-    for scanner in scanners.values():
-        scanner.scan(path, 10_000, 0.5, np.random.default_rng(1), config)
-    for _ in range(repeats):
-        for label, scanner in scanners.items():
-            in_cast = []
+    def __init__(self, scene: TriangleScene, glass_colors: Sequence, glass_transmission: float):
+        super().__init__(scene, 1, glass_colors, glass_transmission)
+        self.seconds: Counter = Counter()
+        self.batches: list | None = None
+        self._first_of_cast = False
 
-            def timed_cast(*cast_args, original=type(scanner).cast, scanner=scanner):
-                start = time.perf_counter()
-                answer = original(scanner, *cast_args)
-                in_cast.append(time.perf_counter() - start)
-                return answer
+    def cast(self, raycaster, origins, directions, rng=None):
+        start = time.perf_counter()
+        self._first_of_cast = True
+        answer = super().cast(raycaster, origins, directions, rng)
+        self.seconds['cast'] += time.perf_counter() - start
+        return answer
 
-            scanner.cast = timed_cast
-            gc.collect()
-            gc.disable()
-            try:
-                start = time.perf_counter()
-                scan = scanner.scan(path, points, 0.5, np.random.default_rng(1), config)
-                seconds[label].append(time.perf_counter() - start)
-            finally:
-                gc.enable()
-                del scanner.cast
-            cast_seconds[label].append(sum(in_cast))
-            rays[label] = scan.rays_cast
-    return {
-        label: (statistics.median(seconds[label]),
-                statistics.median(np.divide(cast_seconds[label], seconds[label])), rays[label])
-        for label in scanners
-    }
+    def _first_hits(self, raycaster, origins, directions):
+        start = time.perf_counter()
+        answer = super()._first_hits(raycaster, origins, directions)
+        key = 'first hits' if self._first_of_cast else 'glass casts'
+        self.seconds[key] += time.perf_counter() - start
+        self._first_of_cast = False
+        if self.batches is not None:
+            self.batches.append((raycaster, np.array(origins, dtype=np.float32),
+                                 np.array(directions, dtype=np.float32)))
+        return answer
+
+
+class TimedRandom:
+    """A ``np.random.Generator`` stand-in that adds the time of its range-error draws (1-D
+    ``normal`` and ``standard_normal``) to ``seconds['noise']``; the same numbers."""
+
+    def __init__(self, rng: np.random.Generator, seconds: Counter):
+        self._rng, self._seconds = rng, seconds
+
+    def __getattr__(self, name: str):
+        method = getattr(self._rng, name)
+        if name not in ('normal', 'standard_normal'):
+            return method
+
+        def timed_draw(*args, **kwargs):
+            start = time.perf_counter()
+            answer = method(*args, **kwargs)
+            if np.ndim(answer) == 1:  # range errors; (N, 3) draws are directions
+                self._seconds['noise'] += time.perf_counter() - start
+            return answer
+
+        return timed_draw
+
+
+@contextlib.contextmanager
+def timed_sensor_parts(seconds: Counter) -> Iterator[None]:
+    """Time ``generator.sensors``' mixed pixels and spacing filter into ``seconds``."""
+    mixed_pixels, voxel_filter = sensors._mixed_pixels, sensors.VoxelFilter
+
+    def timed_mixed_pixels(*args, **kwargs):
+        start = time.perf_counter()
+        answer = mixed_pixels(*args, **kwargs)
+        seconds['noise'] += time.perf_counter() - start
+        return answer
+
+    class TimedVoxelFilter(voxel_filter):
+
+        def new_points(self, xyz: np.ndarray) -> np.ndarray:
+            start = time.perf_counter()
+            answer = super().new_points(xyz)
+            seconds['spacing filter'] += time.perf_counter() - start
+            return answer
+
+    sensors._mixed_pixels, sensors.VoxelFilter = timed_mixed_pixels, TimedVoxelFilter
+    try:
+        yield
+    finally:
+        sensors._mixed_pixels, sensors.VoxelFilter = mixed_pixels, voxel_filter
+
+
+def scan_once(scanner: Scanner, room: RoomGeometry, model: str, points: int, config: dict,
+              seconds: Counter) -> tuple[float, ScanResult]:
+    """One scan of ``model`` (rng seed 1, garbage collector off): its seconds and result."""
+    rng = TimedRandom(np.random.default_rng(1), seconds)
+    gc.collect()
+    gc.disable()
+    try:
+        with timed_sensor_parts(seconds):
+            start = time.perf_counter()
+            scan, _ = scan_room(scanner, room, model, points, 0.5, rng, config, METAL)
+            return time.perf_counter() - start, scan
+    finally:
+        gc.enable()
+
+
+def bare_cast(batches: list) -> float:
+    """Seconds of Embree's bare first-hit casts of ``batches`` on one thread."""
+    start = time.perf_counter()
+    for raycaster, origins, directions in batches:
+        _cast_slice(raycaster, origins, directions)
+    return time.perf_counter() - start
+
+
+def time_sensor_scans(scene: TriangleScene, room: RoomGeometry, names: list[str], meta: dict,
+                      points: int, config: dict, repeats: int, out: Path) -> dict[str, dict]:
+    """Per sensor model: the Embree and ``BVHTree`` scans (median seconds, rays), the Embree
+    scan's parts (median seconds each), its writing time and the bare cast of its rays."""
+    glass = (SEE_THROUGH, config['glass_transmission'])
+    embree, loop = ProfiledScanner(scene, *glass), BVHTreeScanner(scene, *glass)
+    results = {}
+    for model in SENSOR_MODELS:
+        for scanner in (embree, loop):  # warm-up
+            scan_once(scanner, room, model, min(points, 10_000), config, Counter())
+        runs = {'embree': [], 'loop': [], 'parts': []}
+        for _ in range(repeats):
+            embree.seconds = Counter()
+            seconds, scan = scan_once(embree, room, model, points, config, embree.seconds)
+            runs['embree'].append(seconds)
+            runs['parts'].append(embree.seconds)
+            runs['loop'].append(scan_once(loop, room, model, points, config, Counter())[0])
+        embree.seconds, embree.batches = Counter(), []
+        scan_once(embree, room, model, points, config, embree.seconds)
+        batches, embree.batches = embree.batches, None
+        bare = statistics.median(bare_cast(batches) for _ in range(repeats))
+        start = time.perf_counter()
+        labels, annotations, _ = label_stray_returns(scan.part, names, scan.stray)
+        write_room(out, f'{model}_room', scan.xyz, scan.rgb, labels, annotations, meta)
+        writing = time.perf_counter() - start
+        shutil.rmtree(out / f'{model}_room')
+        parts = {
+            key: statistics.median(p[key] for p in runs['parts'])
+            for key in ('first hits', 'cast', 'glass casts', 'noise', 'spacing filter')
+        }
+        results[model] = {
+            'rays': scan.rays_cast,
+            'cast rays': sum(len(b[1]) for b in batches),
+            'embree': statistics.median(runs['embree']),
+            'loop': statistics.median(runs['loop']),
+            'parts': parts,
+            'bare': bare,
+            'writing': writing,
+        }
+    return results
+
+
+def print_sensor_scans(results: dict[str, dict], points: int, repeats: int) -> float:
+    """The per-model table and the time shares of the Embree scans; returns the ratio of the
+    rays per second over all models."""
+    print(f'default sensor models, {points:,} labelled points each, glass passes, 1 thread, '
+          f'median of {repeats} (rays = the scan\'s rays; with glass passes: cast)')
+    print(f'{"model":<8}{"rays":>11}{"cast":>11}{"Embree s":>10}{"rays/s":>13}{"BVHTree s":>11}'
+          f'{"rays/s":>12}{"ratio":>7}{"bare s":>8}{"scan/bare":>10}')
+    for model, r in results.items():
+        print(f'{model:<8}{r["rays"]:>11,}{r["cast rays"]:>11,}{r["embree"]:>10.3f}'
+              f'{r["rays"] / r["embree"]:>13,.0f}{r["loop"]:>11.2f}{r["rays"] / r["loop"]:>12,.0f}'
+              f'{r["loop"] / r["embree"]:>6.1f}x{r["bare"]:>8.3f}{r["embree"] / r["bare"]:>9.1f}x')
+    print('where the Embree scan\'s time goes (seconds, share of the scan; writing after it):')
+    print(f'{"model":<8}{"casting":>15}{"glass passes":>15}{"noise":>15}{"spacing filter":>16}'
+          f'{"rest":>15}{"writing":>9}')
+    for model, r in results.items():
+        p = r['parts']
+        glass = p['cast'] - p['first hits']
+        rest = r['embree'] - p['cast'] - p['noise'] - p['spacing filter']
+        cells = [p['first hits'], glass, p['noise'], p['spacing filter'], rest]
+        print(f'{model:<8}' + ''.join(f'{v:>8.3f} {v / r["embree"]:>5.0%}' for v in cells[:3]) +
+              f'{cells[3]:>9.3f} {cells[3] / r["embree"]:>5.0%}{rest:>8.3f} '
+              f'{rest / r["embree"]:>5.0%}{r["writing"]:>9.3f}')
+    rays = sum(r['rays'] for r in results.values())
+    return (rays / sum(r['embree'] for r in results.values())) / (
+        rays / sum(r['loop'] for r in results.values()))
 
 
 def agreement(found: tuple[np.ndarray, np.ndarray], embree: tuple[np.ndarray, np.ndarray]) -> str:
@@ -237,18 +393,17 @@ def main() -> None:
     parser.add_argument('--rays', type=int, default=1_000_000, help='rays for BVHTree and Embree')
     parser.add_argument(
         '--slow-rays', type=int, default=20_000, help='rays for Object and scene ray_cast')
-    parser.add_argument('--repeats', type=int, default=5, help='timed passes (median)')
+    parser.add_argument('--repeats', type=int, default=3, help='timed passes and scans (median)')
     parser.add_argument('--scan-points', type=int, default=1_000_000)
-    parser.add_argument('--scan-repeats', type=int, default=3, help='timed full scans (median)')
     parser.add_argument('--asset-cache', type=Path, default=None)
-    parser.add_argument('--seed', type=int, default=3)
+    parser.add_argument('--seed', type=int, default=11, help='layout seed of the room')
     args = parser.parse_args()
 
     for obj in list(bpy.data.objects):  # bpy's start-up cube, camera and light
         bpy.data.objects.remove(obj, do_unlink=True)
     config = load_config()
-    workspace = tempfile.TemporaryDirectory(prefix='synthdet-bench-assets-')  # removed at exit
-    cache = args.asset_cache or Path(workspace.name)
+    workspace = tempfile.TemporaryDirectory(prefix='synthdet-bench-scanner-')  # removed at exit
+    cache = args.asset_cache or Path(workspace.name) / 'assets'
     options = RunOptions(
         out='', points=1, object_ratio=0.5, seed=0, config=config, asset_cache=str(cache))
     library = open_library(options)
@@ -257,14 +412,17 @@ def main() -> None:
         np.random.default_rng(args.seed), catalog_from_library(library), config)
     room = RoomScene(lambda cls, name: by_name[name].mesh_arrays())
     room.build(layout, np.random.default_rng(0))
-    triangles, names, _ = export_triangles()
+    triangles, names, classes = export_triangles()
     # the bpy objects in export order: their faces are the TriangleScene's triangles, in order
     objects = sorted(
         bpy.data.collections[COLLECTION].objects, key=lambda o: o['synthdet_instance'])
     offsets = np.cumsum([0] + [len(o.data.polygons) for o in objects])[:-1]
+    glass = triangles_of_colours(triangles, SEE_THROUGH)
+    glass_classes = sorted({classes[p] for p in triangles.part[glass]})
     print(f'scene: {layout.shape} room {np.ptp(layout.polygon, axis=0).round(2).tolist()} m, '
-          f'{len(objects)} objects, {len(triangles.triangles)} triangles; one warm-up pass, '
-          f'median of {args.repeats}')
+          f'{len(objects)} objects, {len(triangles.triangles)} triangles ({int(glass.sum())} of '
+          f'glass, on {", ".join(glass_classes) or "nothing"}); one warm-up pass, median of '
+          f'{args.repeats}')
 
     rng = np.random.default_rng(0)
     path, _ = sensor_path(layout.polygon, layout.height, rng)
@@ -288,33 +446,26 @@ def main() -> None:
     results = timed(methods, origins, directions, args.repeats)
 
     reference = results['Embree Scanner.cast, 1 thread(s)'][2]
+    print(f'bare ray casting, {args.rays:,} uniform rays from the paper\'s path:')
     print(f'{"method":<42}{"rays":>9}{"seconds":>9}{"rays/s":>13}  agreement with Embree')
     rate = {}
     for label, (n, seconds, found) in results.items():
         rate[label] = n / seconds
         check = '' if label.startswith('Embree') else agreement(found, reference)
         print(f'{label:<42}{n:>9}{seconds:>9.3f}{rate[label]:>13,.0f}  {check}')
-
-    scanners = {
-        f'Embree, {threads or os.cpu_count()} thread(s)': scanner
-        for threads, scanner in embree.items()
-    }
-    scanners['bpy BVHTree.ray_cast loop'] = BVHTreeScanner(triangles)
-    scans = time_scans(scanners, path, args.scan_points, config['scanner'], args.scan_repeats)
-    print(f'full scan of {args.scan_points:,} labelled points (Scanner.scan, median of '
-          f'{args.scan_repeats}), ray engine:')
-    for label, (seconds, cast_share, rays) in scans.items():
-        print(f'  {label:<40}{seconds:>7.2f} s {args.scan_points / seconds:>11,.0f} points/s, '
-              f'{rays:,} rays, ray casting {cast_share:.0%} of the time')
-
     fastest = max((label for label in rate if label.startswith('bpy')), key=rate.get)
-    one = rate['Embree Scanner.cast, 1 thread(s)'] / rate[fastest]
-    every = rate[f'Embree Scanner.cast, {os.cpu_count()} thread(s)'] / rate[fastest]
-    bvh_scan = scans['bpy BVHTree.ray_cast loop'][0]
-    print(f'scan speedup vs fastest bpy loop ({fastest}), 1 thread each: ray casting {one:.1f}x '
-          f'(Embree on {os.cpu_count()} threads: {every:.1f}x); full scan '
-          f'{bvh_scan / scans["Embree, 1 thread(s)"][0]:.1f}x '
-          f'({bvh_scan / scans[f"Embree, {os.cpu_count()} thread(s)"][0]:.1f}x)')
+    bare_ratio = rate['Embree Scanner.cast, 1 thread(s)'] / rate[fastest]
+
+    geometry = room_geometry(layout.polygon, layout.height, layout.bays, triangles, classes)
+    meta = {'format': ROOM_FORMAT, **layout_meta(layout)}
+    scans = time_sensor_scans(triangles, geometry, names, meta, args.scan_points,
+                              config['scanner'], args.repeats, Path(workspace.name))
+    scan_ratio = print_sensor_scans(scans, args.scan_points, args.repeats)
+    per_model = ', '.join(f'{m} {r["loop"] / r["embree"]:.1f}x' for m, r in scans.items())
+    bound = sum(r['embree'] for r in scans.values()) / sum(r['bare'] for r in scans.values())
+    print(f'scanner vs fastest bpy loop ({fastest}), 1 thread each, median of {args.repeats}: '
+          f'default sensor scans with glass {scan_ratio:.1f}x rays/s ({per_model}); bare ray '
+          f'casting {bare_ratio:.1f}x; our scan / bare Embree cast {bound:.1f}x')
 
 
 if __name__ == '__main__':
