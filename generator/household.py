@@ -439,8 +439,9 @@ def _build_radiator(s, size, p):
         s.box((x, -0.02, 0), (x + 0.04, 0.02, 0.12), p['color'])
     columns = max(2, int(w / 0.05))
     xs = np.linspace(-w / 2, w / 2, columns + 1)
-    for x0, x1 in zip(xs[:-1], xs[1:]):
-        s.box((x0 + 0.004, -d / 2, 0.12), (x1 - 0.004, d / 2, h), p['color'])
+    for k, (x0, x1) in enumerate(zip(xs[:-1], xs[1:])):  # sections with a gap between them
+        gap_left, gap_right = 0.004 * (k > 0), 0.004 * (k < columns - 1)
+        s.box((x0 + gap_left, -d / 2, 0.12), (x1 - gap_right, d / 2, h), p['color'])
 
 
 def _build_door(s, size, p):
@@ -458,7 +459,7 @@ def _build_curtain(s, size, p):
     xs = np.linspace(-w / 2, w / 2, folds + 1)
     for k, (x0, x1) in enumerate(zip(xs[:-1], xs[1:])):  # pleats, alternately forward and back
         y0 = -d / 2 if k % 2 == 0 else 0.0
-        s.box((x0, y0, 0.02), (x1, y0 + d / 2, h - 0.04), p['color'])
+        s.box((x0, y0, 0.0), (x1, y0 + d / 2, h - 0.04), p['color'])
     s.cylinder((-w / 2, d / 4, h - 0.02), 0, 0.02, w, palette.METAL[2], segments=8)
 
 

@@ -213,7 +213,9 @@ def _room_extras(rng, placer: _Placer, layout: RoomLayout, walls: Sequence[int],
             spec = sample_clutter(rng, kind, placer.top_limit)
         else:
             spec = _household(rng, placer, kind)
-        if kind in wall_kinds:
+        if spec.cls != 'clutter':  # furniture keeps the clearance, in front of a wall
+            _at_wall(rng, placer, spec, walls, (0.05, 0.4))
+        elif kind in wall_kinds:
             _place_against_wall(rng, placer, spec, (0.0, 0.05))
         else:
             _place_on_floor(rng, placer, spec)
