@@ -13,6 +13,8 @@ Beyond the paper: L/U rooms, door/window openings and factory clutter (class ``c
 generator/clutter.py), placed after the detection objects: shelves, cabinets and machines with
 their back to a wall, pallets, crates, carts and bins on the floor (often touching an object),
 crates on pallets and on free table tops, pipe runs along the walls or under the ceiling.
+With ``room_kinds`` in the configuration a room may instead be an office, meeting room, living
+room, bedroom or lab, furnished by the rules of generator/room_kinds.py.
 No two objects intersect: every placement is checked with oriented-box tests and dropped when no
 free position is found after a few tries. Clutter may touch what it stands next to (no
 clearance), the detection objects keep ``layout.clearance`` among themselves.
