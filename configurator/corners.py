@@ -15,6 +15,12 @@ Method (``docs/corners.md`` explains it in full):
 5. each wall line is refitted to the wall points near it (a histogram peak, then a
    total-least-squares fit), snapped to the dominant directions when within
    ``snap_angle``, and consecutive lines are intersected into the corners.
+
+Wall points are points of vertical columns that reach up (``wall_reach``): furniture against
+a wall does not, so its faces never become walls. A scan without a ceiling (an open-top mesh)
+gets walls of ``default_wall_height``. :func:`room_outline` never gives up on a real room:
+when the outline cannot be traced it returns an approximate floor (the footprint's outline or
+its oriented bounding rectangle) marked ``approximate_floor`` in the quality figures.
 """
 from __future__ import annotations
 import math
@@ -63,6 +69,14 @@ class CornerParams:
     min_level_peak: float = 0.05  # a floor peak holds this share of the biggest lower peak
     floor_cell: float = 0.5  # plan grid on which the floor level must span the scan
     min_floor_cover: float = 0.3  # share of the scan's occupied plan cells the floor spans
+    min_inner_cover: float = 0.5  # a level spanning this share of the inner plan cells is a
+    # floor (or ceiling) however sparse: reconstructed meshes sampled per vertex
+    wall_reach: float = 1.6  # wall columns reach this high above the floor (or 60 % of the
+    # room height if lower); furniture does not
+    wall_column: float = 0.2  # plan cell of the wall-column test
+    default_wall_height: float = 2.5  # walls of a scan without a ceiling are at least this tall
+    min_seen_walls: float = 0.75  # an outline backed less than this by walls is partial
+    max_approximate_corners: int = 16  # a rougher approximate footprint becomes a rectangle
 
 
 @dataclass
@@ -74,6 +88,12 @@ class RoomOutline:
     ceiling_z: float
     wall_angle: float  # dominant wall direction in [0, pi/2), radians
     quality: dict[str, float] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)  # warnings: approximate floor, no ceiling
+
+    @property
+    def approximate(self) -> bool:
+        """Whether the floor is a fallback (footprint or rectangle), not a traced outline."""
+        return bool(self.quality.get('approximate_floor', 0.0))
 
 
 @dataclass
@@ -102,15 +122,10 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
                                    f'coordinates (first at row {int(np.flatnonzero(bad)[0])})')
     # far outliers cost nothing: every grid below spans only the room's own cluster of points,
     # in float64 relative to a local origin (georeferenced coordinates keep their precision)
-    keep = main_cluster(xyz[:, :2], params.cluster_gap)
-    far_points = float(len(xyz) - len(keep))
-    origin = np.floor(xyz[keep, :2].min(axis=0))
-    xyz = xyz[keep] - np.array([origin[0], origin[1], 0.0])
-
-    floor_z, ceiling_z = find_levels(xyz, params)
-    in_band = (xyz[:, 2] > floor_z + params.wall_margin) & \
-        (xyz[:, 2] < ceiling_z - params.wall_margin)
-    wall_xy = _subsample(xyz[in_band, :2], params.max_fit_points)
+    xyz, origin, far_points = _room_cluster(xyz, params)
+    levels = room_levels(xyz, params)
+    floor_z, ceiling_z = levels.floor_z, levels.ceiling_z
+    wall_xy = wall_points(xyz, levels, params)
     if len(wall_xy) < 100:
         raise CornerDetectionError(f'no walls found: only {len(wall_xy)} points lie between '
                                    f'the floor (z={floor_z:.2f}) and ceiling (z={ceiling_z:.2f})')
@@ -128,6 +143,7 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
     lines = _fit_wall_lines(outline, frame_walls, outline_error + 0.05, params)
     supported = sum(line.support * _edge_length(outline, i) for i, line in enumerate(lines))
     perimeter = sum(_edge_length(outline, i) for i in range(len(outline)))
+    seen = supported / perimeter
     if supported < params.min_wall_support * perimeter:
         raise CornerDetectionError(
             f'no walls found: wall points back only {supported / perimeter:.0%} of the room '
@@ -145,20 +161,110 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
     corners = corners @ rotation2d(angle).T
     corners = _canonical_order(corners)
     quality = _quality(corners, xyz, floor_z, ceiling_z, lines, params)
-    quality['far_points'] = far_points
-    quality['floor_prominence'] = floor_prominence(xyz[:, 2], floor_z, ceiling_z, params)
-    if quality['floor_prominence'] < params.min_floor_prominence:
-        raise CornerDetectionError(
-            f'no floor found: the lowest level (z={floor_z + 0.0:.2f}) is only '
-            f'{quality["floor_prominence"]:.1f} times as dense as the walls (a floor is at least '
-            f'{params.min_floor_prominence:g} times); the scan has no floor, so its levels are '
-            'unknown')
+    quality['walls_seen'] = seen
+    _check_floor(xyz, levels, quality, far_points, params)
+    notes = list(levels.notes)
+    if seen < params.min_seen_walls:
+        notes.append(f'partial outline: walls back only {seen:.0%} of it (a view of one side '
+                     'of the room?); the rest follows the extent of the points')
     return RoomOutline(
         corners=corners + origin,
         floor_z=floor_z,
         ceiling_z=ceiling_z,
         wall_angle=float(angle % (math.pi / 2)),
-        quality=quality)
+        quality=quality,
+        notes=notes)
+
+
+def _room_cluster(xyz: np.ndarray, params: CornerParams) -> tuple[np.ndarray, np.ndarray, float]:
+    """The room's own cluster of points relative to a local origin (far outliers out), the
+    origin and the number of points left out."""
+    keep = main_cluster(xyz[:, :2], params.cluster_gap)
+    origin = np.floor(xyz[keep, :2].min(axis=0))
+    return xyz[keep] - np.array([origin[0], origin[1], 0.0]), origin, float(len(xyz) - len(keep))
+
+
+def _check_floor(xyz: np.ndarray, levels: 'Levels', quality: dict[str, float],
+                 far_points: float, params: CornerParams) -> None:
+    """Add the level figures to ``quality``; raise if the lowest level is no floor: neither
+    ``min_floor_prominence`` times as dense as the walls nor spanning ``min_inner_cover`` of
+    the room's inner plan cells and a quarter of them more than a slab of the walls does."""
+    quality['far_points'] = far_points
+    quality['floor_prominence'] = floor_prominence(xyz[:, 2], levels.floor_z, levels.ceiling_z,
+                                                   params)
+    quality['floor_cover'] = levels.floor_cover
+    quality['ceiling_found'] = float(levels.ceiling_found)
+    quality['approximate_floor'] = 0.0
+    spans = levels.floor_cover >= max(params.min_inner_cover, levels.wall_cover + 0.25)
+    if quality['floor_prominence'] < params.min_floor_prominence and not spans:
+        raise CornerDetectionError(
+            f'no floor found: the lowest level (z={levels.floor_z + 0.0:.2f}) is only '
+            f'{quality["floor_prominence"]:.1f} times as dense as the walls (a floor is at least '
+            f'{params.min_floor_prominence:g} times) and spans {levels.floor_cover:.0%} of the '
+            f"room's inside (a floor at least {params.min_inner_cover:.0%} and a quarter more "
+            'than the walls); the scan has no floor, so its levels are unknown')
+
+
+def room_outline(points: np.ndarray, params: CornerParams | None = None) -> RoomOutline:
+    """:func:`detect_corners`, or when the outline cannot be traced (no floor, too few walls,
+    a self-crossing fit) :func:`approximate_outline`, with the reason in its notes.
+
+    Raises :class:`CornerDetectionError` only when there is no room at all: no points,
+    non-finite values, a scan under ``min_room_height`` tall."""
+    try:
+        return detect_corners(points, params)
+    except CornerDetectionError as error:
+        reason = str(error)
+    return approximate_outline(points, params, reason)
+
+
+def approximate_outline(points: np.ndarray,
+                        params: CornerParams | None = None,
+                        reason: str = '') -> RoomOutline:
+    """An approximate floor polygon: the outline of the points' footprint (simplified), or its
+    oriented bounding rectangle when that outline is rough or crosses itself, on the floor
+    level found (the lowest dense level). Marked ``approximate_floor`` = 1 in the quality."""
+    params = params or CornerParams()
+    xyz = np.asarray(points)[:, :3].astype(np.float64, copy=False)
+    if len(xyz) == 0 or not np.isfinite(xyz).all():
+        detect_corners(points, params)  # raises the input's own error
+    xyz, origin, far_points = _room_cluster(xyz, params)
+    levels = room_levels(xyz, params)
+    walls = wall_points(xyz, levels, params)
+    angle = dominant_wall_angle(walls, params.angle_cell) if len(walls) >= 100 else \
+        dominant_wall_angle(xyz[:, :2], params.angle_cell)
+    frame_xy = xyz[:, :2] @ rotation2d(-angle).T
+    outline, cell, _ = _traced_outline(frame_xy, params)
+    shape = 'footprint outline'
+    if len(outline) >= 3:
+        outline = simplify_outline(
+            outline, tolerance=max(3 * cell, 0.1), min_edge=max(params.min_edge, 0.5),
+            min_turn=params.min_turn)
+    if len(outline) < 3 or len(outline) > params.max_approximate_corners or \
+            first_self_crossing(outline) is not None:
+        low, high = np.percentile(frame_xy, [0.5, 99.5], axis=0)
+        outline = np.array([[low[0], low[1]], [low[0], high[1]], [high[0], high[1]],
+                            [high[0], low[1]]])
+        shape = 'oriented bounding rectangle'
+    corners = _canonical_order(outline @ rotation2d(angle).T)
+    quality = _quality(corners, xyz, levels.floor_z, levels.ceiling_z, [], params)
+    quality['walls_seen'] = 0.0
+    try:
+        _check_floor(xyz, levels, quality, far_points, params)
+        floor_note = ''
+    except CornerDetectionError:
+        floor_note = ' on the lowest dense level (no floor plane found)'
+    quality['approximate_floor'] = 1.0
+    reason = f' ({reason})' if reason else ''
+    notes = [f'approximate floor: the {shape} of the points{floor_note}; the room outline '
+             f'could not be traced{reason}', *levels.notes]
+    return RoomOutline(
+        corners=corners + origin,
+        floor_z=levels.floor_z,
+        ceiling_z=levels.ceiling_z,
+        wall_angle=float(angle % (math.pi / 2)),
+        quality=quality,
+        notes=notes)
 
 
 SCAN_VOXEL = 0.02  # metres: scans are read keeping one point per voxel of this size
@@ -168,10 +274,13 @@ def corners_for_scan(scan_path: str | os.PathLike,
                      params: CornerParams | None = None,
                      *,
                      voxel: float | None = SCAN_VOXEL,
-                     columns: str | None = None) -> dict:
+                     columns: str | None = None,
+                     approximate: bool = True) -> dict:
     """Read and prepare a scan file and return its ``synthdet.corners/1`` dictionary, in the
-    scan's own coordinates."""
-    outline, _ = scan_outline(scan_path, params, voxel=voxel, columns=columns)
+    scan's own coordinates; by default an approximate floor (``quality.approximate_floor``
+    = 1) when the outline cannot be traced, so that a real scan always gives a document."""
+    outline, _ = scan_outline(
+        scan_path, params, voxel=voxel, columns=columns, approximate=approximate)
     return outline_to_dict(outline, str(scan_path))
 
 
@@ -179,12 +288,15 @@ def scan_outline(scan_path: str | os.PathLike,
                  params: CornerParams | None = None,
                  *,
                  voxel: float | None = SCAN_VOXEL,
-                 columns: str | None = None) -> tuple[RoomOutline, PreparedScan]:
+                 columns: str | None = None,
+                 approximate: bool = False) -> tuple[RoomOutline, PreparedScan]:
     """Stream a scan (``synthdet.scan_io.load_scan``), prepare it (``synthdet.prepare``: no
     outliers, z up, floor level, walls along the axes), find its outline there and return
-    the outline in the scan's own coordinates with the prepared scan."""
+    the outline in the scan's own coordinates with the prepared scan. ``approximate``: an
+    approximate floor (:func:`room_outline`) rather than an error when none can be traced."""
     prepared = prepare_scan(load_scan(scan_path, voxel=voxel, columns=columns))
-    return outline_in_scan(detect_corners(prepared.points, params), prepared), prepared
+    find = room_outline if approximate else detect_corners
+    return outline_in_scan(find(prepared.points, params), prepared), prepared
 
 
 def outline_in_scan(outline: RoomOutline, prepared: PreparedScan) -> RoomOutline:
@@ -201,7 +313,8 @@ def outline_in_scan(outline: RoomOutline, prepared: PreparedScan) -> RoomOutline
         floor_z=float(levels[0, 2]),
         ceiling_z=float(levels[1, 2]),
         wall_angle=float(angle),
-        quality=dict(outline.quality))
+        quality=dict(outline.quality),
+        notes=list(outline.notes))
 
 
 def outline_to_dict(outline: RoomOutline, scan: str) -> dict:
@@ -229,15 +342,38 @@ def outline_to_dict(outline: RoomOutline, scan: str) -> dict:
 # --------------------------------------------------------------------------- levels and angle
 
 
+@dataclass
+class Levels:
+    """Floor and ceiling of a scan (:func:`room_levels`)."""
+
+    floor_z: float
+    ceiling_z: float  # floor_z + the default wall height or more when no ceiling was found
+    ceiling_found: bool
+    floor_cover: float  # share of the inner plan cells the floor level spans
+    wall_cover: float  # ... and the median share a 4 cm slab of the walls spans
+    notes: list[str] = field(default_factory=list)
+
+
 def find_levels(xyz: np.ndarray, params: CornerParams | None = None) -> tuple[float, float]:
-    """Floor and ceiling heights of (N, 3) points from the peaks of their z histogram.
+    """Floor and ceiling heights of (N, 3) points (:func:`room_levels`)."""
+    levels = room_levels(xyz, params)
+    return levels.floor_z, levels.ceiling_z
+
+
+def room_levels(xyz: np.ndarray, params: CornerParams | None = None) -> Levels:
+    """Floor and ceiling of (N, 3) points from the peaks of their z histogram.
 
     The floor is the lowest peak of the lower half that holds ``min_level_peak`` of its
     biggest peak and whose points (within 2 bins) span ``min_floor_cover`` of the plan cells
     the scan occupies: chair seats or a table top can be denser than a floor that clutter
     hides, but they never span the room. Without such a peak, the lowest peak holding a
     quarter of the biggest. The ceiling is the highest peak of the upper half holding a
-    quarter of its biggest; without one (an open scan) the 99.9th z percentile.
+    quarter of its biggest and spanning ``min_floor_cover`` of the inner plan cells (cells
+    not on the rim of the occupied plan: the tops of the walls of an open-top scan are a rim),
+    and a quarter of them more than a slab of the walls does (walls of a small room reach
+    into its inner cells);
+    without one the scan is open-top and the ceiling is put ``default_wall_height`` above the
+    floor, or at the highest points (99.9th z percentile) when they are higher.
     """
     params = params or CornerParams()
     xyz = xyz[::max(1, len(xyz) // params.max_fit_points)]  # levels need no more points
@@ -262,13 +398,71 @@ def find_levels(xyz: np.ndarray, params: CornerParams | None = None) -> tuple[fl
     if floor_peak is None:  # no level spans the scan: the lowest strong peak
         floor_peak = np.flatnonzero(is_peak & lower & (hist >= 0.25 * strongest))[0]
     floor_z = _level_at(z, centres[floor_peak], params.level_bin)
+    inner = _inner_cells(xyz, params.floor_cell)
+    floor_cover = _cover(cells, inner, np.abs(z - floor_z) < 2 * params.level_bin)
+    # walls alone cover part of the inner cells of a small room: a floor or ceiling covers more
+    slabs = np.linspace(floor_z + 0.3, high - 0.3, 8)
+    wall_cover = float(np.median([
+        _cover(cells, inner, np.abs(z - height) < 2 * params.level_bin) for height in slabs
+    ]))
     upper = ~lower
-    ceiling_candidates = np.flatnonzero(is_peak & upper & (hist >= 0.25 * hist[upper].max()))
+    ceiling_z = None
     if hist[upper].max() >= 0.2 * hist[floor_peak]:
-        ceiling_z = _level_at(z, centres[ceiling_candidates[-1]], params.level_bin)
-    else:
-        ceiling_z = float(high)
-    return floor_z, ceiling_z
+        least = max(params.min_floor_cover, wall_cover + 0.25)
+        candidates = np.flatnonzero(is_peak & upper & (hist >= 0.25 * hist[upper].max()))
+        for peak in candidates[::-1]:
+            level = _level_at(z, centres[peak], params.level_bin)
+            if _cover(cells, inner, np.abs(z - level) < 2 * params.level_bin) >= least:
+                ceiling_z = level
+                break
+    if ceiling_z is not None:
+        return Levels(floor_z, ceiling_z, True, floor_cover, wall_cover)
+    height = max(params.default_wall_height, float(high) - floor_z)
+    return Levels(
+        floor_z,
+        floor_z + height,
+        False,
+        floor_cover,
+        wall_cover,
+        notes=[f'no ceiling found (an open-top scan): walls get {height:.2f} m, the default '
+               f'{params.default_wall_height:g} m or the highest points if higher'])
+
+
+def _inner_cells(xyz: np.ndarray, cell: float) -> np.ndarray:
+    """Keys (as :func:`_plan_cells`) of the occupied plan cells whose 8 neighbours are all
+    occupied; all occupied cells when none is."""
+    squares = np.floor((xyz[:, :2] - xyz[:, :2].min(axis=0)) / cell).astype(np.int64)
+    shape = squares.max(axis=0) + 1
+    grid = np.zeros(shape, dtype=bool)
+    grid[squares[:, 0], squares[:, 1]] = True
+    inner = ndimage.binary_erosion(grid, np.ones((3, 3), dtype=bool))
+    ix, iy = np.nonzero(inner if inner.any() else grid)
+    return ix * shape[1] + iy
+
+
+def _cover(cells: np.ndarray, inner: np.ndarray, selected: np.ndarray) -> float:
+    """Share of the ``inner`` cells holding at least one ``selected`` point."""
+    return float(np.isin(inner, cells[selected]).mean()) if len(inner) else 0.0
+
+
+def wall_points(xyz: np.ndarray, levels: Levels, params: CornerParams | None = None) -> np.ndarray:
+    """Plan positions ``(M, 2)`` of the wall points: the points between the floor and the
+    ceiling (``wall_margin`` away from both) in ``wall_column`` plan cells whose points reach
+    ``wall_reach`` above the floor (or 60 % of the room height if lower). Walls are vertical
+    surfaces that reach up; a sofa, a bed or a table against a wall does not, so its faces
+    never pull a wall line into the room. At most about ``max_fit_points`` are returned."""
+    params = params or CornerParams()
+    z = xyz[:, 2]
+    band = xyz[(z > levels.floor_z + params.wall_margin) &
+               (z < levels.ceiling_z - params.wall_margin)]
+    if len(band) == 0:
+        return np.zeros((0, 2))
+    reach = levels.floor_z + min(params.wall_reach, 0.6 * (levels.ceiling_z - levels.floor_z))
+    columns = _plan_cells(band, params.wall_column)
+    _, inverse = np.unique(columns, return_inverse=True)
+    top = np.full(int(inverse.max()) + 1, -np.inf)
+    np.maximum.at(top, inverse, band[:, 2])
+    return _subsample(band[top[inverse] >= reach, :2], params.max_fit_points)
 
 
 def _plan_cells(xyz: np.ndarray, cell: float) -> np.ndarray:

@@ -1,8 +1,8 @@
 """Find a scan's room corners and floor/ceiling levels and write them as synthdet.corners/1 JSON.
 
-Usage: ``python -m configurator corners SCAN --out corners.json [--preview corners.png]``.
-The scan (any format of ``synthdet.scan_io``) is streamed, voxel-filtered and prepared
-(``synthdet.prepare``); the corners are written in the scan's own coordinates.
+Usage: ``python -m configurator corners SCAN --out corners.json [--preview corners.png]
+[--approximate]``. The scan (any format of ``synthdet.scan_io``) is streamed, voxel-filtered and
+prepared (``synthdet.prepare``); the corners are written in the scan's own coordinates.
 """
 from __future__ import annotations
 import argparse
@@ -34,6 +34,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=CornerParams.min_edge,
         help='walls shorter than this (m) are merged into their neighbours '
         '(default: %(default)s)')
+    parser.add_argument(
+        '--approximate',
+        action='store_true',
+        help='when no room outline can be traced, write an approximate floor (the footprint '
+        'of the points or its bounding rectangle, quality.approximate_floor = 1) with a '
+        'warning instead of failing')
 
 
 def _positive_metres(text: str) -> float:
@@ -51,21 +57,25 @@ def run(args: argparse.Namespace) -> int:
             args.scan,
             CornerParams(min_edge=args.min_edge),
             voxel=args.voxel,
-            columns=args.columns)
+            columns=args.columns,
+            approximate=args.approximate)
     except (OSError, ValueError) as error:  # ScanFormatError and CornerDetectionError too
         kind = 'no room found' if isinstance(error, CornerDetectionError) else 'bad scan'
         print(f'corners: {kind}: {error}', file=sys.stderr)
         return 2
     for line in prepared.report:
         print(f'corners: {line}', file=sys.stderr if line.startswith('warning') else sys.stdout)
+    for note in outline.notes:
+        print(f'corners: warning: {args.scan}: {note}', file=sys.stderr)
     result = outline_to_dict(outline, args.scan)
     try:
         write_corners(args.out, result)
     except OSError as error:
         print(f'corners: cannot write {args.out}: {error.strerror or error}', file=sys.stderr)
         return 1
-    print(f'corners: {len(outline.corners)} corners, floor z={outline.floor_z:.3f} m, '
-          f'ceiling z={outline.ceiling_z:.3f} m, '
+    ceiling = 'ceiling' if outline.quality.get('ceiling_found', 1.0) else 'no ceiling, walls to'
+    print(f'corners: {len(outline.corners)} {"approximate " if outline.approximate else ""}'
+          f'corners, floor z={outline.floor_z:.3f} m, {ceiling} z={outline.ceiling_z:.3f} m, '
           f'{outline.quality["wall_points_on_polygon"]:.0%} of wall points on the outline '
           f'-> {args.out}')
     if args.preview:

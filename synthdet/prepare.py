@@ -26,6 +26,9 @@ TILT_POINTS = 50_000  # ... and this many the tilt search
 FOOTPRINT_CELL = 0.25  # metres: floor cells of the density figure
 FAR_DENSITY = 2.0  # a density this many times off the target is reported as a warning
 UP_AXIS_MARGIN = 1.5  # another axis is up if its floor evidence beats z's by this factor
+UP_AXIS_POINTS = 20_000  # at most this many points search each axis's tilt
+CAMERA_HALF_FOV = math.radians(40.0)  # wider than a Kinect's or RealSense's half view
+FURNITURE_MARGIN = 1.5  # the floor's end holds this many times the points of the other end
 AXIS_NAMES = ('x', 'y', 'z')
 
 
@@ -237,22 +240,89 @@ def _end_masses(values: np.ndarray) -> tuple[float, float, float, float]:
             band(low + 0.1, low + 1.2) / count, band(high - 1.2, high - 0.1) / count)
 
 
+def _levelled_end_masses(xyz: np.ndarray, axis: int) -> tuple[np.ndarray, tuple[float, ...]]:
+    """:func:`_end_masses` of the heights along ``axis`` tilted by up to ``MAX_TILT`` (2 degree
+    steps) towards the two other axes, at the tilt with the biggest end plane: a floor a few
+    degrees off the axis spreads over more than a 6 cm slab. Returns the heights too."""
+    others = [a for a in range(3) if a != axis]
+    search = xyz[::max(1, len(xyz) // UP_AXIS_POINTS)]
+    slopes = np.tan(np.arange(-MAX_TILT, MAX_TILT + 1e-9, math.radians(2.0)))
+    best, best_plane = (0.0, 0.0), -1.0
+    for first in slopes:
+        for second in slopes:
+            heights = search[:, axis] + first * search[:, others[0]] + \
+                second * search[:, others[1]]
+            plane = max(_end_masses(heights)[:2])
+            if plane > best_plane:
+                best, best_plane = (first, second), plane
+    heights = xyz[:, axis] + best[0] * xyz[:, others[0]] + best[1] * xyz[:, others[1]]
+    return heights, _end_masses(heights)
+
+
+def _is_camera_frustum(xyz: np.ndarray) -> bool:
+    """Whether the points fill a depth camera's view frustum in its own frame (x right, y
+    down, z forward, as PCL and Kinect frames are): all in front (z > 0) and within
+    ``CAMERA_HALF_FOV`` of the optical axis. No room scanned from inside looks like that: its
+    floor reaches the camera's feet."""
+    depth = xyz[:, 2]
+    if len(xyz) < 100 or np.percentile(depth, 0.5) <= 0.1:
+        return False
+    spread = np.abs(xyz[:, :2]) / depth[:, None]
+    return bool((np.percentile(spread, 99.5, axis=0) < math.tan(CAMERA_HALF_FOV)).all())
+
+
+def _floor_end(xyz: np.ndarray, heights: np.ndarray, axis: int,
+               masses: tuple[float, ...]) -> bool:
+    """Whether the floor is at the low end of ``heights``: furniture stands on floors, so the
+    inside of the room (plan cells 0.5 m or more from its rim) holds more points in the 0.1-1.2 m
+    band above the floor than below the ceiling. When both hold about as many (an empty
+    room), the end with more points on its plane and band (:func:`_end_masses`)."""
+    others = [a for a in range(3) if a != axis]
+    # 0.25 m cells over the bulk of the points (far strays clipped onto the rim): at most
+    # 1000 x 1000 cells whatever the coordinates' range
+    low_corner, high_corner = np.percentile(xyz[:, others], [0.5, 99.5], axis=0)
+    cell = max(0.25, float((high_corner - low_corner).max()) / 1000)
+    plan = np.floor((np.clip(xyz[:, others], low_corner, high_corner) - low_corner) /
+                    cell).astype(np.int64)
+    shape = plan.max(axis=0) + 1
+    occupied = np.zeros(shape, dtype=bool)
+    occupied[plan[:, 0], plan[:, 1]] = True
+    padded = np.pad(occupied, 2)
+    inner = np.ones(shape, dtype=bool)  # occupied with all cells within 2 occupied too
+    for dx in range(5):
+        for dy in range(5):
+            inner &= padded[dx:dx + shape[0], dy:dy + shape[1]]
+    inside = inner[plan[:, 0], plan[:, 1]]
+    low, high = np.percentile(heights, [0.5, 99.5])
+    near_low = np.count_nonzero(inside & (heights > low + 0.1) & (heights < low + 1.2))
+    near_high = np.count_nonzero(inside & (heights > high - 1.2) & (heights < high - 0.1))
+    if max(near_low, near_high) >= 100 and \
+            max(near_low, near_high) >= FURNITURE_MARGIN * min(near_low, near_high):
+        return near_low > near_high
+    low_plane, high_plane, low_band, high_band = masses
+    return low_plane + low_band >= high_plane + high_band
+
+
 def detect_up_axis(xyz: np.ndarray) -> str:
     """The scan's up direction (``'+z'``, ``'+y'``, ``'-x'``...).
 
-    The floor is the largest plane of a room or hall (larger than any one wall when the room
-    is wider than tall), so the up axis is the one with the most points on a plane at one end
-    of its range; z is kept unless another axis beats it by ``UP_AXIS_MARGIN``. On that axis
-    the floor is the end with more points on its plane plus the band above it (furniture
-    stands on floors). A z-up scan is never turned upside down.
+    A depth camera's frame (points filling a view frustum along +z) has y pointing down:
+    ``'-y'``. Otherwise the floor is the largest plane of a room or hall (larger than any one
+    wall when the room is wider than tall), so the up axis is the one with the most points on
+    a plane at one end of its range, each axis allowed a tilt of up to ``MAX_TILT``; z is kept
+    unless another axis beats it by ``UP_AXIS_MARGIN``. On a turned axis the floor is the end
+    with the furniture (:func:`_floor_end`). A z-up scan is never turned upside down.
     """
-    masses = [_end_masses(xyz[:, axis]) for axis in range(3)]
-    plane = [max(low, high) for low, high, _, _ in masses]
+    xyz = np.asarray(xyz, dtype=np.float64)[::max(1, len(xyz) // FIT_POINTS)]
+    if _is_camera_frustum(xyz):
+        return '-y'
+    levelled = [_levelled_end_masses(xyz, axis) for axis in range(3)]
+    plane = [max(masses[:2]) for _, masses in levelled]
     axis = int(np.argmax(plane))
     if axis == 2 or plane[axis] < UP_AXIS_MARGIN * plane[2]:
         return '+z'
-    low, high, low_band, high_band = masses[axis]
-    return ('+' if low + low_band >= high + high_band else '-') + AXIS_NAMES[axis]
+    heights, masses = levelled[axis]
+    return ('+' if _floor_end(xyz, heights, axis, masses) else '-') + AXIS_NAMES[axis]
 
 
 def _levelled(xyz: np.ndarray, rotation: np.ndarray) -> tuple[np.ndarray, float, str]:
