@@ -21,23 +21,37 @@ class InfoFileError(ValueError):
 
 
 class _PlainUnpickler(pickle.Unpickler):
-    """Unpickles dicts, lists, strings and numbers only: an info pickle never runs code."""
+    """Unpickles dicts, lists, tuples, strings, bytes, numbers, booleans and None only: every
+    other type is looked up by ``find_class``, which refuses them all, so nothing in the pickle
+    is ever called."""
 
     def find_class(self, module: str, name: str) -> object:
         raise pickle.UnpicklingError(f'{module}.{name} is not plain data')
 
 
 def load_info_pickle(path: str | os.PathLike) -> dict:
-    """Read an info pickle written by ``tools/create_data.py`` (plain data only)."""
+    """Read an info pickle written by ``tools/create_data.py`` (plain data only).
+
+    Raises ``InfoFileError`` naming the file when it cannot be read, is not plain data, or
+    lacks the ``metainfo`` dict and the ``data_list`` list of dicts.
+    """
     try:
-        with open(path, 'rb') as f:
-            infos = _PlainUnpickler(f).load()
-    except (pickle.UnpicklingError, EOFError, ValueError, IndexError, KeyError) as error:
-        raise InfoFileError(f'{path}: not an info pickle of tools/create_data.py '
-                            f'({error or type(error).__name__})') from None
+        with open(path, 'rb') as stream:
+            infos = _PlainUnpickler(stream).load()
+    except OSError as error:
+        raise InfoFileError(
+            f'{path}: cannot read the info pickle ({error.strerror or error})') from None
+    except Exception as error:  # malformed pickles raise many types; none runs code here
+        reason = ' '.join(str(error).split())[:200] or type(error).__name__
+        raise InfoFileError(
+            f'{path}: not an info pickle of tools/create_data.py ({reason})') from None
     if not isinstance(infos, dict) or not {'metainfo', 'data_list'} <= set(infos):
         raise InfoFileError(f'{path}: not an info pickle of tools/create_data.py (no metainfo '
                             'and data_list)')
+    if not isinstance(infos['metainfo'], dict) or not isinstance(infos['data_list'], list) or \
+            not all(isinstance(info, dict) for info in infos['data_list']):
+        raise InfoFileError(f'{path}: not an info pickle of tools/create_data.py (metainfo must '
+                            'be a dict and data_list a list of dicts)')
     return infos
 
 

@@ -12,6 +12,7 @@ from mmdet3d.registry import DATASETS
 from projects.synthdet.datasets import transforms  # noqa: F401  (registers the augmentations)
 from synthdet.classes import (CLASS_COLOURS, DETECTION_CLASSES, DETECTION_SEMANTIC_IDS,
                               SEMANTIC_CLASSES)
+from synthdet.info_files import InfoFileError, load_info_pickle
 
 
 @DATASETS.register_module()
@@ -22,7 +23,8 @@ class SynthdetS3DISDataset(S3DISDataset):
     ``metainfo=dict(classes=...)`` selects a subset: labels are renumbered in the subset's
     order and instances of the other classes are dropped (mmdet3d's parent keeps them with
     label -1). The palette and the semantic-mask mapping used by ``PointSegClassMapping``
-    follow the subset too.
+    follow the subset too. The ``ann_file`` is read as plain data (``load_info_pickle``): a
+    pickle that would run code is refused with ``InfoFileError`` naming the file.
     """
     METAINFO = {
         'classes':
@@ -60,6 +62,23 @@ class SynthdetS3DISDataset(S3DISDataset):
         for index, name in enumerate(classes):
             mapping[SEMANTIC_CLASSES.index(name)] = index
         return mapping
+
+    def load_data_list(self) -> list[dict]:
+        """The parsed infos of ``ann_file``, read by the project's plain-data unpickler
+        (mmengine's ``load``, which the parent uses, unpickles anything); the pickle's
+        ``metainfo`` fills what the class and the config leave unset, as in the parent."""
+        annotations = load_info_pickle(self.ann_file)
+        for key, value in annotations['metainfo'].items():
+            self._metainfo.setdefault(key, value)
+        data_list = []
+        for index, info in enumerate(annotations['data_list']):
+            try:
+                data_list.append(self.parse_data_info(info))
+            except (KeyError, TypeError, ValueError, IndexError) as error:
+                raise InfoFileError(f'{self.ann_file}: data_list[{index}] is not an info of '
+                                    f'tools/create_data.py ({type(error).__name__}: '
+                                    f'{" ".join(str(error).split())[:200]})') from None
+        return data_list
 
     def parse_data_info(self, info: dict) -> dict:
         info = super().parse_data_info(info)
