@@ -59,10 +59,11 @@ def annotation_class(path: Path) -> str | None:
 
 def annotation_files(folder: Path) -> list[Path]:
     """The ``.txt`` files (any case of the suffix) of an ``Annotations`` folder, in natural
-    order; none if the folder does not exist."""
+    order; none if the folder does not exist. A broken symbolic link is listed too, so that its
+    reader reports it instead of leaving an object out without a word."""
     if not folder.is_dir():
         return []
-    return sorted((p for p in folder.iterdir() if p.suffix.lower() == '.txt' and p.is_file()),
+    return sorted((p for p in folder.iterdir() if p.suffix.lower() == '.txt' and not p.is_dir()),
                   key=lambda p: natural_key(p.name))
 
 

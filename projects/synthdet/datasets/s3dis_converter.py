@@ -163,9 +163,17 @@ def _read_room(room_dir: Path, skip: bool) -> _RoomPoints:
     files = annotation_files(ann_dir)
     if not files:
         raise S3DISLayoutError(f'{ann_dir}: no Annotations/<class>_<k>.txt files')
+    broken = [path for path in files if not path.is_file()]  # a dangling symbolic link
+    if broken and not skip:
+        raise S3DISLayoutError(f'{broken[0]}: annotation file not found (a broken symbolic '
+                               'link)')
+    files = [path for path in files if path not in broken]
     sizes = [path.stat().st_size for path in files]
     buffer = np.empty((sum(max_rows(size) for size in sizes), 6))  # one array, no concatenation
     room = _RoomPoints(buffer, [], [], [], [], {})
+    room.skipped += [
+        SkippedInput(str(path), None, 'file left out: a broken symbolic link') for path in broken
+    ]
     for path in files:
         class_name = annotation_class(path)
         if class_name is None:
