@@ -6,6 +6,7 @@ prepared (``synthdet.prepare``); the corners are written in the scan's own coord
 """
 from __future__ import annotations
 import argparse
+import os
 import sys
 
 from configurator.corners import (SCAN_VOXEL, CornerDetectionError, CornerParams, outline_to_dict,
@@ -49,9 +50,24 @@ def _positive_metres(text: str) -> float:
     return value
 
 
+def _cannot_write(path: str | None) -> str | None:
+    """Why the output file ``path`` cannot be written, checked before any work; else None."""
+    if path is None:
+        return None
+    if os.path.isdir(path):
+        return 'it is a folder'
+    folder = os.path.dirname(os.path.abspath(path))
+    return None if os.path.isdir(folder) else f'no folder {folder}'
+
+
 def run(args: argparse.Namespace) -> int:
     """Detect the corners of ``args.scan``; returns 0, 2 with a message on bad input, or 1 if
-    the output cannot be written."""
+    an output cannot be written (checked before the scan is read)."""
+    for output in (args.out, args.preview):
+        problem = _cannot_write(output)
+        if problem:
+            print(f'corners: cannot write {output}: {problem}', file=sys.stderr)
+            return 1
     try:
         outline, prepared = scan_outline(
             args.scan,
