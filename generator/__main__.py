@@ -1,5 +1,6 @@
 """CLI: ``python -m generator --out DIR --areas 7 8 9 --rooms-per-area 50 --points 1000000``."""
 import argparse
+import math
 import os
 import re
 import sys
@@ -8,6 +9,41 @@ from pathlib import Path
 
 
 PROFILES = Path(__file__).resolve().parent / 'profiles'
+# the accepted ranges of the integer options (docs/generator.md); a hall of 10-50 million
+# points is the largest scan the generator is made for
+MAX_POINTS = 100_000_000
+MAX_AREA = 9_999
+MAX_ROOMS_PER_AREA = 100_000
+MAX_WORKERS = 256
+MAX_SEED = 2**63 - 1
+
+
+def shown(text: str, limit: int = 24) -> str:
+    """``text`` for a message, at most ``limit`` characters (a 300-digit number is cut)."""
+    return text if len(text) <= limit else f'{text[:limit - 3]}...'
+
+
+def whole_number(text: str) -> int:
+    """An argparse ``type``: an integer, also written as a whole float (``1e6``)."""
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        number = float(text)
+    except ValueError:
+        number = math.nan
+    if not number.is_integer():  # NaN and infinities are not
+        raise argparse.ArgumentTypeError(f'expected an integer, got {shown(text)}')
+    return int(number)
+
+
+def check_range(parser: argparse.ArgumentParser, option: str, values: list[int], low: int,
+                high: int) -> None:
+    """``parser.error`` unless every value of ``option`` is in ``[low, high]``."""
+    for value in values:
+        if not low <= value <= high:
+            parser.error(f'{option} must be >= {low:,} and <= {high:,}, got {shown(str(value))}')
 
 
 def profile_names() -> list[str]:
@@ -27,22 +63,35 @@ def build_parser() -> argparse.ArgumentParser:
         help='output root, e.g. data/s3dis/Stanford3dDataset_v1.2_Aligned_Version')
     parser.add_argument(
         '--areas',
-        type=int,
+        type=whole_number,
         nargs='+',
         default=[7, 8, 9],
-        help='area numbers to write (default: 7 8 9)')
+        help=f'area numbers to write, 1 to {MAX_AREA} (default: 7 8 9)')
     parser.add_argument(
-        '--rooms-per-area', type=int, default=50, help='rooms per area (default 50)')
+        '--rooms-per-area',
+        type=whole_number,
+        default=50,
+        help=f'rooms per area, 1 to {MAX_ROOMS_PER_AREA:,} (default 50)')
     parser.add_argument(
-        '--points', type=int, default=1_000_000, help='points per room (default 1000000)')
+        '--points',
+        type=whole_number,
+        default=1_000_000,
+        help=f'points per room, 1 to {MAX_POINTS:,} (default 1,000,000)')
     parser.add_argument(
         '--object-ratio',
         type=float,
         default=0.5,
         help='share of the points on movable objects (default 0.5)')
     parser.add_argument(
-        '--seed', type=int, default=0, help='run seed; room seeds derive from (seed, area, room)')
-    parser.add_argument('--workers', type=int, default=1, help="worker processes ('spawn')")
+        '--seed',
+        type=whole_number,
+        default=0,
+        help='run seed, 0 to 2^63-1; room seeds derive from (seed, area, room)')
+    parser.add_argument(
+        '--workers',
+        type=whole_number,
+        default=1,
+        help=f"worker processes ('spawn'), 1 to {MAX_WORKERS}")
     parser.add_argument(
         '--shard',
         default='1/1',
@@ -66,7 +115,11 @@ def build_parser() -> argparse.ArgumentParser:
         '--asset-cache',
         type=Path,
         help='cache folder of the procedural library (default ~/.cache/synthdet/assets)')
-    parser.add_argument('--asset-seed', type=int, default=0, help='seed of the procedural library')
+    parser.add_argument(
+        '--asset-seed',
+        type=whole_number,
+        default=0,
+        help='seed of the procedural library, 0 to 2^63-1')
     parser.add_argument('--ply', action='store_true', help='also write <room>.ply (CloudCompare)')
     parser.add_argument(
         '--preview',
@@ -80,23 +133,20 @@ def build_parser() -> argparse.ArgumentParser:
 
 def check_arguments(args: argparse.Namespace, parser: argparse.ArgumentParser) -> tuple[int, int]:
     """Reject bad arguments before any work; return the shard (K, N)."""
-    if any(a < 1 for a in args.areas):
-        parser.error(f'--areas must be positive integers, got {args.areas}')
-    if len(set(args.areas)) != len(args.areas):
-        parser.error(f'--areas has duplicates: {args.areas}')
-    if args.rooms_per_area < 1:
-        parser.error(f'--rooms-per-area must be >= 1, got {args.rooms_per_area}')
-    if args.points < 1:
-        parser.error(f'--points must be >= 1, got {args.points}')
-    if not 0.0 <= args.object_ratio <= 1.0:
-        parser.error(f'--object-ratio must be in [0, 1], got {args.object_ratio}')
-    if args.workers < 1:
-        parser.error(f'--workers must be >= 1, got {args.workers}')
-    if args.seed < 0 or args.asset_seed < 0:
-        parser.error('--seed and --asset-seed must not be negative')
-    match = re.fullmatch(r'(\d+)/(\d+)', args.shard)
+    check_range(parser, '--areas', args.areas, 1, MAX_AREA)
+    check_range(parser, '--rooms-per-area', [args.rooms_per_area], 1, MAX_ROOMS_PER_AREA)
+    check_range(parser, '--points', [args.points], 1, MAX_POINTS)
+    check_range(parser, '--workers', [args.workers], 1, MAX_WORKERS)
+    check_range(parser, '--seed', [args.seed], 0, MAX_SEED)
+    check_range(parser, '--asset-seed', [args.asset_seed], 0, MAX_SEED)
+    duplicates = sorted({a for a in args.areas if args.areas.count(a) > 1})
+    if duplicates:
+        parser.error(f'--areas has duplicates: {" ".join(map(str, duplicates))}')
+    if not 0.0 <= args.object_ratio <= 1.0:  # NaN fails too
+        parser.error(f'--object-ratio must be in [0, 1], got {shown(str(args.object_ratio))}')
+    match = re.fullmatch(r'(\d{1,9})/(\d{1,9})', args.shard)
     if not match or not 1 <= int(match.group(1)) <= int(match.group(2)):
-        parser.error(f'--shard must be K/N with 1 <= K <= N, got {args.shard!r}')
+        parser.error(f'--shard must be K/N with 1 <= K <= N < 10^9, got {shown(args.shard)}')
     for area in args.areas:  # never mix generated rooms into a real S3DIS area
         area_dir = args.out / f'Area_{area}'
         foreign = sorted(p.name for p in area_dir.iterdir()
