@@ -1,12 +1,13 @@
 """Scan reading in bounded memory: streamed ``load_scan`` vs reading the whole file, side by side.
 
     .venv/bin/python benchmarks/bench_scan_io.py [--points 30000000] [--voxel 0.05]
-        [--chunk 1000000] [--scan FILE]
+        [--chunk 1000000] [--room-points 1000000] [--scan FILE]
 
-Writes a georeferenced LAZ of about ``--points`` points (``tests/room_scans.py`` rooms of 1M
-points, tiled side by side over a hall-sized area and shifted to 500000 / 5400000, written a
-chunk at a time by ``synthdet.scan_io.write_las_chunks``) unless ``--scan`` names one. Then,
-each in its own process so that the peak resident memory (``ru_maxrss``) is its own, it runs
+Writes a georeferenced LAZ of about ``--points`` points (``tests/room_scans.py`` rooms of
+``--room-points`` points, tiled side by side over a hall-sized area and shifted to 500000 /
+5400000, written a chunk at a time by ``synthdet.scan_io.write_las_chunks``) unless ``--scan``
+names one. Then, each in its own process so that the peak resident memory (``ru_maxrss``) is
+its own, it runs
 
 - streamed: ``load_scan(scan, voxel)``, chunks of ``--chunk`` points voxel-filtered on the fly;
 - read-all: ``read_scan(scan)``, the whole file as one float64 array, as before;
@@ -34,11 +35,11 @@ GEO = np.array([500000.0, 5400000.0, 300.0])
 ROOM_POINTS = 1_000_000
 
 
-def hall_chunks(total: int):
-    """Rooms of ``ROOM_POINTS`` points (8 different ones, repeated) on a grid of 12 m cells:
+def hall_chunks(total: int, room_points: int = ROOM_POINTS):
+    """Rooms of ``room_points`` points (8 different ones, repeated) on a grid of 12 m cells:
     about ``total`` points over a hall-sized area, one room at a time."""
     rooms = [
-        make_room('rect', n_points=ROOM_POINTS, seed=seed, rotate=False).points
+        make_room('rect', n_points=room_points, seed=seed, rotate=False).points
         for seed in range(8)
     ]
     count = max(1, round(total * len(rooms) / sum(len(room) for room in rooms)))
@@ -49,12 +50,13 @@ def hall_chunks(total: int):
         yield points
 
 
-def measure(mode: str, scan: str, voxel: float, chunk: int, points: int) -> None:
+def measure(mode: str, scan: str, voxel: float, chunk: int, points: int,
+            room_points: int) -> None:
     """Child process: write the scan, or run one side and print its figures (seconds, points,
     kept)."""
     start = time.perf_counter()
     if mode == 'write':
-        points = kept = write_las_chunks(scan, hall_chunks(points))
+        points = kept = write_las_chunks(scan, hall_chunks(points, room_points))
     elif mode == 'streamed':
         loaded = load_scan(scan, voxel=voxel, chunk_points=chunk)
         points, kept = loaded.points_read, len(loaded.points)
@@ -73,7 +75,8 @@ def run_child(mode: str, args: argparse.Namespace, scan: str) -> tuple[float, in
         sys.executable, __file__, '--measure', mode, '--scan', scan, '--voxel',
         str(args.voxel), '--chunk',
         str(args.chunk), '--points',
-        str(args.points)
+        str(args.points), '--room-points',
+        str(args.room_points)
     ],
                                stdout=subprocess.PIPE,
                                text=True)
@@ -91,12 +94,14 @@ def main() -> None:
     parser.add_argument('--points', type=int, default=30_000_000)
     parser.add_argument('--voxel', type=float, default=0.05)
     parser.add_argument('--chunk', type=int, default=1_000_000)
+    parser.add_argument(
+        '--room-points', type=int, default=ROOM_POINTS, help='points of each tiled room')
     parser.add_argument('--scan', help='an existing scan instead of the generated LAZ')
     parser.add_argument(
         '--measure', choices=('write', 'streamed', 'read-all', 'imports'), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.measure:
-        measure(args.measure, args.scan, args.voxel, args.chunk, args.points)
+        measure(args.measure, args.scan, args.voxel, args.chunk, args.points, args.room_points)
         return
     with tempfile.TemporaryDirectory() as folder:
         scan = args.scan

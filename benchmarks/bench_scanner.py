@@ -3,7 +3,7 @@ per-ray loops a bpy user would write, on the same scene and rays, and the defaul
 scans with each ray engine.
 
     .venv/bin/python benchmarks/bench_scanner.py [--rays 1000000] [--slow-rays 20000]
-        [--scan-points 1000000] [--repeats 3] [--seed 11]
+        [--scan-points 1000000] [--repeats 3] [--seed 11] [--batch-rays N]
 
 The room is layout seed ``--seed`` of the default configuration (seed 11: a box room whose 3D
 printer and one clutter cabinet have glass), scanned as the generator scans it: glass passes
@@ -397,11 +397,15 @@ def main() -> None:
     parser.add_argument('--scan-points', type=int, default=1_000_000)
     parser.add_argument('--asset-cache', type=Path, default=None)
     parser.add_argument('--seed', type=int, default=11, help='layout seed of the room')
+    parser.add_argument(
+        '--batch-rays', type=int, default=None, help='rays per cast (default: the generator\'s)')
     args = parser.parse_args()
 
     for obj in list(bpy.data.objects):  # bpy's start-up cube, camera and light
         bpy.data.objects.remove(obj, do_unlink=True)
     config = load_config()
+    if args.batch_rays:
+        config['scanner']['batch_rays'] = args.batch_rays
     workspace = tempfile.TemporaryDirectory(prefix='synthdet-bench-scanner-')  # removed at exit
     cache = args.asset_cache or Path(workspace.name) / 'assets'
     options = RunOptions(

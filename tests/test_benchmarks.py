@@ -1,0 +1,129 @@
+"""Every benchmark in ``benchmarks/`` runs at its smallest size, as its own process with the
+project's interpreter: it exits 0 and ends with its headline line in the documented format
+with finite figures. A changed signature that a benchmark uses then fails here, not in the
+docs. A new ``benchmarks/bench_<name>.py`` needs one line in ``SMOKE``."""
+from __future__ import annotations
+
+import math
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+from typing import NamedTuple
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+NUMBER = r'(?P<{}>[-+]?\d[\d,]*(?:\.\d+)?)'  # a figure as the benchmarks print it
+
+
+def figure(name: str) -> str:
+    """Regex group ``name`` matching one printed figure (checked to be finite)."""
+    return NUMBER.format(name)
+
+
+class Smoke(NamedTuple):
+    """The smallest arguments of a benchmark and the regex of its last line; ``with_model``:
+    the arguments end with a checkpoint of the tiny config's model, made for the run."""
+    args: list[str]
+    headline: str
+    with_model: bool = False
+
+
+SMOKE: dict[str, Smoke | str] = {
+    'scanner': Smoke(['--rays', '2000', '--slow-rays', '100', '--scan-points', '2000',
+                      '--repeats', '1', '--batch-rays', '4096'],
+                     r'scanner vs fastest bpy loop \(bpy \S+ loop\), 1 thread each, median of 1: '
+                     r'default sensor scans with glass ' + figure('scan') + r'x rays/s \(paper '
+                     r'[\d.]+x, tls [\d.]+x, tablet [\d.]+x\); bare ray casting ' + figure('bare') +
+                     r'x; our scan / bare Embree cast ' + figure('bound') + 'x'),
+    'writer': Smoke(['--points', '2000', '--repeats', '1'],
+                    r'text writer speedup vs the fastest alternative \(.+\), best of 1: ' +
+                    figure('ratio') + 'x'),
+    'generate': Smoke(['--rooms-per-area', '1', '--points', '5000', '--workers', '1'],
+                      r'3x50 rooms x 5,000 points, 1 workers: ' + figure('seconds') +
+                      r' s \(.+\) = ' + figure('ratio') + 'x of the 10-minute goal'),
+    'convert': Smoke(['--rooms', '2', '--points-per-object', '1000', '--workers', '2',
+                      '--repeats', '1'],
+                     r'convert speedup vs mmdet3d at equal parallelism: ' + figure('one') +
+                     r'x \(1 process each\), ' + figure('two') + r'x \(2 each\); synthdet 2 '
+                     r'workers vs mmdet3d as shipped: ' + figure('shipped') + r'x; CPU-time '
+                     r'ratio \(1 process each\): ' + figure('cpu') + 'x'),
+    'model': Smoke(['--points', '3000', '--iters', '1', '--threads', '1'],
+                   r'2 cm \+ fine level \(CPU seconds\): train x' + figure('train_2cm') +
+                   r' of 2 cm, x' + figure('train_1cm') + r' of 1 cm; inference x' +
+                   figure('infer_2cm') + r' of 2 cm, x' + figure('infer_1cm') + ' of 1 cm'),
+    'corners': Smoke(['--rooms', '1', '--points', '5000', '--timing-rooms', '0', '--generate',
+                      '0'],
+                     r'corners, generator rooms: .+; all rooms \(mean error, right count, right '
+                     r'order\): traced ' + figure('traced') + r' cm \(worst [\d.]+\) / \d+% / '
+                     r'\d+%; paper .+; convex hull ' + figure('hull') + ' cm .+'),
+    'hall': Smoke(['--points', '100000', '--hall-size', '16', '12', '--rooms', '1',
+                   '--room-points', '20000', '--config', 'configs/tr3d/tiny.py', '--checkpoint'],
+                  r'hall ' + figure('points') + r'M points -> FCStd: ' + figure('seconds') +
+                  r' s, peak ' + figure('peak') + r' GB; windowed recall ' + figure('hall') +
+                  ' vs room recall ' + figure('rooms'),
+                  with_model=True),
+    'sensors': Smoke(['--rooms', '1', '--points', '5000', '--repeats', '1'],
+                     r'sensors: slowest \S+ ' + figure('seconds') + r' s per 1M-point room \(' +
+                     figure('ratio') + r'x the aimed paper sensor\)'),
+    'structure_thinning': Smoke(['--rooms', '1', '--points', '20000', '--sample', '2000'],
+                                r'voxel grid first: 10th-percentile voxels per object paper ' +
+                                figure('paper') + 'x, tls ' + figure('tls') + 'x, tablet ' +
+                                figure('tablet') + 'x'),
+    'dist_train': Smoke(['--rooms-per-area', '1', '--points', '5000', '--iters', '2', '--warmup',
+                         '1'],
+                        r'2 processes x 1 thread vs 1 process x 2 threads: x' + figure('ratio') +
+                        r' faster per iteration of 4 rooms \(' + figure('two') + ' s vs ' +
+                        figure('one') + r' s\)'),
+    'scan_io': Smoke(['--points', '20000', '--room-points', '5000', '--chunk', '5000'],
+                     r'scan_io \d+M-point LAZ: streamed load_scan peak ' + figure('streamed') +
+                     r' GB in \d+ s vs read-all ' + figure('whole') + r' GB in \d+ s: ' +
+                     figure('ratio') + 'x less memory'),
+    # its whole run at a tiny scale, headline included, is tests/test_bench_domain_shift.py's
+    'domain_shift': 'tests/test_bench_domain_shift.py',
+}
+
+
+def test_every_benchmark_has_a_smoke_run():
+    found = {p.stem[len('bench_'):] for p in (REPO / 'benchmarks').glob('bench_*.py')}
+    assert sorted(found - set(SMOKE)) == [], 'benchmarks without an entry in SMOKE'
+    assert sorted(set(SMOKE) - found) == [], 'SMOKE entries without a benchmark'
+    for name, smoke in SMOKE.items():
+        if isinstance(smoke, str):  # run by another test file, which must name it
+            assert f'bench_{name}' in (REPO / smoke).read_text(), name
+
+
+@pytest.fixture(scope='module')
+def tiny_checkpoint(tmp_path_factory) -> Path:
+    """A checkpoint of ``configs/tr3d/tiny.py``'s model with its initial weights (seeded)."""
+    import torch
+    from mmdet3d.apis import init_model
+    from mmengine.config import Config
+    torch.manual_seed(0)
+    model = init_model(Config.fromfile(str(REPO / 'configs/tr3d/tiny.py')), None, device='cpu')
+    path = tmp_path_factory.mktemp('model') / 'initialised.pth'
+    torch.save({'state_dict': model.state_dict(), 'meta': {}}, path)
+    return path
+
+
+@pytest.mark.parametrize('name', [n for n, s in SMOKE.items() if isinstance(s, Smoke)])
+def test_benchmark_smoke_run(name, request):
+    smoke = SMOKE[name]
+    args = [*smoke.args]
+    if smoke.with_model:
+        args.append(str(request.getfixturevalue('tiny_checkpoint')))
+    done = subprocess.run([sys.executable, f'benchmarks/bench_{name}.py', *args],
+                          cwd=REPO,
+                          env=dict(os.environ, OMP_NUM_THREADS='1'),
+                          capture_output=True,
+                          text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-4000:]
+    lines = [line for line in done.stdout.splitlines() if line.strip()]
+    assert lines, done.stderr[-2000:]
+    headline = re.fullmatch(smoke.headline, lines[-1].strip())
+    assert headline, f'last line not in the documented format: {lines[-1]!r}'
+    for key, value in headline.groupdict().items():
+        assert math.isfinite(float(value.replace(',', ''))), f'{key} = {value}'
