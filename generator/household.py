@@ -23,11 +23,11 @@ from generator.clutter import _Solids, clutter_mesh
 CLUTTER_HOUSEHOLD_KINDS = ('monitor', 'pc_tower', 'keyboard', 'books', 'storage_box', 'bag',
                            'lamp', 'plant', 'wastebin', 'tv', 'tv_stand', 'bed', 'nightstand',
                            'wardrobe', 'bookshelf', 'radiator', 'door', 'curtain')
-FURNITURE_KINDS = {'desk': 'table', 'coffee_table': 'table', 'armchair': 'chair',
-                   'corner_sofa': 'sofa'}
+FURNITURE_KINDS = {'desk': 'table', 'coffee_table': 'table', 'side_table': 'table',
+                   'armchair': 'chair', 'corner_sofa': 'sofa'}
 HOUSEHOLD_KINDS = CLUTTER_HOUSEHOLD_KINDS + tuple(FURNITURE_KINDS)
 # objects that carry others on a free top (monitors on desks, a TV on its stand)
-SUPPORT_KINDS = ('desk', 'coffee_table', 'tv_stand', 'nightstand')
+SUPPORT_KINDS = ('desk', 'coffee_table', 'side_table', 'tv_stand', 'nightstand')
 
 Size = tuple[float, float, float]
 
@@ -214,6 +214,16 @@ def _coffee_table(rng, max_height):
         'leg_color': _color(rng, palette.WOOD + palette.METAL), 'shelf': bool(rng.random() < 0.4)}
 
 
+def _side_table(rng, max_height):
+    # an end table beside a sofa or an armchair: as high as their arms, square or round
+    round_top = bool(rng.random() < 0.35)
+    width = _mm(rng.uniform(0.4, 0.7))
+    depth = width if round_top else _mm(rng.uniform(0.4, 0.7))
+    return (width, depth, _fit(rng, 0.45, 0.62, max_height)), {
+        'round': round_top, 'top_color': _color(rng, palette.WOOD + LIGHT + DARK[:1]),
+        'leg_color': _color(rng, palette.WOOD + palette.METAL), 'shelf': bool(rng.random() < 0.5)}
+
+
 def _armchair(rng, max_height):
     return (_mm(rng.uniform(0.72, 0.95)), _mm(rng.uniform(0.72, 0.9)),
             _fit(rng, 0.75, 1.0, max_height)), {
@@ -223,8 +233,9 @@ def _armchair(rng, max_height):
 
 
 def _corner_sofa(rng, max_height):
-    # the footprint diagonal stays under 2.75 m, like the library's largest sofas
-    return (_mm(rng.uniform(1.8, 2.2)), _mm(rng.uniform(1.35, 1.6)),
+    # the footprint diagonal stays under 2.54 m, the library's largest sofa, which sets the
+    # inference window overlap
+    return (_mm(rng.uniform(1.8, 2.05)), _mm(rng.uniform(1.3, 1.45)),
             _fit(rng, 0.75, 0.9, max_height)), {
                 'color': _color(rng, palette.FABRIC), 'seat_depth': _mm(rng.uniform(0.8, 0.92)),
                 'seat_height': _mm(rng.uniform(0.4, 0.46)),
@@ -238,7 +249,8 @@ _SAMPLERS: dict[str, Callable[..., tuple[Size, dict]]] = {
     'wastebin': _wastebin, 'tv': _tv, 'tv_stand': _tv_stand, 'bed': _bed,
     'nightstand': _nightstand, 'wardrobe': _wardrobe, 'bookshelf': _bookshelf,
     'radiator': _radiator, 'door': _door, 'curtain': _curtain, 'desk': _desk,
-    'coffee_table': _coffee_table, 'armchair': _armchair, 'corner_sofa': _corner_sofa
+    'coffee_table': _coffee_table, 'side_table': _side_table, 'armchair': _armchair,
+    'corner_sofa': _corner_sofa
 }
 
 
@@ -537,7 +549,8 @@ _BUILDERS: dict[str, Callable[[_Solids, Size, dict], None]] = {
     'tv_stand': _build_tv_stand, 'bed': _build_bed, 'nightstand': _build_nightstand,
     'wardrobe': _build_wardrobe, 'bookshelf': _build_bookshelf, 'radiator': _build_radiator,
     'door': _build_door, 'curtain': _build_curtain, 'desk': _build_desk,
-    'coffee_table': _build_coffee_table, 'armchair': _build_armchair,
+    'coffee_table': _build_coffee_table, 'side_table': _build_coffee_table,
+    'armchair': _build_armchair,
     'corner_sofa': _build_corner_sofa
 }
 

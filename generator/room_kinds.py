@@ -8,8 +8,9 @@ hold a YuMi or a 3D printer:
   a PC tower, books or a lamp on it; bookshelves, cabinets, bins, plants, now and then a sofa;
 - ``meeting``: a meeting table in the middle of the room with chairs around it, a TV on a stand,
   cabinets and spare chairs along the walls;
-- ``living``: a sofa (or a corner sofa) against a wall with a coffee table in front of it,
-  armchairs, a TV on its stand across the room, shelves, lamps, plants, at times a dining table;
+- ``living``: a sofa (or a corner sofa) against a wall with a coffee table in front of it and
+  end tables beside it, armchairs, a TV on its stand across the room, shelves, lamps, plants, at
+  times a dining table;
 - ``bedroom``: a bed with its head against a wall, night stands with lamps, a wardrobe, at times
   a desk with a chair;
 - ``lab``: benches along the walls with monitors, PC towers and boxes on them, stools and swivel
@@ -152,16 +153,22 @@ def _chair_at(rng, placer: _Placer, chair: AssetSpec, target: PlacedObject, side
     return placer.place_first_free(chair, propose, tries)
 
 
-def _next_to(rng, placer: _Placer, anchor: PlacedObject, spec: AssetSpec, side: int,
+def _next_to(rng,
+             placer: _Placer,
+             anchor: PlacedObject,
+             spec: AssetSpec,
+             side: int,
+             gap: Sequence[float] = (0.0, 0.08),
+             clearance: float | None = CONTACT,
              tries: int = 4) -> PlacedObject | None:
-    """``spec`` beside ``anchor`` on its local ``side`` (-1: left, +1: right), backs aligned
-    (a night stand at a bed, a PC tower at a desk)."""
+    """``spec`` beside ``anchor`` on its local ``side`` (-1: left, +1: right), ``gap`` apart,
+    backs aligned (a night stand at a bed, a PC tower at a desk, a side table at a sofa)."""
     def propose(_attempt: int) -> tuple[np.ndarray, float]:
-        x = side * (anchor.size[0] / 2 + spec.size[0] / 2 + rng.uniform(0.0, 0.08))
+        x = side * (anchor.size[0] / 2 + spec.size[0] / 2 + rng.uniform(*gap))
         y = anchor.size[1] / 2 - spec.size[1] / 2 - rng.uniform(0.0, 0.05)
         return _local_pose(anchor, (x, y), spec, 0.0)
 
-    return placer.place_first_free(spec, propose, tries, clearance=CONTACT)
+    return placer.place_first_free(spec, propose, tries, clearance=clearance)
 
 
 def _household(rng, placer: _Placer, kind: str) -> AssetSpec:
@@ -332,13 +339,18 @@ def _furnish_living(rng, placer, catalog, layout, walls) -> None:
             for _ in range(int(rng.integers(0, 3))):
                 kind = ('books', 'plant', 'storage_box')[int(rng.integers(3))]
                 _on_top(rng, placer, table, _household(rng, placer, kind))
-            for side in (-1.0, 1.0):  # armchairs at the coffee table's ends
-                if rng.random() < 0.4:
-                    _chair_at(rng, placer, _household(rng, placer, 'armchair'), table,
-                              (side, 0.0), gap=(0.2, 0.5))
-        if rng.random() < 0.4:
-            _next_to(rng, placer, sofa, _household(rng, placer, 'nightstand'),
-                     1 if rng.random() < 0.5 else -1)
+            for side in (-1.0, 1.0):  # armchairs or one-seat sofas at the coffee table's ends
+                if rng.random() < 0.5:
+                    seat = _household(rng, placer, 'armchair') if rng.random() < 0.6 else (
+                        _choose(rng, catalog, 'sofa', ('1seat', )))
+                    if seat is not None:
+                        _chair_at(rng, placer, seat, table, (side, 0.0), gap=(0.2, 0.5))
+        for side in (-1, 1):  # end tables, as high as the sofa's arms
+            if rng.random() < 0.45:
+                end = _next_to(rng, placer, sofa, _household(rng, placer, 'side_table'), side,
+                               (0.06, 0.2), None)
+                if end is not None and rng.random() < 0.4:
+                    _on_top(rng, placer, end, _household(rng, placer, 'lamp'))
     if rng.random() < 0.3:
         second = _choose(rng, catalog, 'sofa', LIVING_SOFAS)
         if second is not None:

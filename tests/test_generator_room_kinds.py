@@ -63,6 +63,8 @@ def test_every_household_kind_builds_a_closed_mesh_of_its_size(kind):
         assert colors.shape == (len(triangles), 3) and colors.dtype == np.uint8
         size = np.asarray(spec.size)
         assert np.all(size > 0.02) and size[2] <= 2.4 + 1e-9, (kind, size)
+        if kind in FURNITURE_KINDS:  # within the largest library sofa: the window overlap
+            assert math.hypot(size[0], size[1]) <= 2.54, (kind, size)
         assert np.allclose(vertices.min(axis=0), [-size[0] / 2, -size[1] / 2, 0], atol=1e-9)
         assert np.allclose(vertices.max(axis=0), [size[0] / 2, size[1] / 2, size[2]], atol=1e-9)
         edges = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
@@ -163,6 +165,7 @@ def test_living_rooms_have_a_sofa_with_a_coffee_table(rooms_by_kind):
     rooms = rooms_by_kind['living']
     assert _share(rooms, lambda m: any(o['class'] == 'sofa' for o in m['objects'])) >= 0.9
     assert _share(rooms, lambda m: _kinds(m)['coffee_table']) >= 0.7
+    assert _share(rooms, lambda m: _kinds(m)['side_table']) >= 0.4
     assert _share(rooms, lambda m: _kinds(m)['tv']) >= 0.3
     assert any(_kinds(m)['corner_sofa'] for m in rooms) and any(_kinds(m)['armchair']
                                                                 for m in rooms)
