@@ -25,7 +25,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from generator.clutter import sample_clutter
-from generator.household import sample_household
+from generator.household import FURNITURE_KINDS, sample_household
 from generator.layout import (CONTACT, AssetSpec, Catalog, PlacedObject, RoomLayout, _Placer,
                               _facing_yaw, _place_against_wall, _place_on_floor, _wall_frame,
                               _wall_lengths, _wrap_angle)
@@ -82,14 +82,16 @@ def _walls_by_length(rng, polygon: np.ndarray, min_length: float) -> list[int]:
 
 def _at_wall(rng,
              placer: _Placer,
-             spec: AssetSpec,
+             spec: AssetSpec | None,
              walls: Sequence[int],
              gap: Sequence[float] = (0.0, 0.08),
              clearance: float | None = None,
              tries: int = 16,
              u_center: float | None = None) -> PlacedObject | None:
     """``spec`` with its back to one of ``walls`` (drawn per try), facing into the room; at
-    ``u_center`` along the wall (metres from its start) when given."""
+    ``u_center`` along the wall (metres from its start) when given. None places nothing."""
+    if spec is None:
+        return None
     lengths = _wall_lengths(placer.polygon)
     usable = [w for w in walls if lengths[w] >= spec.size[0] + 0.2]
     if not usable:
@@ -134,11 +136,14 @@ def _on_top(rng, placer: _Placer, support: PlacedObject, spec: AssetSpec,
     return placer.place_first_free(spec, propose, tries, on=support.instance, clearance=CONTACT)
 
 
-def _chair_at(rng, placer: _Placer, chair: AssetSpec, target: PlacedObject, side: np.ndarray,
+def _chair_at(rng, placer: _Placer, chair: AssetSpec | None, target: PlacedObject,
+              side: Sequence[float],
               along: float = 0.0, gap: Sequence[float] = (0.08, 0.35),
               tries: int = 6) -> PlacedObject | None:
     """``chair`` facing ``target`` from its local ``side`` (a unit axis, e.g. (0, -1): in front),
-    ``along`` metres off the middle of that side."""
+    ``along`` metres off the middle of that side. None places nothing."""
+    if chair is None:
+        return None
     side = np.asarray(side, dtype=float)
     reach = abs(side[0]) * target.size[0] / 2 + abs(side[1]) * target.size[1] / 2
     tangent = np.array([-side[1], side[0]])
@@ -156,13 +161,17 @@ def _chair_at(rng, placer: _Placer, chair: AssetSpec, target: PlacedObject, side
 def _next_to(rng,
              placer: _Placer,
              anchor: PlacedObject,
-             spec: AssetSpec,
+             spec: AssetSpec | None,
              side: int,
              gap: Sequence[float] = (0.0, 0.08),
              clearance: float | None = CONTACT,
              tries: int = 4) -> PlacedObject | None:
     """``spec`` beside ``anchor`` on its local ``side`` (-1: left, +1: right), ``gap`` apart,
-    backs aligned (a night stand at a bed, a PC tower at a desk, a side table at a sofa)."""
+    backs aligned (a night stand at a bed, a PC tower at a desk, a side table at a sofa). None
+    places nothing."""
+    if spec is None:
+        return None
+
     def propose(_attempt: int) -> tuple[np.ndarray, float]:
         x = side * (anchor.size[0] / 2 + spec.size[0] / 2 + rng.uniform(*gap))
         y = anchor.size[1] / 2 - spec.size[1] / 2 - rng.uniform(0.0, 0.05)
@@ -173,6 +182,14 @@ def _next_to(rng,
 
 def _household(rng, placer: _Placer, kind: str) -> AssetSpec:
     return sample_household(rng, kind, placer.top_limit)
+
+
+def _furniture(rng, placer: _Placer, catalog: Catalog, kind: str) -> AssetSpec | None:
+    """A household furniture object of ``kind``, or None when the library lacks its class (a
+    user library without tables gets no desks either)."""
+    if not catalog.get(FURNITURE_KINDS[kind]):
+        return None
+    return _household(rng, placer, kind)
 
 
 def _desk_items(rng, placer: _Placer, desk: PlacedObject, monitors: float = 0.85) -> None:
@@ -197,7 +214,8 @@ def _window_spans(layout: RoomLayout) -> list[tuple[int, float, float]]:
     return [(o.wall, o.u0, o.u1) for o in layout.openings if o.kind == 'window']
 
 
-def _room_extras(rng, placer: _Placer, layout: RoomLayout, walls: Sequence[int],
+def _room_extras(rng, placer: _Placer, catalog: Catalog, layout: RoomLayout,
+                 walls: Sequence[int],
                  floor_kinds: Mapping[str, float], wall_kinds: Mapping[str, float],
                  count: Sequence[int]) -> None:
     """Radiators under windows, curtains beside them, then ``count`` (inclusive range) objects:
@@ -218,9 +236,11 @@ def _room_extras(rng, placer: _Placer, layout: RoomLayout, walls: Sequence[int],
         kind = kinds[int(rng.choice(len(kinds), p=weights / weights.sum()))]
         if kind in ('cabinet', 'shelf'):  # the factory's cabinets and shelving
             spec = sample_clutter(rng, kind, placer.top_limit)
+        elif kind in FURNITURE_KINDS:
+            spec = _furniture(rng, placer, catalog, kind)
         else:
             spec = _household(rng, placer, kind)
-        if spec.cls != 'clutter':  # furniture keeps the clearance, in front of a wall
+        if spec is None or spec.cls != 'clutter':  # furniture keeps the clearance
             _at_wall(rng, placer, spec, walls, (0.05, 0.4))
         elif kind in wall_kinds:
             _place_against_wall(rng, placer, spec, (0.0, 0.05))
@@ -240,7 +260,7 @@ def _spare_chairs(rng, placer: _Placer, catalog: Catalog, walls: Sequence[int], 
 def _furnish_office(rng, placer, catalog, layout, walls) -> None:
     for _ in range(int(rng.integers(1, 5))):
         if rng.random() < 0.5:
-            spec = _household(rng, placer, 'desk')
+            spec = _furniture(rng, placer, catalog, 'desk')
         else:
             spec = _choose(rng, catalog, 'table', DESK_TABLES)
         desk = spec and _at_wall(rng, placer, spec, walls, (0.0, 0.06))
@@ -257,7 +277,7 @@ def _furnish_office(rng, placer, catalog, layout, walls) -> None:
         if sofa is not None:
             _at_wall(rng, placer, sofa, walls, (0.02, 0.1))
     _spare_chairs(rng, placer, catalog, walls, int(rng.integers(0, 3)), GUEST_CHAIRS)
-    _room_extras(rng, placer, layout, walls,
+    _room_extras(rng, placer, catalog, layout, walls,
                  {'wastebin': 2, 'plant': 1, 'storage_box': 1.5, 'bag': 1, 'lamp': 0.3},
                  {'bookshelf': 2, 'cabinet': 1.5, 'wardrobe': 0.5}, (3, 8))
 
@@ -318,37 +338,36 @@ def _furnish_meeting(rng, placer, catalog, layout, walls) -> None:
         if stand is not None:
             _on_top(rng, placer, stand, _household(rng, placer, 'tv'))
     _spare_chairs(rng, placer, catalog, walls, int(rng.integers(0, 4)), GUEST_CHAIRS)
-    _room_extras(rng, placer, layout, walls, {'wastebin': 1, 'plant': 1.5, 'bag': 1},
+    _room_extras(rng, placer, catalog, layout, walls, {'wastebin': 1, 'plant': 1.5, 'bag': 1},
                  {'cabinet': 1, 'bookshelf': 1}, (1, 5))
 
 
 def _furnish_living(rng, placer, catalog, layout, walls) -> None:
-    sofa_spec = (_household(rng, placer, 'corner_sofa') if rng.random() < 0.3 else
+    sofa_spec = (_furniture(rng, placer, catalog, 'corner_sofa') if rng.random() < 0.3 else
                  _choose(rng, catalog, 'sofa', LIVING_SOFAS))
     sofa = sofa_spec and _at_wall(rng, placer, sofa_spec, walls[:2], (0.02, 0.12))
     if sofa is not None:
-        coffee = _household(rng, placer, 'coffee_table')
+        coffee = _furniture(rng, placer, catalog, 'coffee_table')
 
         def propose(_attempt: int) -> tuple[np.ndarray, float]:
             y = -(sofa.size[1] / 2 + rng.uniform(0.35, 0.6) + coffee.size[1] / 2)
             return _local_pose(sofa, (rng.uniform(-0.2, 0.2), y), coffee,
                                float(rng.normal(0.0, 0.05)))
 
-        table = placer.place_first_free(coffee, propose, 8)
+        table = None if coffee is None else placer.place_first_free(coffee, propose, 8)
         if table is not None:
             for _ in range(int(rng.integers(0, 3))):
                 kind = ('books', 'plant', 'storage_box')[int(rng.integers(3))]
                 _on_top(rng, placer, table, _household(rng, placer, kind))
             for side in (-1.0, 1.0):  # armchairs or one-seat sofas at the coffee table's ends
                 if rng.random() < 0.5:
-                    seat = _household(rng, placer, 'armchair') if rng.random() < 0.6 else (
-                        _choose(rng, catalog, 'sofa', ('1seat', )))
-                    if seat is not None:
-                        _chair_at(rng, placer, seat, table, (side, 0.0), gap=(0.2, 0.5))
+                    seat = (_furniture(rng, placer, catalog, 'armchair') if rng.random() < 0.6
+                            else _choose(rng, catalog, 'sofa', ('1seat', )))
+                    _chair_at(rng, placer, seat, table, (side, 0.0), gap=(0.2, 0.5))
         for side in (-1, 1):  # end tables, as high as the sofa's arms
             if rng.random() < 0.45:
-                end = _next_to(rng, placer, sofa, _household(rng, placer, 'side_table'), side,
-                               (0.06, 0.2), None)
+                end_table = _furniture(rng, placer, catalog, 'side_table')
+                end = _next_to(rng, placer, sofa, end_table, side, (0.06, 0.2), None)
                 if end is not None and rng.random() < 0.4:
                     _on_top(rng, placer, end, _household(rng, placer, 'lamp'))
     if rng.random() < 0.3:
@@ -373,7 +392,7 @@ def _furnish_living(rng, placer, catalog, layout, walls) -> None:
             chair = _choose(rng, catalog, 'chair', GUEST_CHAIRS)
             if dining is not None and chair is not None:
                 _chairs_around(rng, placer, chair, dining, 0.6)
-    _room_extras(rng, placer, layout, walls,
+    _room_extras(rng, placer, catalog, layout, walls,
                  {'plant': 2, 'lamp': 1.5, 'storage_box': 1, 'bag': 1, 'wastebin': 0.5,
                   'armchair': 0.8},
                  {'bookshelf': 2, 'cabinet': 0.5}, (2, 7))
@@ -390,7 +409,7 @@ def _furnish_bedroom(rng, placer, catalog, layout, walls) -> None:
     if rng.random() < 0.85:
         _at_wall(rng, placer, _household(rng, placer, 'wardrobe'), walls, (0.0, 0.03), CONTACT)
     if rng.random() < 0.4:
-        spec = _household(rng, placer, 'desk') if rng.random() < 0.5 else _choose(
+        spec = _furniture(rng, placer, catalog, 'desk') if rng.random() < 0.5 else _choose(
             rng, catalog, 'table', DESK_TABLES)
         desk = spec and _at_wall(rng, placer, spec, walls, (0.0, 0.06))
         if desk is not None:
@@ -399,8 +418,9 @@ def _furnish_bedroom(rng, placer, catalog, layout, walls) -> None:
                 _chair_at(rng, placer, chair, desk, (0.0, -1.0))
             _desk_items(rng, placer, desk, monitors=0.5)
     if rng.random() < 0.2:
-        _at_wall(rng, placer, _household(rng, placer, 'armchair'), walls, (0.05, 0.3))
-    _room_extras(rng, placer, layout, walls,
+        _at_wall(rng, placer, _furniture(rng, placer, catalog, 'armchair'), walls,
+                 (0.05, 0.3))
+    _room_extras(rng, placer, catalog, layout, walls,
                  {'storage_box': 1.5, 'bag': 1.5, 'wastebin': 0.5, 'plant': 1, 'lamp': 0.5},
                  {'bookshelf': 1, 'tv_stand': 0.3}, (1, 5))
 
@@ -418,7 +438,7 @@ def _furnish_lab(rng, placer, catalog, layout, walls) -> None:
         _desk_items(rng, placer, bench, monitors=0.6)
         for _ in range(int(rng.integers(0, 3))):
             _on_top(rng, placer, bench, _household(rng, placer, 'storage_box'))
-    _room_extras(rng, placer, layout, walls,
+    _room_extras(rng, placer, catalog, layout, walls,
                  {'wastebin': 1, 'storage_box': 1.5, 'bag': 0.5, 'plant': 0.3},
                  {'shelf': 1.5, 'cabinet': 1.5, 'bookshelf': 0.5}, (3, 8))
 

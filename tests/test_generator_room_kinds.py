@@ -184,6 +184,18 @@ def test_bedrooms_have_a_bed_with_its_head_at_a_wall(rooms_by_kind):
             assert min(gaps) < 0.05, f"{bed['instance']}: head {min(gaps):.3f} m from the wall"
 
 
+def test_a_library_without_a_class_gets_none_of_it(catalog):  # noqa: F811
+    """As in factory rooms, a class the asset library lacks never appears: no household desks,
+    coffee tables or end tables without library tables, no corner sofas without sofas."""
+    for cls in ('table', 'sofa', 'chair'):
+        partial = {name: (specs if name != cls else []) for name, specs in catalog.items()}
+        for kind in OTHER_KINDS:
+            for seed in range(8):
+                layout = generate_layout(np.random.default_rng([seed, 9]), partial,
+                                         kind_config(kind))
+                assert cls not in {obj.cls for obj in layout.objects}, (cls, kind, seed)
+
+
 def test_mixed_profile_mixes_the_kinds(catalog):  # noqa: F811
     config = load_config(MIXED)
     kinds = Counter(generate_layout(np.random.default_rng([seed, 3]), catalog, config).kind
