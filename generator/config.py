@@ -14,6 +14,10 @@ rooms (chair 364, table 252, sofa 86, yumi 200, 3dprinter 192), with the procedu
   items that fit on no table of the library are dropped: ~504 sides -> ~197 yumis, ~192 printers.
 
 Counts are binomial: over 150 rooms the sofa count alone has a standard deviation of ~10 %.
+
+A file may add ``room_kinds`` (:data:`ROOM_KINDS`, generator/room_kinds.py): the share of
+offices, meeting rooms, living rooms, bedrooms and labs among the rooms. The defaults have none:
+every room is a factory room.
 """
 import copy
 import json
