@@ -77,6 +77,7 @@ class CornerParams:
     default_wall_height: float = 2.5  # walls of a scan without a ceiling are at least this tall
     min_seen_walls: float = 0.75  # an outline backed less than this by walls is partial
     max_approximate_corners: int = 16  # a rougher approximate footprint becomes a rectangle
+    min_approximate_share: float = 0.97  # ... so does one holding a smaller share of the points
 
 
 @dataclass
@@ -222,8 +223,10 @@ def approximate_outline(points: np.ndarray,
                         params: CornerParams | None = None,
                         reason: str = '') -> RoomOutline:
     """An approximate floor polygon: the outline of the points' footprint (simplified), or its
-    oriented bounding rectangle when that outline is rough or crosses itself, on the floor
-    level found (the lowest dense level). Marked ``approximate_floor`` = 1 in the quality."""
+    oriented bounding rectangle (0.5th to 99.5th percentiles along the walls) when that
+    outline is rough, crosses itself or leaves out more than 3 % of the points (objects seen
+    apart from the floor), on the floor level found (the lowest dense level). Marked
+    ``approximate_floor`` = 1 in the quality."""
     params = params or CornerParams()
     xyz = np.asarray(points)[:, :3].astype(np.float64, copy=False)
     if len(xyz) == 0 or not np.isfinite(xyz).all():
@@ -241,7 +244,9 @@ def approximate_outline(points: np.ndarray,
             outline, tolerance=max(3 * cell, 0.1), min_edge=max(params.min_edge, 0.5),
             min_turn=params.min_turn)
     if len(outline) < 3 or len(outline) > params.max_approximate_corners or \
-            first_self_crossing(outline) is not None:
+            first_self_crossing(outline) is not None or \
+            points_in_polygon(_subsample(frame_xy, params.max_quality_points),
+                              outline).mean() < params.min_approximate_share:
         low, high = np.percentile(frame_xy, [0.5, 99.5], axis=0)
         outline = np.array([[low[0], low[1]], [low[0], high[1]], [high[0], high[1]],
                             [high[0], low[1]]])

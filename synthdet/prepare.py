@@ -310,8 +310,10 @@ def detect_up_axis(xyz: np.ndarray) -> str:
     ``'-y'``. Otherwise the floor is the largest plane of a room or hall (larger than any one
     wall when the room is wider than tall), so the up axis is the one with the most points on
     a plane at one end of its range, each axis allowed a tilt of up to ``MAX_TILT``; z is kept
-    unless another axis beats it by ``UP_AXIS_MARGIN``. On a turned axis the floor is the end
-    with the furniture (:func:`_floor_end`). A z-up scan is never turned upside down.
+    unless another axis beats it by ``UP_AXIS_MARGIN`` and z is not the shortest extent (a
+    reconstructed mesh's floor can hold fewer points than one wall). On a turned axis the
+    floor is the end with the furniture (:func:`_floor_end`). A z-up scan is never turned
+    upside down.
     """
     xyz = np.asarray(xyz, dtype=np.float64)[::max(1, len(xyz) // FIT_POINTS)]
     if _is_camera_frustum(xyz):
@@ -320,6 +322,9 @@ def detect_up_axis(xyz: np.ndarray) -> str:
     plane = [max(masses[:2]) for _, masses in levelled]
     axis = int(np.argmax(plane))
     if axis == 2 or plane[axis] < UP_AXIS_MARGIN * plane[2]:
+        return '+z'
+    extent = np.percentile(xyz, 99.5, axis=0) - np.percentile(xyz, 0.5, axis=0)
+    if extent[2] <= extent.min():  # rooms are wider than tall: a sparse floor, a big wall
         return '+z'
     heights, masses = levelled[axis]
     return ('+' if _floor_end(xyz, heights, axis, masses) else '-') + AXIS_NAMES[axis]

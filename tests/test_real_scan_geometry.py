@@ -1,0 +1,182 @@
+"""Corners and up axis on scans with the properties of real ones, made here (never copied):
+a reconstructed mesh sampled per vertex (floor sparser than the walls, no ceiling), an open-top
+room, furniture in front of a wall the sensor never saw, a single depth view of one side of a
+room, a y-up room and a depth camera's own frame (y down, z forward)."""
+import math
+
+import numpy as np
+import pytest
+
+from configurator.corners import (CornerParams, detect_corners, floor_prominence,
+                                  room_outline)
+from synthdet.geometry import (distance_to_polygon, first_self_crossing, points_in_polygon,
+                               signed_area)
+from synthdet.prepare import detect_up_axis, prepare_scan
+from synthdet.scan_io import LoadedScan
+from tests.room_scans import _outside_box, _sample_box, _sample_flat, _sample_walls
+
+WIDTH, DEPTH = 6.0, 5.0
+RECTANGLE = np.array([[0.0, 0.0], [0.0, DEPTH], [WIDTH, DEPTH], [WIDTH, 0.0]])
+
+
+def room_scan(*,
+              height: float = 2.7,
+              density: float = 1500.0,
+              floor_share: float = 1.0,
+              ceiling: bool = True,
+              furniture: int = 3,
+              furniture_density: float = 4.0,
+              seed: int = 0,
+              width: float = WIDTH,
+              depth: float = DEPTH) -> np.ndarray:
+    """A ``width`` x ``depth`` room (corner at the origin, floor at z = 0) as x y z r g b:
+    floor (``floor_share`` of the walls' density per m^2: a mesh sampled per vertex has a
+    sparse floor), walls with a door and a window, an optional ceiling and ``furniture``
+    boxes standing free (``furniture_density`` times as dense)."""
+    rng = np.random.default_rng(seed)
+    polygon = np.array([[0.0, 0.0], [0.0, depth], [width, depth], [width, 0.0]])
+    floor = _sample_flat(polygon, 0.0, int(density * width * depth * floor_share), rng,
+                         (150, 140, 130))
+    parts = []
+    if ceiling:
+        parts.append(_sample_flat(polygon, height, int(density * width * depth), rng,
+                                  (230, 230, 225)))
+    walls = _sample_walls(polygon, height, density, rng, openings=True)
+    for _ in range(furniture):
+        size = np.array([rng.uniform(0.5, 1.2), rng.uniform(0.5, 0.9), rng.uniform(0.45, 0.8)])
+        box = (rng.uniform([1.5, 1.5], [width - 1.5, depth - 1.5]), size,
+               rng.uniform(0, math.pi), False)
+        parts.append(_sample_box(box, furniture_density * density, rng))
+        floor = _outside_box(floor, box, 0.0)
+    points = np.concatenate([floor, walls, *parts])
+    return points[rng.permutation(len(points))]
+
+
+def depth_view(points: np.ndarray, camera: np.ndarray, half_width: float = 30.0,
+               half_height: float = 23.0) -> np.ndarray:
+    """What a depth camera at ``camera`` looking along +y sees (a frustum, half angles in
+    degrees), in an upright camera frame: z up, the camera at the origin (as SUN RGB-D)."""
+    relative = points[:, :3] - camera
+    forward = relative[:, 1]
+    keep = (forward > 0.4) & \
+        (np.abs(np.arctan2(relative[:, 0], forward)) < math.radians(half_width)) & \
+        (np.abs(np.arctan2(relative[:, 2], forward)) < math.radians(half_height))
+    view = points[keep].copy()
+    view[:, :3] -= camera
+    return view
+
+
+def assert_rectangle(corners: np.ndarray, tolerance: float = 0.03) -> None:
+    assert len(corners) == 4, corners
+    errors = [np.linalg.norm(corners - corner, axis=1).min() for corner in RECTANGLE]
+    assert max(errors) < tolerance, corners
+
+
+def loaded(points: np.ndarray) -> LoadedScan:
+    return LoadedScan(points=points.astype(np.float64), origin=np.zeros(3), report=[],
+                      source='made by the test')
+
+
+# --------------------------------------------------------------------------- corners
+
+
+def test_sparse_floor_of_a_mesh_sample_is_the_floor():
+    """A floor holding 8 % of the walls' density per m^2 is under 3 times as dense as a slab
+    of the walls (what the old rule demanded), but it spans the room: it is the floor."""
+    points = room_scan(floor_share=0.08, ceiling=False, seed=1)
+    outline = detect_corners(points)
+    assert floor_prominence(points[:, 2], 0.0, 2.7, CornerParams()) < 3.0
+    assert outline.quality['floor_cover'] > 0.9
+    assert outline.floor_z == pytest.approx(0.0, abs=0.01)
+    assert_rectangle(outline.corners)
+    assert not outline.approximate
+
+
+def test_open_top_room_has_no_ceiling_and_walls_of_the_default_height():
+    """No ceiling, and three cabinets whose tops (1.4 m) are the densest upper level: they
+    were taken for the ceiling. They cover a strip of the room, no ceiling does that."""
+    rng = np.random.default_rng(0)
+    cabinets = [
+        _sample_box((np.array([x, DEPTH - 0.3]), np.array([1.0, 0.5, 1.4]), 0.0, True), 6000.0,
+                    rng) for x in (1.0, 2.5, 4.0)
+    ]
+    points = np.vstack([room_scan(ceiling=False, height=2.2, furniture=0, seed=2), *cabinets])
+    outline = detect_corners(points)
+    assert outline.quality['ceiling_found'] == 0.0
+    assert outline.ceiling_z == pytest.approx(CornerParams.default_wall_height, abs=0.01)
+    assert any('no ceiling found' in note for note in outline.notes)
+    assert_rectangle(outline.corners)
+
+
+def test_furniture_in_front_of_an_unseen_wall_stays_out_of_the_outline():
+    """A sofa 0.3-0.6 m in front of a wall hides it and the floor behind it (a reconstructed
+    mesh has nothing there). The sofa's back faces the wall but does not reach up as a wall
+    does, so the wall's two seen halves make one straight wall: no bite around the sofa."""
+    for gap in (0.3, 0.6):
+        points = room_scan(ceiling=False, height=2.4, furniture=2, seed=int(gap * 10))
+        hidden = (points[:, 0] > 1.5) & (points[:, 0] < 4.5) & \
+            (points[:, 1] > DEPTH - 0.95 - gap)
+        sofa = _sample_box((np.array([3.0, DEPTH - gap - 0.45]), np.array([3.0, 0.9, 0.85]),
+                            0.0, False), 6000.0, np.random.default_rng(0))
+        outline = detect_corners(np.vstack([points[~hidden], sofa]))
+        assert_rectangle(outline.corners)
+
+
+def test_one_sided_depth_view_gives_an_approximate_floor_holding_the_points():
+    """One depth frame of a 7 m x 6 m room from 1.4 m above its floor: the far wall and bits
+    of the side walls. No room outline can be traced; the approximate floor is a simple
+    clockwise polygon on the floor level that holds the points."""
+    room = room_scan(width=7.0, depth=6.0, furniture=5, seed=4)
+    view = depth_view(room, np.array([3.5, 0.3, 1.4]))
+    outline = room_outline(view)
+    assert outline.approximate and outline.quality['approximate_floor'] == 1.0
+    assert any(note.startswith('approximate floor') for note in outline.notes)
+    assert outline.floor_z == pytest.approx(-1.4, abs=0.02)
+    assert 3 <= len(outline.corners) <= CornerParams.max_approximate_corners
+    assert first_self_crossing(outline.corners) is None and signed_area(outline.corners) < 0
+    held = points_in_polygon(view[:, :2], outline.corners) | \
+        (distance_to_polygon(view[:, :2], outline.corners) < 0.02)  # the far wall is an edge
+    assert held.mean() > 0.95
+
+
+def test_room_outline_is_the_traced_outline_when_there_is_one():
+    points = room_scan(seed=5)
+    traced, outline = detect_corners(points), room_outline(points)
+    np.testing.assert_array_equal(traced.corners, outline.corners)
+    assert outline.quality == traced.quality and not outline.approximate
+    assert outline.quality['ceiling_found'] == 1.0
+    assert outline.ceiling_z == pytest.approx(2.7, abs=0.01)
+
+
+# --------------------------------------------------------------------------- up axis
+
+
+def test_y_up_room_with_a_sparse_floor_and_a_full_ceiling_is_not_upside_down():
+    """The ceiling holds ten times the floor's points: the plane count says the ceiling is
+    the floor. The furniture inside the room stands on the floor."""
+    points = room_scan(floor_share=0.1, furniture=4, furniture_density=1.0, seed=6)
+    y_up = points.copy()
+    y_up[:, :3] = np.column_stack([points[:, 0], points[:, 2], -points[:, 1]])
+    assert detect_up_axis(y_up[:, :3]) == '+y'
+    prepared = prepare_scan(loaded(y_up))
+    heights = prepared.points[:, 2]
+    assert np.percentile(heights, 1) > -0.05 and np.percentile(heights, 99) < 2.75
+
+
+def test_camera_frame_of_a_depth_view_has_y_down():
+    """A depth camera's own frame (x right, y down, z forward, as PCL and Kinect save it)."""
+    room = room_scan(width=7.0, depth=6.0, furniture=5, seed=7)
+    view = depth_view(room, np.array([3.5, 0.3, 1.4]))
+    camera = np.column_stack([view[:, 0], -view[:, 2], view[:, 1]])
+    assert detect_up_axis(camera) == '-y'
+    assert detect_up_axis(view[:, :3]) == '+z'  # the same view upright
+
+
+def test_tilted_z_up_room_with_a_sparse_floor_keeps_z():
+    """A mesh sample's floor (15 % density) tilted 4 degrees holds fewer points than one
+    wall, yet the room is wider than tall: z stays up."""
+    points = room_scan(floor_share=0.15, ceiling=False, furniture=5, seed=8)
+    tilt = math.radians(4.0)
+    turn = np.array([[math.cos(tilt), 0, math.sin(tilt)], [0, 1, 0],
+                     [-math.sin(tilt), 0, math.cos(tilt)]])
+    assert detect_up_axis(points[:, :3] @ turn.T) == '+z'
