@@ -32,12 +32,13 @@ from generator.layout import (CONTACT, AssetSpec, Catalog, PlacedObject, RoomLay
 from synthdet.geometry import rotation2d
 
 # floor size and height of each kind's rooms (metres); real offices, meeting rooms, living rooms
-# and bedrooms are smaller and lower than the factory rooms
+# and bedrooms are smaller and lower than the factory rooms (reconstructed real rooms measure
+# 3-7.6 m a side)
 KIND_ROOMS: dict[str, dict[str, Any]] = {
-    'office': {'width': [4.0, 8.0], 'depth': [4.0, 7.0]},
-    'meeting': {'width': [4.5, 8.0], 'depth': [4.0, 6.5]},
-    'living': {'width': [4.0, 7.0], 'depth': [4.0, 6.0]},
-    'bedroom': {'width': [4.0, 5.5], 'depth': [4.0, 5.0]},
+    'office': {'width': [3.5, 8.0], 'depth': [3.0, 7.0]},
+    'meeting': {'width': [4.0, 8.0], 'depth': [3.5, 6.5]},
+    'living': {'width': [4.0, 8.0], 'depth': [3.5, 7.5]},
+    'bedroom': {'width': [3.0, 5.0], 'depth': [3.0, 4.5]},
     'lab': {'width': [5.0, 9.0], 'depth': [4.5, 8.0]},
 }
 KIND_HEIGHT = [2.6, 3.2]
