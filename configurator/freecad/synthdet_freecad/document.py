@@ -27,7 +27,10 @@ def build_room(doc, corners: dict, wall_thickness: float, group, look):
     """Floor face from the corner sketch, and walls offset outwards and extruded to the ceiling.
 
     ``RoomParameters`` (a sheet) holds ``height``, ``wall_thickness`` and ``floor_z``; the
-    sketch, offset and extrusion are bound to it by expressions. Returns the sheet.
+    sketch, offset and extrusion are bound to it by expressions. The ``Room`` group records
+    whether the floor is approximate (``ApproximateFloor``: the corner finder could not trace
+    the outline, the floor is the points' footprint) and whether the scan showed a ceiling
+    (``CeilingFound``: if not, the walls have the default height). Returns the sheet.
     """
     sheet = doc.addObject('Spreadsheet::Sheet', 'RoomParameters')
     sheet.setColumnWidth('A', library.LABEL_COLUMN_WIDTH)
@@ -39,9 +42,14 @@ def build_room(doc, corners: dict, wall_thickness: float, group, look):
         sheet.set(f'A{row}', description)
         sheet.set(f'B{row}', f'={1000.0 * metres:.3f} mm')
         sheet.setAlias(f'B{row}', alias)
-    for prop, type_name, value in (('SourceScan', 'App::PropertyString',
-                                    corners['scan']), ('CornerCount', 'App::PropertyInteger',
-                                                       len(corners['corners']))):
+    quality = corners['quality']
+    approximate = bool(quality.get('approximate_floor', 0.0))
+    for prop, type_name, value in (
+        ('SourceScan', 'App::PropertyString', corners['scan']),
+        ('CornerCount', 'App::PropertyInteger', len(corners['corners'])),
+        ('ApproximateFloor', 'App::PropertyBool', approximate),
+        ('CeilingFound', 'App::PropertyBool', bool(quality.get('ceiling_found', 1.0))),
+    ):
         group.addProperty(type_name, prop, 'Synthdet', 'from the corners file')
         setattr(group, prop, value)
 
@@ -57,6 +65,8 @@ def build_room(doc, corners: dict, wall_thickness: float, group, look):
 
     floor = doc.addObject('Part::Face', 'Floor')
     floor.Sources = [sketch]
+    if approximate:
+        floor.Label = 'Floor (approximate)'
     outline = doc.addObject('Part::Offset2D', 'WallOutline')
     outline.Source = sketch
     outline.Join = 'Intersection'
@@ -153,6 +163,9 @@ def import_detections(doc,
     kept = [d for d in predictions['detections'] if d['score'] >= min_score]
     skipped = len(predictions['detections']) - len(kept)
     placed_items, warnings = arrangement.arrange(kept, corners)
+    if corners is not None and corners['quality'].get('approximate_floor', 0.0):
+        warnings.append('the floor is approximate (the points\' footprint, no traced room '
+                        'outline): check the walls (Room.ApproximateFloor)')
     step_paths = find_step_models(library_dir)
     step_objects = {}
     containers = {}
