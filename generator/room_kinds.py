@@ -4,8 +4,9 @@ A room's kind is drawn from the configuration's ``room_kinds`` (generator/config
 room follows the paper's rules (generator/layout.py), the other kinds follow their own and never
 hold a YuMi or a 3D printer:
 
-- ``office``: desks against the walls, each with a chair in front of it and monitors, a keyboard,
-  a PC tower, books or a lamp on it; bookshelves, cabinets, bins, plants, now and then a sofa;
+- ``office``: desks against the walls (and at times two back to back in the middle), each with a
+  chair in front of it and monitors, a keyboard, a PC tower, books or a lamp on it; bookshelves,
+  cabinets, bins, plants, now and then a sofa;
 - ``meeting``: a meeting table in the middle of the room with chairs around it, a TV on a stand,
   cabinets and spare chairs along the walls;
 - ``living``: a sofa (or a corner sofa) against a wall with a coffee table in front of it and
@@ -258,21 +259,48 @@ def _spare_chairs(rng, placer: _Placer, catalog: Catalog, walls: Sequence[int], 
             _at_wall(rng, placer, chair, walls, (0.05, 0.3), tries=8)
 
 
+def _office_desk(rng, placer: _Placer, catalog: Catalog) -> AssetSpec | None:
+    """A household desk or a library desk, half and half."""
+    if rng.random() < 0.5:
+        return _furniture(rng, placer, catalog, 'desk')
+    return _choose(rng, catalog, 'table', DESK_TABLES)
+
+
+def _workplace(rng, placer: _Placer, catalog: Catalog, desk: PlacedObject | None) -> None:
+    """A chair in front of ``desk`` (a swivel chair 3 times in 4) and things on its top."""
+    if desk is None:
+        return
+    if rng.random() < 0.9:
+        chair = _choose(rng, catalog, 'chair',
+                        OFFICE_CHAIRS if rng.random() < 0.75 else GUEST_CHAIRS)
+        _chair_at(rng, placer, chair, desk, (0.0, -1.0), rng.uniform(-0.2, 0.2))
+    _desk_items(rng, placer, desk)
+
+
+def _desk_island(rng, placer: _Placer, catalog: Catalog) -> None:
+    """Two desks back to back in the middle of an open-plan office."""
+    spec = _office_desk(rng, placer, catalog)
+    first = spec and _central_table(rng, placer, spec)
+    if first is None:
+        return
+    _workplace(rng, placer, catalog, first)
+    other = _office_desk(rng, placer, catalog)
+    if other is None:
+        return
+
+    def propose(_attempt: int) -> tuple[np.ndarray, float]:
+        y = first.size[1] / 2 + rng.uniform(0.06, 0.12) + other.size[1] / 2
+        return _local_pose(first, (rng.uniform(-0.1, 0.1), y), other, np.pi)
+
+    _workplace(rng, placer, catalog, placer.place_first_free(other, propose, 4))
+
+
 def _furnish_office(rng, placer, catalog, layout, walls) -> None:
+    if rng.random() < 0.3:
+        _desk_island(rng, placer, catalog)
     for _ in range(int(rng.integers(1, 5))):
-        if rng.random() < 0.5:
-            spec = _furniture(rng, placer, catalog, 'desk')
-        else:
-            spec = _choose(rng, catalog, 'table', DESK_TABLES)
-        desk = spec and _at_wall(rng, placer, spec, walls, (0.0, 0.06))
-        if desk is None:
-            continue
-        if rng.random() < 0.9:
-            chair = _choose(rng, catalog, 'chair',
-                            OFFICE_CHAIRS if rng.random() < 0.75 else GUEST_CHAIRS)
-            if chair is not None:
-                _chair_at(rng, placer, chair, desk, (0.0, -1.0), rng.uniform(-0.2, 0.2))
-        _desk_items(rng, placer, desk)
+        spec = _office_desk(rng, placer, catalog)
+        _workplace(rng, placer, catalog, spec and _at_wall(rng, placer, spec, walls, (0.0, 0.06)))
     if rng.random() < 0.15:
         sofa = _choose(rng, catalog, 'sofa', LIVING_SOFAS)
         if sofa is not None:
