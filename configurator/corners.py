@@ -111,16 +111,7 @@ class _WallLine:
 def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> RoomOutline:
     """Find the room outline of a scan given as an ``(N, >=3)`` array of ``x y z ...``."""
     params = params or CornerParams()
-    points = np.asarray(points)
-    if points.ndim != 2 or points.shape[1] < 3:
-        raise CornerDetectionError(f'points must be an (N, 3+) array, got shape {points.shape}')
-    if len(points) == 0:
-        raise CornerDetectionError('the scan holds no points')
-    xyz = points[:, :3].astype(np.float64, copy=False)
-    bad = ~np.isfinite(xyz.sum(axis=1))  # NaN and inf propagate through the sum
-    if bad.any():
-        raise CornerDetectionError(f'the scan has {int(bad.sum())} points with non-finite '
-                                   f'coordinates (first at row {int(np.flatnonzero(bad)[0])})')
+    xyz = _checked_xyz(points)
     # far outliers cost nothing: every grid below spans only the room's own cluster of points,
     # in float64 relative to a local origin (georeferenced coordinates keep their precision)
     xyz, origin, far_points = _room_cluster(xyz, params)
@@ -177,6 +168,22 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
         notes=notes)
 
 
+def _checked_xyz(points: np.ndarray) -> np.ndarray:
+    """The ``(N, 3)`` float64 coordinates of ``(N, >=3)`` points; raises for no points, a
+    wrong shape or non-finite values."""
+    points = np.asarray(points)
+    if points.ndim != 2 or points.shape[1] < 3:
+        raise CornerDetectionError(f'points must be an (N, 3+) array, got shape {points.shape}')
+    if len(points) == 0:
+        raise CornerDetectionError('the scan holds no points')
+    xyz = points[:, :3].astype(np.float64, copy=False)
+    bad = ~np.isfinite(xyz.sum(axis=1))  # NaN and inf propagate through the sum
+    if bad.any():
+        raise CornerDetectionError(f'the scan has {int(bad.sum())} points with non-finite '
+                                   f'coordinates (first at row {int(np.flatnonzero(bad)[0])})')
+    return xyz
+
+
 def _room_cluster(xyz: np.ndarray, params: CornerParams) -> tuple[np.ndarray, np.ndarray, float]:
     """The room's own cluster of points relative to a local origin (far outliers out), the
     origin and the number of points left out."""
@@ -185,7 +192,7 @@ def _room_cluster(xyz: np.ndarray, params: CornerParams) -> tuple[np.ndarray, np
     return xyz[keep] - np.array([origin[0], origin[1], 0.0]), origin, float(len(xyz) - len(keep))
 
 
-def _check_floor(xyz: np.ndarray, levels: 'Levels', quality: dict[str, float],
+def _check_floor(xyz: np.ndarray, levels: Levels, quality: dict[str, float],
                  far_points: float, params: CornerParams) -> None:
     """Add the level figures to ``quality``; raise if the lowest level is no floor: neither
     ``min_floor_prominence`` times as dense as the walls nor spanning ``min_inner_cover`` of
@@ -228,10 +235,7 @@ def approximate_outline(points: np.ndarray,
     apart from the floor), on the floor level found (the lowest dense level). Marked
     ``approximate_floor`` = 1 in the quality."""
     params = params or CornerParams()
-    xyz = np.asarray(points)[:, :3].astype(np.float64, copy=False)
-    if len(xyz) == 0 or not np.isfinite(xyz).all():
-        detect_corners(points, params)  # raises the input's own error
-    xyz, origin, far_points = _room_cluster(xyz, params)
+    xyz, origin, far_points = _room_cluster(_checked_xyz(points), params)
     levels = room_levels(xyz, params)
     walls = wall_points(xyz, levels, params)
     angle = dominant_wall_angle(walls, params.angle_cell) if len(walls) >= 100 else \
