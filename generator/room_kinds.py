@@ -10,7 +10,7 @@ hold a YuMi or a 3D printer:
 - ``meeting``: a meeting table in the middle of the room with chairs around it, a TV on a stand,
   cabinets and spare chairs along the walls;
 - ``living``: a sofa (or a corner sofa) against a wall with a coffee table in front of it and
-  end tables beside it, armchairs, a TV on its stand across the room, shelves, lamps, plants, at
+  end tables beside it, at times a sofa facing it across the table, armchairs, a TV on its stand across the room, shelves, lamps, plants, at
   times a dining table;
 - ``bedroom``: a bed with its head against a wall, night stands with lamps, a wardrobe, at times
   a desk with a chair;
@@ -393,6 +393,9 @@ def _furnish_living(rng, placer, catalog, layout, walls) -> None:
                     seat = (_furniture(rng, placer, catalog, 'armchair') if rng.random() < 0.6
                             else _choose(rng, catalog, 'sofa', ('1seat', )))
                     _chair_at(rng, placer, seat, table, (side, 0.0), gap=(0.2, 0.5))
+            if rng.random() < 0.25:  # a sofa across the coffee table, facing the first
+                across = _choose(rng, catalog, 'sofa', ('1seat', '2seat', '3seat'))
+                _chair_at(rng, placer, across, table, (0.0, -1.0), gap=(0.35, 0.6))
         for side in (-1, 1):  # end tables, as high as the sofa's arms
             if rng.random() < 0.45:
                 end_table = _furniture(rng, placer, catalog, 'side_table')
