@@ -10,8 +10,8 @@ hold a YuMi or a 3D printer:
 - ``meeting``: a meeting table in the middle of the room with chairs around it, a TV on a stand,
   cabinets and spare chairs along the walls;
 - ``living``: a sofa (or a corner sofa) against a wall with a coffee table in front of it and
-  end tables beside it, at times a sofa facing it across the table, armchairs, a TV on its stand across the room, shelves, lamps, plants, at
-  times a dining table;
+  end tables beside it, at times a sofa facing it across the table, armchairs, a TV on its
+  stand across the room, shelves, lamps, plants, at times a dining table;
 - ``bedroom``: a bed with its head against a wall, night stands with lamps, a wardrobe, at times
   a desk with a chair;
 - ``lab``: benches along the walls with monitors, PC towers and boxes on them, stools and swivel
@@ -21,6 +21,7 @@ Every kind gets radiators under its windows, curtains, doors leaning in their fr
 and bins. The placement checks of the layout apply: nothing intersects, detection objects keep
 ``layout.clearance`` among themselves, clutter may touch what it stands next to.
 """
+import math
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -125,15 +126,28 @@ def _on_top(rng, placer: _Placer, support: PlacedObject, spec: AssetSpec,
     top_z, top_size = support.spec.top_z, support.spec.top_size
     if top_z is None or top_size is None or support.size[2] > top_z + 0.01:
         return None  # no usable top, or parts above it
-    slack = np.array([top_size[0] - spec.size[0], top_size[1] - spec.size[1]]) / 2 - 0.02
-    if (slack < 0).any():
-        return None
     z0 = support.base[2] + top_z
 
+    def slack(turn: float) -> np.ndarray:
+        """How far the centre may move on the top with the item turned by ``turn``, 2 cm from
+        the edges (nothing overhangs)."""
+        c, s = abs(math.cos(turn)), abs(math.sin(turn))
+        width, depth = spec.size[0], spec.size[1]
+        extent = np.array([c * width + s * depth, s * width + c * depth])
+        return (np.asarray(top_size) - extent) / 2 - 0.02
+
+    if (slack(0.0) < 0).any():
+        return None
+
     def propose(_attempt: int) -> tuple[np.ndarray, float]:
-        x = rng.uniform(-slack[0], slack[0])
-        y = {'back': slack[1], 'front': -slack[1]}.get(where, rng.uniform(-slack[1], slack[1]))
-        return _local_pose(support, (x, y), spec, float(rng.normal(0.0, 0.1)), z0)
+        turn = float(rng.normal(0.0, 0.1))
+        free = slack(turn)
+        if (free < 0).any():
+            turn, free = 0.0, slack(0.0)
+        x = rng.uniform(-free[0], free[0])
+        y = free[1] if where == 'back' else -free[1] if where == 'front' else rng.uniform(
+            -free[1], free[1])
+        return _local_pose(support, (x, y), spec, turn, z0)
 
     return placer.place_first_free(spec, propose, tries, on=support.instance, clearance=CONTACT)
 

@@ -112,6 +112,27 @@ def test_objects_stay_inside_the_room_and_apart(rooms_by_kind, kind):
                     assert not inside_convex(quads[i], quads[j]).any()
 
 
+@pytest.mark.parametrize('kind', OTHER_KINDS)
+def test_things_on_a_top_stand_on_it_without_overhanging(rooms_by_kind, kind):
+    """An object with ``on`` stands on its support's top and inside its footprint (the boxes of
+    tables and of the household supports are their tops)."""
+    count = 0
+    for meta in rooms_by_kind[kind]:
+        by_name = {obj['instance']: obj for obj in meta['objects']}
+        for obj in meta['objects']:
+            if obj['on'] is None:
+                continue
+            support = by_name[obj['on']]
+            assert abs(z_range(obj)[0] - z_range(support)[1]) < 1e-3, obj['instance']
+            quad, top = footprint(obj), footprint(support)
+            edges = np.roll(top, -1, axis=0) - top
+            rel = quad[:, None, :] - top[None, :, :]
+            inside = edges[None, :, 0] * rel[..., 1] - edges[None, :, 1] * rel[..., 0] >= -TOL
+            assert inside.all(), f"{kind}: {obj['instance']} overhangs {support['instance']}"
+            count += 1
+    assert count >= len(SEEDS) / 2
+
+
 def _kinds(meta: dict) -> Counter:
     return Counter(obj['params']['kind'] for obj in meta['objects'] if 'kind' in obj['params'])
 
