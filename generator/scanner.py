@@ -226,19 +226,22 @@ class Scanner:
         rows = np.flatnonzero(np.isfinite(t_hit))
         rows = rows[glass[primitive[rows]]]
         rows = rows[rng.random(len(rows)) < self.glass_transmission]
-        origins = np.asarray(origins, dtype=np.float32)
-        directions = np.asarray(directions, dtype=np.float32)
+        if not len(rows):
+            return t_hit, primitive
+        # only the passing rays, in float32 as cast (the same values as converting the batch)
+        origins = np.take(origins, rows, axis=0).astype(np.float32, copy=False)
+        directions = np.take(directions, rows, axis=0).astype(np.float32, copy=False)
         for _ in range(_MAX_GLASS_FACES):
             if not len(rows):
                 break
-            step = _GLASS_STEP / np.linalg.norm(directions[rows], axis=1)
+            step = _GLASS_STEP / np.linalg.norm(directions, axis=1)
             travelled = t_hit[rows] + step
-            behind = origins[rows] + directions[rows] * travelled[:, None]
-            t_next, p_next = self._first_hits(raycaster, behind, directions[rows])
+            behind = origins + directions * travelled[:, None]
+            t_next, p_next = self._first_hits(raycaster, behind, directions)
             t_hit[rows], primitive[rows] = travelled + t_next, p_next
-            passing = np.isfinite(t_next)
-            rows = rows[passing]
-            rows = rows[glass[primitive[rows]]]
+            passing = np.flatnonzero(np.isfinite(t_next))
+            passing = passing[glass[p_next[passing]]]
+            rows, origins, directions = rows[passing], origins[passing], directions[passing]
         return t_hit, primitive
 
     def _first_hits(self, raycaster, origins: np.ndarray,

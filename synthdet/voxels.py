@@ -1,6 +1,7 @@
 """One point per cube (voxel): the voxel filter of scan reading (``synthdet.scan_io``) and of the
 generator's laser-scanner export, and the voxel grid of the training pipeline
 (``VoxelGridSample``)."""
+import numba
 import numpy as np
 
 
@@ -42,15 +43,19 @@ class VoxelFilter:
     def new_points(self, xyz: np.ndarray) -> np.ndarray:
         """Indices (ascending) of the points of ``xyz`` (scan coordinates) in voxels not seen
         before, one per voxel: its first point."""
-        keys = (np.floor(xyz / self.voxel) - self.origin_key).astype(np.int64)
-        packable = (np.abs(keys) < 2**20).all(axis=1)
-        packed = ((keys[:, 0] + 2**20) << 42) | ((keys[:, 1] + 2**20) << 21) | (keys[:, 2] + 2**20)
+        scaled = xyz / self.voxel
+        np.floor(scaled, out=scaled)
+        scaled -= self.origin_key
+        keys = scaled.astype(np.int64)
+        x, y, z = keys[:, 0], keys[:, 1], keys[:, 2]
+        packable = (np.abs(x) < 2**20) & (np.abs(y) < 2**20) & (np.abs(z) < 2**20)
+        packed = ((x + 2**20) << 42) | ((y + 2**20) << 21) | (z + 2**20)
         packed = np.where(packable, packed, -1)
-        _, first = np.unique(packed, return_index=True)
+        first = _first_of_each(packed)
         first = first[packed[first] >= 0]
         fresh = first[~_sorted_contains(self.seen, packed[first])]
-        self.seen = np.insert(self.seen, np.searchsorted(self.seen, packed[fresh]),
-                              np.sort(packed[fresh]))
+        # the fresh keys are new and distinct: the sorted union is the sorted concatenation
+        self.seen = np.sort(np.concatenate([self.seen, packed[fresh]]))
         far = []
         for index in np.flatnonzero(~packable):  # points kilometres away: rare, kept exact
             key = tuple(int(value) for value in keys[index])
@@ -60,9 +65,43 @@ class VoxelFilter:
         return np.sort(np.concatenate([fresh, np.array(far, dtype=np.int64)]))
 
 
+@numba.njit(cache=True, nogil=True)
+def _first_of_each(keys: np.ndarray) -> np.ndarray:
+    """Ascending indices of the first occurrence of every distinct value of ``keys`` (int64),
+    in one pass through an open-addressing hash table (the same indices as ``np.unique``'s
+    ``return_index``, sorted, without sorting the keys)."""
+    bits = 1
+    while (1 << bits) < 2 * len(keys):
+        bits += 1
+    slot_of = np.full(1 << bits, -1, dtype=np.int64)  # index of the key held by each slot
+    mask = (1 << bits) - 1
+    first = np.empty(len(keys), dtype=np.int64)
+    count = 0
+    for i in range(len(keys)):
+        # Fibonacci hashing: the top bits of the key times 2**64 / golden ratio
+        slot = np.int64((np.uint64(keys[i]) * np.uint64(11400714819323198485)) >>
+                        np.uint64(64 - bits))
+        while True:
+            held = slot_of[slot]
+            if held < 0:
+                slot_of[slot] = i
+                first[count] = i
+                count += 1
+                break
+            if keys[held] == keys[i]:
+                break
+            slot = (slot + 1) & mask
+    return first[:count]
+
+
 def _sorted_contains(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
     """Whether each of ``keys`` is in the sorted array ``sorted_keys``."""
     if len(sorted_keys) == 0:
         return np.zeros(len(keys), dtype=bool)
-    position = np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)
-    return sorted_keys[position] == keys
+    # searched in ascending order: each search starts from the last one's place
+    order = np.argsort(keys)
+    wanted = keys[order]
+    position = np.minimum(np.searchsorted(sorted_keys, wanted), len(sorted_keys) - 1)
+    found = np.empty(len(keys), dtype=bool)
+    found[order] = sorted_keys[position] == wanted
+    return found

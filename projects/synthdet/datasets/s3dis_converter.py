@@ -220,9 +220,12 @@ def convert_room(room_dir: Path, name: str, out_dir: Path, skip: bool) -> RoomRe
         room.skipped.append(
             SkippedInput(str(room_dir), None, 'room left out: no valid annotation file'))
         return RoomResult(name, 0, [], room.skipped, room.unknown)
-    points = room.points
-    points -= np.concatenate([_xyz_min_max(points)[0], np.zeros(3)])  # colours: c - 0 == c
-    points = points.astype(np.float32)
+    low, high = _xyz_min_max(room.points)
+    # xyz shifted to the room's minimum, computed in float64 and rounded to float32 once (as
+    # shifting the float64 points, then converting); colours converted as they are
+    points = np.empty(room.points.shape, dtype=np.float32)
+    np.subtract(room.points[:, :3], low, out=points[:, :3], casting='unsafe')
+    points[:, 3:] = room.points[:, 3:]
     semantic = np.repeat(
         np.array([_SEMANTIC_ID[c] for c in room.classes], dtype=np.int64), room.counts)
     instance = np.repeat(np.arange(1, len(room.counts) + 1, dtype=np.int64), room.counts)
@@ -232,7 +235,7 @@ def convert_room(room_dir: Path, name: str, out_dir: Path, skip: bool) -> RoomRe
         'bbox_label_3d': _DETECTION_LABEL[c]
     } for c, start, end in zip(room.classes, starts[:-1], starts[1:]) if c in _DETECTION_LABEL]
     try:
-        _check_float32(points, instances, room)
+        _check_float32(points, instances, room, high - low)
     except OutputOverflowError as error:
         if not skip:
             raise
@@ -243,10 +246,15 @@ def convert_room(room_dir: Path, name: str, out_dir: Path, skip: bool) -> RoomRe
     return RoomResult(name, len(points), instances, room.skipped, room.unknown, room.repaired)
 
 
-def _check_float32(points: np.ndarray, instances: list[dict], room: _RoomPoints) -> None:
-    """Raise :class:`OutputOverflowError` naming the file of the first non-finite point or box."""
+def _check_float32(points: np.ndarray, instances: list[dict], room: _RoomPoints,
+                   span: np.ndarray) -> None:
+    """Raise :class:`OutputOverflowError` naming the file of the first non-finite point or box.
+
+    ``span`` is the float64 extent of the room's xyz: below 1e38 on every axis, every shifted
+    point is finite in float32 (up to 3.4e38) and only the boxes are checked."""
     ends = np.cumsum(room.counts)
-    bad = np.flatnonzero(~np.isfinite(points[:, :3]).all(axis=1))
+    shifted_fit = bool((span < 1e38).all())
+    bad = [] if shifted_fit else np.flatnonzero(~np.isfinite(points[:, :3]).all(axis=1))
     if len(bad):
         k = int(np.searchsorted(ends, bad[0], side='right'))
         raise OutputOverflowError(
