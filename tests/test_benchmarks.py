@@ -4,11 +4,13 @@ with finite figures. A changed signature that a benchmark uses then fails here, 
 docs. A new ``benchmarks/bench_<name>.py`` needs one line in ``SMOKE``."""
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 from typing import NamedTuple
 
@@ -127,3 +129,34 @@ def test_benchmark_smoke_run(name, request):
     assert headline, f'last line not in the documented format: {lines[-1]!r}'
     for key, value in headline.groupdict().items():
         assert math.isfinite(float(value.replace(',', ''))), f'{key} = {value}'
+
+
+def test_the_page_names_command_machine_and_date_and_no_path_of_the_machine(tmp_path):
+    sys.path.insert(0, str(REPO / 'tools'))
+    import collect_benchmarks
+    output_dir = tmp_path / 'kept'
+    output_dir.mkdir()
+    record = {
+        'name': 'scanner', 'command': '.venv/bin/python benchmarks/bench_scanner.py',
+        'returncode': 0, 'seconds': 1.0, 'load_before': [0.1, 0.2, 0.3],
+        'load_after': [0.4, 0.5, 0.6], 'finished': '2026-12-06 07:00 UTC',
+        'machine': 'Some CPU, 2 cores, Python 3.11.7', 'commit': 'abc1234',
+        'last_line': 'scanner vs fastest bpy loop: 12.0x'
+    }
+    (output_dir / 'scanner.json').write_text(json.dumps(record))
+    (output_dir / 'scanner.txt').write_text(
+        f'{REPO}/.venv/lib/python3.11/site-packages/x/__init__.py:1: UserWarning\n'
+        '/elsewhere/venv/lib/python3.11/site-packages/y.py:2: warning\n'
+        f'{tempfile.gettempdir()}/synthdet-bench-x/room.laz: 10 points\n'
+        f'read {REPO}/work_dirs/a.pth and /data/scans/hall.e57 at 1/5/15-minute load, 9 rays/s\n'
+        'scanner vs fastest bpy loop: 12.0x\n')
+    page = collect_benchmarks.render([collect_benchmarks.kept_output('scanner', output_dir)], [],
+                                     output_dir)
+    assert str(REPO) not in page and tempfile.gettempdir() + '/' not in page
+    assert re.findall(r'(?<![\w.~$/])/(?:[\w.+-]+/)+', page) == []
+    assert 'read work_dirs/a.pth and .../hall.e57 at 1/5/15-minute load, 9 rays/s' in page
+    assert '$TMPDIR/synthdet-bench-x/room.laz' in page
+    assert ('`.venv/bin/python benchmarks/bench_scanner.py` ([' in page and
+            'Some CPU, 2 cores, Python 3.11.7, 2026-12-06 07:00 UTC, commit abc1234' in page)
+    row = next(line for line in page.splitlines() if line.startswith('| `scanner`'))
+    assert 'Some CPU, 2 cores' in row and '2026-12-06 07:00 UTC' in row

@@ -10,7 +10,10 @@ arguments). The benchmarks of ``OPT_IN`` (hours of training) run only when ``--o
 them; their kept outputs are still shown. Each one prints a side-by-side comparison measured in that one run and ends with a
 summary line. Its full output (without progress-bar lines) is kept in
 ``docs/benchmarks/<name>.txt`` and its record (exact command, exit code, wall time, the
-machine's load average before and after, the finishing time) in ``docs/benchmarks/<name>.json``.
+machine's load average before and after, the finishing time, the machine kind: CPU model,
+cores, Python, and the commit) in ``docs/benchmarks/<name>.json``. Absolute paths of the machine
+are scrubbed from what is kept (:func:`scrub`): the checkout becomes relative, an installed
+package ``site-packages/...``, a temporary folder ``$TMPDIR/...``.
 ``docs/benchmarks.md`` is then written from all kept outputs: a table of the last lines and
 every output in full. With ``--only``, the other benchmarks keep their earlier outputs;
 ``--render-only`` runs nothing and rewrites the page from the kept outputs.
@@ -24,8 +27,10 @@ import datetime
 import json
 import os
 import platform
+import re
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -86,6 +91,15 @@ GOALS = {
     'sensors': 'a 1M-point room in seconds with every model',
     'domain_shift': 'mixed model: drop <= 0.05 mAP@0.25 on every held-out profile',
 }
+# What a reader needs beside an output that was not measured with today's code.
+NOTES = {
+    'domain_shift': [
+        '',
+        'Not re-run with the regeneration of this page (about 1.5 h of training): the output '
+        'of the command above on the date shown, before the laser scanner\'s export changed '
+        'the generated data; running it again measures today\'s data.'
+    ],
+}
 OUTPUT_DIR = REPO_ROOT / 'docs' / 'benchmarks'
 
 
@@ -97,6 +111,30 @@ def discover() -> list[str]:
 
 def command_of(name: str) -> list[str]:
     return [f'benchmarks/bench_{name}.py', *ARGUMENTS.get(name, [])]
+
+
+def scrub(text: str) -> str:
+    """``text`` without the absolute paths of this machine: the checkout's own paths relative to
+    it, installed packages from ``site-packages/``, temporary folders as ``$TMPDIR/``, any other
+    absolute folder as ``.../`` before the file's name."""
+    text = text.replace(f'{REPO_ROOT}/', '').replace(str(REPO_ROOT), '.')
+    text = re.sub(r'(?<![\w.~$])(?:/[\w.+-]+)+/site-packages/', 'site-packages/', text)
+    for temporary in sorted({tempfile.gettempdir(), '/tmp'}, key=len, reverse=True):
+        text = re.sub(rf'(?<![\w.~$]){re.escape(temporary)}/', '$TMPDIR/', text)
+    return ABSOLUTE_FOLDER.sub('.../', text)
+
+
+# an absolute folder path (a "/" not after a word character, then folder names, each with "/")
+ABSOLUTE_FOLDER = re.compile(r'(?<![\w.~$/])/(?:[\w.+-]+/)+')
+
+
+def git_commit() -> str:
+    """The checkout's commit (short hash), or ``unknown``."""
+    done = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'],
+                          cwd=REPO_ROOT,
+                          capture_output=True,
+                          text=True)
+    return done.stdout.strip() if done.returncode == 0 else 'unknown'
 
 
 def run_benchmark(name: str, output_dir: Path) -> dict:
@@ -125,8 +163,10 @@ def run_benchmark(name: str, output_dir: Path) -> dict:
         'load_before': [round(x, 2) for x in load_before],
         'load_after': [round(x, 2) for x in os.getloadavg()],
         'finished': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC'),
+        'machine': machine(),
+        'commit': git_commit(),
     }
-    text = ''.join(output).replace('\r', '\n')
+    text = scrub(''.join(output).replace('\r', '\n'))
     lines = [line.rstrip() for line in text.splitlines() if line.strip() and '%|' not in line]
     record['last_line'] = lines[-1].strip() if lines else ''
     output_dir.mkdir(parents=True, exist_ok=True)
@@ -141,12 +181,12 @@ def kept_output(name: str, output_dir: Path) -> dict | None:
     if not record_path.is_file():
         return None
     record = json.loads(record_path.read_text())
-    record['output'] = (output_dir / f'{name}.txt').read_text().splitlines()
+    record['output'] = scrub((output_dir / f'{name}.txt').read_text()).splitlines()
     return record
 
 
 def machine() -> str:
-    """CPU model and core count, for the report's header."""
+    """CPU model, core count and Python version of this machine."""
     model = platform.processor() or 'unknown CPU'
     cpuinfo = Path('/proc/cpuinfo')
     if cpuinfo.is_file():
@@ -161,9 +201,9 @@ def render(records: list[dict], not_run: list[str], output_dir: Path) -> str:
     """docs/benchmarks.md from the kept benchmark records (and the benchmarks without one)."""
     docs = REPO_ROOT / 'docs'
     # links relative to this page; in the text, the folder as seen from the repository root
-    where = output_dir.relative_to(docs) if output_dir.is_relative_to(docs) else output_dir
-    shown = output_dir.relative_to(REPO_ROOT) if output_dir.is_relative_to(
-        REPO_ROOT) else output_dir
+    where = scrub(str(output_dir.relative_to(docs) if output_dir.is_relative_to(docs) else
+                      output_dir))
+    shown = scrub(str(output_dir))
     loads = [x for r in records for x in (r['load_before'][0], r['load_after'][0])]
     load = f'{min(loads)}-{max(loads)}' if loads else 'not measured'
     lines = [
@@ -173,32 +213,40 @@ def render(records: list[dict], not_run: list[str], output_dir: Path) -> str:
         '`benchmarks/bench_*.py` one after the other (' +
         ', '.join(f'`{name}`' for name in sorted(OPT_IN)) + ' only when named with `--only`: '
         'hours of training), keeps each full output in '
-        f'`{shown}/<name>.txt` (progress bars left out) and writes this page from them. Every '
-        'benchmark measures all sides of its comparison in the same run, on the same input, '
-        'with the same warm-up, repeats and thread or process counts. '
-        f'Machine: {machine()}. Load average = 1/5/15-minute load before and after the run; '
-        'the project machine is shared with other jobs, so absolute times vary with it more '
-        f'than the ratios do. The 1-minute load around these runs: {load} (on 2 cores, above 2 '
-        'means jobs were waiting for a core).',
+        f'`{shown}/<name>.txt` (progress bars left out, the machine\'s absolute paths scrubbed) '
+        'and writes this page from them; `make bench BENCH_ARGS="--only scanner convert"` runs '
+        'some again and keeps the others\' outputs. Every benchmark measures all sides of its '
+        'comparison in the same run, on the same input, with the same warm-up, repeats and '
+        'thread or process counts. Each figure comes with the command that printed it, the '
+        'machine kind it ran on (CPU model, cores, Python), its date and the commit it ran at '
+        '(where recorded). Load average = 1/5/15-minute load before and after the run; the '
+        'project machine is shared with other jobs, so absolute times vary with it more than '
+        f'the ratios do. The 1-minute load around these runs: {load} (on 2 cores, above 2 '
+        'means jobs were waiting for a core). `tests/test_benchmarks.py` runs every benchmark '
+        'at its smallest size in `make test`.',
         '',
         '| benchmark | what | result (last line) | goal | wall s | load before | load after | '
-        'finished |',
-        '|---|---|---|---|---|---|---|---|',
+        'machine | finished |',
+        '|---|---|---|---|---|---|---|---|---|',
     ]
     for r in records:
         result = r['last_line'] if r['returncode'] == 0 else f'FAILED (exit {r["returncode"]})'
-        lines.append(f'| `{r["name"]}` | {WHAT.get(r["name"], "")} | {result} | '
+        lines.append(f'| `{r["name"]}` | {WHAT.get(r["name"], "")} | {scrub(result)} | '
                      f'{GOALS.get(r["name"], "")} | {r["seconds"]} | '
                      f'{" / ".join(map(str, r["load_before"]))} | '
-                     f'{" / ".join(map(str, r["load_after"]))} | {r["finished"]} |')
+                     f'{" / ".join(map(str, r["load_after"]))} | '
+                     f'{r.get("machine", "not recorded")} | {r["finished"]} |')
     for name in not_run:
         lines.append(f'| `{name}` | {WHAT.get(name, "")} | not run yet | '
-                     f'{GOALS.get(name, "")} | | | | |')
+                     f'{GOALS.get(name, "")} | | | | | |')
     lines += ['', '## Outputs', '']
     for r in records:
+        commit = f', commit {r["commit"]}' if r.get('commit') else ''
         lines += [
             f'### {r["name"]}', '', f'`{r["command"]}` ([{where}/{r["name"]}.txt]'
-            f'({where}/{r["name"]}.txt))', '', '```', *r['output'], '```', ''
+            f'({where}/{r["name"]}.txt)); {r.get("machine", "machine not recorded")}, '
+            f'{r["finished"]}{commit}', *NOTES.get(r['name'], []), '', '```', *r['output'],
+            '```', ''
         ]
     return '\n'.join(lines)
 
@@ -238,6 +286,9 @@ def main(argv: list[str] | None = None) -> int:
         record = run_benchmark(name, args.output_dir)
         print(f'[bench] {name}: {record["seconds"]} s, exit {record["returncode"]}', flush=True)
     kept = {name: kept_output(name, args.output_dir) for name in names}
+    for name, record in kept.items():  # outputs kept before scrubbing existed: scrubbed now
+        if record is not None:
+            (args.output_dir / f'{name}.txt').write_text('\n'.join(record['output']) + '\n')
     records = [record for record in kept.values() if record is not None]
     args.out.write_text(
         render(records, [name for name, record in kept.items() if record is None],
