@@ -8,9 +8,10 @@ size runs in its own subprocess so that peak RSS (``ru_maxrss``, including the ~
 imported libraries) is per configuration. A training iteration is forward + backward + AdamW
 step on a batch of one scene; inference is ``predict`` with NMS. Times are medians over
 ``--iters`` runs after one warm-up run, as CPU seconds of the process (``time.process_time``,
-the cost on any machine) and as wall seconds (inflated on a shared machine). Workers get ``OMP_NUM_THREADS=--threads``: the OpenMP
-runtime reads it at start-up only, and ``torch.set_num_threads`` alone leaves MinkowskiEngine's
-CPU kernels spin-waiting on a busy machine.
+the cost on any machine) and as wall seconds (inflated on a shared machine). Workers get
+``OMP_NUM_THREADS=--threads``: the OpenMP runtime reads it at start-up only, and
+``torch.set_num_threads`` alone leaves MinkowskiEngine's CPU kernels spin-waiting on a busy
+machine.
 
 A third model is 2 cm voxels with ``TR3DNeck(backbone_fine_level=True)``: a finest head level on
 the first backbone stage's voxels (16 cm apart at 2 cm voxels, as TR3D's finest level at 1 cm),

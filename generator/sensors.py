@@ -113,8 +113,8 @@ def scan_room(
             'angular_step_deg': step,
             **{
                 k: cfg[k]
-                for k in ('min_elevation_deg', 'min_range', 'max_range', 'range_noise', 'mixed_pixels',
-                          'edge_jump', 'oversample', 'point_spacing')
+                for k in ('min_elevation_deg', 'min_range', 'max_range', 'range_noise',
+                          'mixed_pixels', 'edge_jump', 'oversample', 'point_spacing')
             }
         }
     if model == 'tablet':

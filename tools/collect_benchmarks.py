@@ -7,8 +7,8 @@ from them (``make bench``).
 Every ``benchmarks/bench_<name>.py`` runs in turn, as its own process, with the arguments of
 ``ARGUMENTS`` (the documented, paper-scale settings; a benchmark not listed runs without
 arguments). The benchmarks of ``OPT_IN`` (hours of training) run only when ``--only`` names
-them; their kept outputs are still shown. Each one prints a side-by-side comparison measured in that one run and ends with a
-summary line. Its full output (without progress-bar lines) is kept in
+them; their kept outputs are still shown. Each one prints a side-by-side comparison measured in
+that one run and ends with a summary line. Its full output (without progress-bar lines) is kept in
 ``docs/benchmarks/<name>.txt`` and its record (exact command, exit code, wall time, the
 machine's load average before and after, the finishing time, the machine kind: CPU model,
 cores, Python, and the commit) in ``docs/benchmarks/<name>.json``. Absolute paths of the machine

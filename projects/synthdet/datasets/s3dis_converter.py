@@ -359,7 +359,7 @@ def convert_s3dis(root_path: str | Path,
                   workers: int = 1,
                   on_error: str = 'raise',
                   info_prefix: str = 's3dis') -> ConversionSummary:
-    """Convert S3DIS-format areas under ``root_path`` to .bin files and info pickles in ``out_dir``.
+    """Convert the S3DIS-format areas under ``root_path`` to .bin files and info pickles.
 
     Args:
         root_path: folder holding ``Stanford3dDataset_v1.2_Aligned_Version``.
