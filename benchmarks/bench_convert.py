@@ -19,7 +19,9 @@ thread), and ``--workers`` each, where mmdet3d's collect step, serial as shipped
 in a pool of ``--workers`` processes (what a user would write to parallelise it) and
 ``S3DISData`` gets ``--workers`` threads. mmdet3d as shipped (serial collect, ``--workers``
 threads) is timed too. Every configuration runs once untimed (warm-up), then ``--repeats``
-times, alternating; the best wall time of each is kept. The last line gives the wall-time
+times, alternating; the best wall time of each is kept. Each run writes into empty output
+folders (the previous run's files removed before its timer starts), as a first conversion
+does. The last line gives the wall-time
 ratios at equal parallelism (the headline), synthdet's own parallelism against mmdet3d as
 shipped and the ratio of CPU seconds (mmdet3d / synthdet, one process each) beside them.
 
@@ -34,6 +36,7 @@ import io
 import os
 import pickle
 import resource
+import shutil
 import sys
 import tempfile
 import time
@@ -46,7 +49,8 @@ import pandas as pd
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
 
-from projects.synthdet.datasets.s3dis_converter import S3DIS_DIR, convert_s3dis  # noqa: E402
+from projects.synthdet.datasets.s3dis_converter import (  # noqa: E402
+    OUTPUT_DIRS, S3DIS_DIR, convert_s3dis)
 from synthdet.room_data import annotation_files  # noqa: E402  (the converter's file order)
 from tests.s3dis_fixtures import write_synthetic_area  # noqa: E402
 
@@ -110,7 +114,8 @@ def run_mmdet3d(root: Path, collect_processes: int,
     s3dis_data_cls = load_mmdet3d_s3dis_data()
     data_dir = root / S3DIS_DIR
     output_folder = root / 's3dis_data'
-    output_folder.mkdir(exist_ok=True)
+    remove_outputs(output_folder, *(root / sub for sub in OUTPUT_DIRS))
+    output_folder.mkdir()
     with Timer() as timer:
         rooms = sorted(os.listdir(data_dir / 'Area_1'))
         collect = functools.partial(_collect_room, data_dir, output_folder)
@@ -125,12 +130,20 @@ def run_mmdet3d(root: Path, collect_processes: int,
     return timer, infos, dict(zip(rooms, orders))
 
 
+def remove_outputs(*folders: Path) -> None:
+    """Remove an earlier run's outputs (untimed): every run writes new files, as a first
+    conversion does (replacing files makes ext4 flush them to disk at once)."""
+    for folder in folders:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
 def _collect_room(data_dir: Path, output_folder: Path, room: str) -> list[str]:
     return mmdet3d_collect_room(
         str(data_dir / 'Area_1' / room / 'Annotations'), str(output_folder / f'Area_1_{room}'))
 
 
 def run_synthdet(root: Path, out_dir: Path, area: int, workers: int) -> Timer:
+    remove_outputs(out_dir)
     with Timer() as timer:
         convert_s3dis(root, out_dir, areas=[area], workers=workers)
     return timer
