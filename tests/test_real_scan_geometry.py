@@ -1,19 +1,26 @@
 """Corners and up axis on scans with the properties of real ones, made here (never copied):
 a reconstructed mesh sampled per vertex (floor sparser than the walls, no ceiling), an open-top
 room, furniture in front of a wall the sensor never saw, a single depth view of one side of a
-room, a y-up room and a depth camera's own frame (y down, z forward)."""
+room, a y-up room and a depth camera's own frame (y down, z forward); and tools/scan2cad.py
+end to end on three of them with the tiny model of tests/test_scan2cad.py and the real
+``freecadcmd``."""
 import math
+import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from configurator.corners import (CornerParams, detect_corners, floor_prominence,
-                                  room_outline)
+from configurator.corners import (CornerDetectionError, CornerParams, detect_corners,
+                                  floor_prominence, room_outline)
 from synthdet.geometry import (distance_to_polygon, first_self_crossing, points_in_polygon,
                                signed_area)
+from synthdet.contracts import read_corners, read_predictions
 from synthdet.prepare import detect_up_axis, prepare_scan
-from synthdet.scan_io import LoadedScan
+from synthdet.scan_io import LoadedScan, write_scan
 from tests.room_scans import _outside_box, _sample_box, _sample_flat, _sample_walls
+from tests.test_scan2cad import TINY, _predict, tiny  # noqa: F401 (tiny: the model fixture)
+from tests.test_tr3d_tools import load_tool
 
 WIDTH, DEPTH = 6.0, 5.0
 RECTANGLE = np.array([[0.0, 0.0], [0.0, DEPTH], [WIDTH, DEPTH], [WIDTH, 0.0]])
@@ -180,3 +187,119 @@ def test_tilted_z_up_room_with_a_sparse_floor_keeps_z():
     turn = np.array([[math.cos(tilt), 0, math.sin(tilt)], [0, 1, 0],
                      [-math.sin(tilt), 0, math.cos(tilt)]])
     assert detect_up_axis(points[:, :3] @ turn.T) == '+z'
+
+
+# --------------------------------------------------------------------------- scan2cad
+
+
+def open_top_scan() -> np.ndarray:
+    """The open-top room of the corner test: no ceiling, cabinets 1.4 m tall along a wall."""
+    rng = np.random.default_rng(0)
+    cabinets = [
+        _sample_box((np.array([x, DEPTH - 0.3]), np.array([1.0, 0.5, 1.4]), 0.0, True), 6000.0,
+                    rng) for x in (1.0, 2.5, 4.0)
+    ]
+    return np.vstack([room_scan(ceiling=False, height=2.2, furniture=0, seed=2), *cabinets])
+
+
+@pytest.fixture(scope='module')
+def real_like_scans(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    folder = tmp_path_factory.mktemp('real_like')
+    scans = {
+        'sparse_floor': room_scan(floor_share=0.08, ceiling=False, seed=1),
+        'one_sided': depth_view(room_scan(width=7.0, depth=6.0, furniture=5, seed=4),
+                                np.array([3.5, 0.3, 1.4])),
+        'open_top': open_top_scan(),
+    }
+    paths = {}
+    for name, points in scans.items():
+        paths[name] = folder / f'{name}.ply'
+        write_scan(paths[name], points)
+    return paths
+
+
+def document_property(document: Path, name: str) -> str:
+    """The value of the Bool property ``name`` in a .FCStd's Document.xml."""
+    with zipfile.ZipFile(document) as archive:
+        xml = archive.read('Document.xml').decode('utf-8')
+    start = xml.index('<Bool value="', xml.index(f'<Property name="{name}"'))
+    return xml[start + len('<Bool value="'):].split('"', 1)[0]
+
+
+def scan2cad_args(tiny: dict, scan: Path, out: Path, threshold: str, *options: str) -> list[str]:
+    return [
+        str(scan), '--config',
+        str(TINY), '--checkpoint',
+        str(tiny['checkpoint']), '--out',
+        str(out), '--score-thr', threshold, '--device', 'cpu', *options
+    ]
+
+
+def best_scores_threshold(tiny: dict, scan: Path, folder: Path, keep: int = 8) -> str:
+    """A score threshold keeping the weak model's best ``keep`` boxes of ``scan``."""
+    scores = sorted((d['score'] for d in _predict(tiny, scan, folder)['detections']),
+                    reverse=True)
+    assert scores, f'the tiny model found nothing in {scan.name}'
+    return str(scores[min(keep, len(scores)) - 1])
+
+
+@pytest.mark.parametrize('name', ['sparse_floor', 'one_sided', 'open_top'])
+def test_scan2cad_writes_a_document_with_the_objects_and_a_marked_floor(
+        tiny, real_like_scans, tmp_path, capsys, name):
+    """Before, the sparse floor and the one-sided view exited 2 without a document."""
+    scan = real_like_scans[name]
+    threshold = best_scores_threshold(tiny, scan, tmp_path / 'scores')
+    out = tmp_path / f'{name}.FCStd'
+    scan2cad = load_tool('scan2cad')
+    result = scan2cad.scan_to_cad(scan2cad.parse_args(scan2cad_args(tiny, scan, out, threshold)),
+                                  lambda line: None)
+    assert out.is_file() and result['document'] == str(out.resolve())
+    detections = read_predictions(str(out.with_suffix('.pred.json')))['detections']
+    assert detections and result['objects']
+    with zipfile.ZipFile(out) as archive:
+        xml = archive.read('Document.xml').decode('utf-8')
+    assert all(f'name="{item["name"]}"' in xml for item in result['objects'])
+    corners = read_corners(str(out.with_suffix('.corners.json')))
+    approximate = corners['quality']['approximate_floor'] == 1.0
+    assert document_property(out, 'ApproximateFloor') == str(approximate).lower()
+    assert document_property(out, 'CeilingFound') == \
+        str(corners['quality']['ceiling_found'] == 1.0).lower()
+    if name == 'one_sided':
+        assert approximate and any('approximate floor' in w for w in result['warnings'])
+        assert 'Floor (approximate)' in xml
+    if name == 'open_top':
+        assert corners['quality']['ceiling_found'] == 0.0
+        assert corners['ceiling_z'] - corners['floor_z'] == pytest.approx(2.5, abs=0.01)
+    # the command line: exit 0, the notes as warnings on stderr
+    assert scan2cad.main(scan2cad_args(tiny, scan, tmp_path / 'again.FCStd', threshold)) == 0
+    stderr = capsys.readouterr().err
+    assert ('approximate floor' in stderr) == approximate
+
+
+def test_failed_scan2cad_run_leaves_the_previous_outputs_as_they_were(
+        tiny, real_like_scans, tmp_path):
+    scan = real_like_scans['one_sided']
+    threshold = best_scores_threshold(tiny, scan, tmp_path / 'scores', keep=3)
+    out = tmp_path / 'out' / 'room.FCStd'
+    out.parent.mkdir()
+    scan2cad = load_tool('scan2cad')
+    assert scan2cad.main(scan2cad_args(tiny, scan, out, threshold)) == 0
+    outputs = [out, out.with_suffix('.pred.json'), out.with_suffix('.corners.json')]
+    before = [path.read_bytes() for path in outputs]
+    # a different scan whose run fails in FreeCAD, the last stage
+    other = real_like_scans['open_top']
+    assert scan2cad.main(scan2cad_args(tiny, other, out, threshold, '--freecadcmd',
+                                       'false')) == 1
+    assert [path.read_bytes() for path in outputs] == before
+    assert sorted(path.name for path in out.parent.iterdir()) == sorted(p.name for p in outputs)
+
+
+@pytest.mark.parametrize('points,message', [
+    (np.zeros((0, 6)), 'no points'),
+    (np.full((200, 3), np.nan), 'non-finite'),
+    (np.column_stack([np.random.default_rng(0).uniform(0, 5, (5000, 2)), np.zeros(5000)]),
+     'only 0.00 m tall'),
+])
+def test_room_outline_refuses_a_scan_with_no_room_at_all(points, message):
+    with pytest.raises(CornerDetectionError, match=message):
+        room_outline(points)

@@ -12,20 +12,28 @@ The stages are the ones a user runs one by one, on the same prepared scan:
 2. detection by windows sized from the training rooms (``ModelDetector.predictions``, as
    ``tools/predict.py --voxel`` with the same voxel) -> ``<out stem>.pred.json`` beside it;
 3. the room corners on the prepared points, written in the scan's coordinates
-   (``configurator.corners.outline_in_scan``, as ``python -m configurator corners``)
-   -> ``<out stem>.corners.json``;
+   (``configurator.corners.outline_in_scan``, as ``python -m configurator corners
+   --approximate``) -> ``<out stem>.corners.json``; when no outline can be traced, an
+   approximate floor (the points' footprint or its bounding rectangle, on the floor level
+   found) marked ``approximate_floor`` with a warning: a real scan always ends in a document;
 4. the FreeCAD document (``configurator.freecad_cli.build_document``, as
    ``python -m configurator freecad``).
 Every output is in the scan's own coordinates (a georeferenced scan gives georeferenced boxes).
+The outputs of one run are written under unique temporary names beside them and renamed at the
+end together: a failed run leaves the previous set as it was.
 """
 import argparse
+import contextlib
+import os
+import secrets
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
 
-from configurator.corners import SCAN_VOXEL, CornerDetectionError, detect_corners  # noqa: E402
+from configurator.corners import SCAN_VOXEL, CornerDetectionError, room_outline  # noqa: E402
 from configurator.corners import outline_in_scan, outline_to_dict  # noqa: E402
 from configurator.freecad_cli import FreecadFailed, build_document  # noqa: E402
 from projects.synthdet.bootstrap import add_detection_arguments, load_config  # noqa: E402
@@ -55,8 +63,29 @@ def output_paths(out: Path) -> tuple[Path, Path]:
     return out.with_suffix('.pred.json'), out.with_suffix('.corners.json')
 
 
+@contextlib.contextmanager
+def staged_outputs(paths: list[Path]) -> Iterator[list[Path]]:
+    """Unique temporary paths beside ``paths`` (same suffix); when the block succeeds they
+    replace ``paths``, one rename each, all after the last output is complete; whatever
+    happens the temporaries are gone afterwards."""
+    token = f'{os.getpid()}.{secrets.token_hex(4)}'
+    staged = [path.with_name(f'.{path.stem}.{token}.partial{path.suffix}') for path in paths]
+    try:
+        yield staged
+        for temporary in staged:
+            if not temporary.is_file():
+                raise OSError(f'{temporary}: the output was not written')
+        for temporary, path in zip(staged, paths):
+            os.replace(temporary, path)
+    finally:
+        for temporary in staged:
+            with contextlib.suppress(OSError):
+                temporary.unlink()
+
+
 def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
-    """Run the four stages on ``args.scan``; returns FreeCAD's result (objects, warnings)."""
+    """Run the four stages on ``args.scan``; returns FreeCAD's result (objects, warnings, the
+    corner finder's notes first: an approximate floor, an open-top scan)."""
     scan, out = Path(args.scan), Path(args.out)
     if out.suffix.lower() != '.fcstd':
         raise ValueError(f'{out}: the output must end with .FCStd')
@@ -72,22 +101,27 @@ def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
         report(f'prepare: {line}')
     detector = ModelDetector(
         load_model(cfg, args.checkpoint, args.device, args.tta), args.score_thr, args.seed)
-    predictions = detector.predictions(prepared, spec, Path(args.config).stem)
-    write_predictions(predictions_path, predictions)
-    report(f'detect: {len(predictions["detections"])} objects -> {predictions_path}')
-    corners = outline_to_dict(
-        outline_in_scan(detect_corners(outlined.points), outlined), str(scan))
-    write_corners(corners_path, corners)
-    report(f'corners: {len(corners["corners"])} corners -> {corners_path}')
-    result = build_document(
-        scan,
-        predictions_path,
-        out,
-        corners=corners_path,
-        library=args.library,
-        min_score=args.score_thr,
-        wall_thickness=args.wall_thickness,
-        freecadcmd=args.freecadcmd)
+    with staged_outputs([predictions_path, corners_path, out]) as (predictions_tmp, corners_tmp,
+                                                                   out_tmp):
+        predictions = detector.predictions(prepared, spec, Path(args.config).stem)
+        write_predictions(predictions_tmp, predictions)
+        report(f'detect: {len(predictions["detections"])} objects -> {predictions_path}')
+        outline = outline_in_scan(room_outline(outlined.points), outlined)
+        corners = outline_to_dict(outline, str(scan))
+        write_corners(corners_tmp, corners)
+        kind = 'approximate corners' if outline.approximate else 'corners'
+        report(f'corners: {len(corners["corners"])} {kind} -> {corners_path}')
+        result = build_document(
+            scan,
+            predictions_tmp,
+            out_tmp,
+            corners=corners_tmp,
+            library=args.library,
+            min_score=args.score_thr,
+            wall_thickness=args.wall_thickness,
+            freecadcmd=args.freecadcmd)
+    result = dict(result, document=str(out.resolve()), warnings=[
+        *(f'{scan}: {note}' for note in outline.notes), *result['warnings']])
     report(f'freecad: {len(result["objects"])} objects -> {result["document"]} '
            f'({time.perf_counter() - start:.1f} s from reading the scan)')
     return result
