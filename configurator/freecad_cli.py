@@ -9,15 +9,16 @@ checked.
 """
 import argparse
 import json
+import math
 import os
 import signal
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 from configurator.freecad.synthdet_freecad.schema import JOB_FORMAT, RESULT_FORMAT
 from synthdet.contracts import load_json, read_corners, read_predictions, validate_corners
+from synthdet.processes import ends_with_parent, work_folder
 
 MACRO = Path(__file__).resolve().parent / 'freecad' / 'ImportSynthdet.FCMacro'
 
@@ -64,9 +65,19 @@ def _check_scan(scan: Path) -> None:
         raise ValueError(f'{scan}: the scan is empty')
 
 
+def check_timeout(timeout: float) -> None:
+    """Raise ``ValueError`` unless ``timeout`` is a positive, finite number of seconds."""
+    if not (math.isfinite(timeout) and timeout > 0.0):
+        raise ValueError(f'--timeout {timeout:g}: expected a positive number of seconds')
+
+
 def _corners_from_scan(scan: Path) -> dict:
-    from configurator.corners import corners_for_scan
-    return validate_corners(corners_for_scan(scan), f'corners computed from {scan}')
+    from configurator.corners import CornerDetectionError, corners_for_scan
+    try:
+        corners = corners_for_scan(scan)
+    except CornerDetectionError as error:
+        raise CornerDetectionError(f'{scan}: no room found: {error}') from None
+    return validate_corners(corners, f'corners computed from {scan}')
 
 
 def run_freecad_process(command: list[str], env: dict, work_dir: Path, timeout: float,
@@ -107,7 +118,8 @@ def _run_freecad(job: dict, work_dir: Path, freecadcmd: str, timeout: float) -> 
 
 def _run_process_group(command: list[str], env: dict, cwd: Path,
                        timeout: float) -> subprocess.CompletedProcess:
-    """Run ``command`` in its own process group; a timeout or an interruption kills the group.
+    """Run ``command`` in its own process group; a timeout or an interruption kills the group,
+    and the program gets SIGKILL when this process ends in any way (``kill -9`` included).
 
     FreeCAD may start helper processes: killing only ``freecadcmd`` would leave them running.
     """
@@ -119,7 +131,8 @@ def _run_process_group(command: list[str], env: dict, cwd: Path,
         stderr=subprocess.PIPE,
         text=True,
         errors='replace',
-        start_new_session=True)
+        start_new_session=True,
+        preexec_fn=ends_with_parent(os.getpid()))
     try:
         stdout, stderr = process.communicate(timeout=timeout)
     except BaseException:  # TimeoutExpired, Ctrl-C, SIGTERM turned into an exception
@@ -152,10 +165,11 @@ def build_document(scan: Path,
         raise ValueError(f'{library}: library folder not found')
     if not 0.0 <= min_score <= 1.0:
         raise ValueError(f'--min-score {min_score}: expected a score in [0, 1]')
-    if not wall_thickness > 0.0:
-        raise ValueError(f'--wall-thickness {wall_thickness}: expected a positive thickness')
-    with tempfile.TemporaryDirectory(prefix='synthdet-freecad-') as work:
-        work_dir = Path(work)
+    if not (math.isfinite(wall_thickness) and wall_thickness > 0.0):
+        raise ValueError(f'--wall-thickness {wall_thickness:g}: expected a positive thickness '
+                         'in metres')
+    check_timeout(timeout)
+    with work_folder('synthdet-freecad') as work_dir:
         if corners is not None:
             read_corners(str(corners))
             corners_path = Path(corners).resolve()

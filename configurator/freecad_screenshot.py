@@ -12,12 +12,13 @@ import json
 import os
 import subprocess
 import sys
-import tempfile
 import zipfile
 from pathlib import Path
 from typing import Iterator
 
-from configurator.freecad_cli import FreecadFailed, add_program_options, run_freecad_process
+from configurator.freecad_cli import (FreecadFailed, add_program_options, check_timeout,
+                                      run_freecad_process)
+from synthdet.processes import ends_with_parent, work_folder
 
 GUI_SCRIPT = Path(__file__).resolve().parent / 'freecad' / 'screenshot_gui.py'
 # A user configuration that opens no Start page (its web view cannot start as root).
@@ -52,7 +53,8 @@ def virtual_display(width: int, height: int, timeout: float = 30.0) -> Iterator[
              '-nolisten', 'tcp'],
             pass_fds=(write_end, ),
             stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL)
+            stderr=subprocess.DEVNULL,
+            preexec_fn=ends_with_parent(os.getpid()))
     except FileNotFoundError:
         os.close(read_end)
         os.close(write_end)
@@ -95,9 +97,9 @@ def screenshot(document: Path,
         raise ValueError(f'{out}: the picture must end with .png')
     if not (16 <= width <= 8000 and 16 <= height <= 8000):
         raise ValueError(f'--width/--height {width}x{height}: expected 16 to 8000 pixels')
+    check_timeout(timeout)
     out.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix='synthdet-screenshot-') as work:
-        work_dir = Path(work)
+    with work_folder('synthdet-screenshot') as work_dir:
         config = work_dir / 'user.cfg'
         config.write_text(USER_CONFIG, encoding='utf-8')
         result_path = work_dir / 'result.json'

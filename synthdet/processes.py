@@ -1,18 +1,23 @@
-"""Process hygiene: pool workers end with their parent, SIGINT and SIGTERM stop a CLI cleanly.
+"""Process hygiene: pool workers and child programs end with their parent, SIGINT and SIGTERM
+stop a CLI cleanly, temporary folders of killed runs are cleaned.
 
 Standard library only. A worker pool calls :func:`die_with_parent` as (or in) its initializer;
-a CLI runs its work inside :func:`stop_on_signals` and turns :class:`Interrupted` into a
-one-line message and the exit code ``128 + signal number`` (130 for SIGINT, 143 for SIGTERM).
+a child program is started with :func:`ends_with_parent` as its ``preexec_fn``; a CLI runs its
+work inside :func:`stop_on_signals` and turns :class:`Interrupted` into a one-line message and
+the exit code ``128 + signal number`` (130 for SIGINT, 143 for SIGTERM).
 """
 from __future__ import annotations
 import ctypes
 import os
+import shutil
 import signal
 import sys
+import tempfile
 import threading
 import time
 from contextlib import contextmanager
-from typing import Iterator
+from pathlib import Path
+from typing import Callable, Iterator
 
 _PR_SET_PDEATHSIG = 1  # linux/prctl.h
 _WATCH_INTERVAL = 0.2  # seconds between parent checks where prctl is unavailable
@@ -47,6 +52,56 @@ def die_with_parent(parent_pid: int) -> None:
         os._exit(1)
     if not armed:
         threading.Thread(target=_watch_parent, args=(parent_pid, ), daemon=True).start()
+
+
+def ends_with_parent(parent_pid: int) -> Callable[[], None]:
+    """A ``preexec_fn`` for ``subprocess.Popen``: the child program gets SIGKILL as soon as
+    ``parent_pid`` (the process starting it, from its main thread) ends, ``kill -9`` included.
+
+    The kernel's parent-death signal (``prctl(PR_SET_PDEATHSIG)``, Linux) survives ``exec``;
+    a child whose parent died before it was armed exits at once. Elsewhere it does nothing.
+    """
+
+    def arm() -> None:
+        if not sys.platform.startswith('linux'):
+            return
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+        if os.getppid() != parent_pid:
+            os._exit(1)
+
+    return arm
+
+
+def process_alive(pid: int) -> bool:
+    """Whether a process ``pid`` exists (one of another user counts as alive)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+@contextmanager
+def work_folder(prefix: str) -> Iterator[Path]:
+    """A new temporary folder ``<tmp>/<prefix>-<pid>-<random>`` for the block, removed after it.
+
+    Folders of the same ``prefix`` whose process no longer exists (killed before it could
+    remove its own) are removed first.
+    """
+    root = Path(tempfile.gettempdir())
+    for stale in root.glob(f'{prefix}-*-*'):
+        pid = stale.name[len(prefix) + 1:].split('-', 1)[0]
+        if pid.isdigit() and not process_alive(int(pid)) and stale.is_dir() \
+                and not stale.is_symlink():
+            shutil.rmtree(stale, ignore_errors=True)
+    folder = Path(tempfile.mkdtemp(prefix=f'{prefix}-{os.getpid()}-', dir=root))
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def parent_alive(parent_pid: int) -> bool:

@@ -8,8 +8,6 @@ GUI) or writes it as the ``GuiDocument.xml`` FreeCAD itself would have saved (he
 an isometric camera fitted to the room.
 """
 import os
-import shutil
-import tempfile
 import zipfile
 from xml.sax.saxutils import escape, quoteattr
 
@@ -72,9 +70,7 @@ class Look:
         document's own files (the shapes), where a GUI-saved document has it.
         """
         xml = self._gui_xml(doc)
-        folder = os.path.dirname(os.path.abspath(path))
-        handle, temporary = tempfile.mkstemp(suffix='.FCStd', dir=folder)
-        os.close(handle)
+        temporary = f'{path}.gui'  # beside ``path``, named after it: cleaned up with it
         try:
             with zipfile.ZipFile(path) as source, \
                     zipfile.ZipFile(temporary, 'w', zipfile.ZIP_DEFLATED) as target:
@@ -82,7 +78,7 @@ class Look:
                     if info.filename != 'GuiDocument.xml':
                         target.writestr(info, source.read(info.filename))
                 target.writestr('GuiDocument.xml', xml)
-            shutil.move(temporary, path)
+            os.replace(temporary, path)
         finally:
             if os.path.exists(temporary):
                 os.remove(temporary)

@@ -15,6 +15,8 @@ it faces, inside the walls (standard library only; metres and radians like the i
 """
 import math
 
+GRID_CELLS = 4  # the spatial index's cell: a quarter of the median footprint side ...
+MIN_CELL = 0.05  # ... but no smaller than 5 cm
 MERGE_IOU = 0.5
 AXIS_ALIGNED = 1e-6  # radians: a smaller |yaw| counts as an axis-aligned detection
 ORIENTED_CLASSES = ('chair', 'table', 'sofa', 'yumi')
@@ -78,23 +80,100 @@ def box_iou(first: dict, second: dict) -> float:
     return overlap / (volume_a + volume_b - overlap) if overlap > 0.0 else 0.0
 
 
+class Grid:
+    """Keys indexed by the square cells their xy bounds cover: what may overlap a rectangle,
+    or lie near a point, is found among a few keys instead of all of them."""
+
+    def __init__(self, cell: float):
+        self.cell = cell
+        self.cells: dict[tuple[int, int], list] = {}
+        self.span: tuple[int, int, int, int] | None = None  # occupied cells' index bounds
+
+    def _range(self, low: float, high: float) -> range:
+        return range(math.floor(low / self.cell), math.floor(high / self.cell) + 1)
+
+    def add(self, key, low_x: float, low_y: float, high_x: float, high_y: float) -> None:
+        """Index ``key`` under every cell the bounds cover."""
+        columns, rows = self._range(low_x, high_x), self._range(low_y, high_y)
+        for column in columns:
+            for row in rows:
+                self.cells.setdefault((column, row), []).append(key)
+        bounds = (columns[0], rows[0], columns[-1], rows[-1])
+        self.span = bounds if self.span is None else (
+            min(self.span[0], bounds[0]), min(self.span[1], bounds[1]),
+            max(self.span[2], bounds[2]), max(self.span[3], bounds[3]))
+
+    def overlapping(self, low_x: float, low_y: float, high_x: float, high_y: float) -> set:
+        """Every key whose bounds may overlap these (a superset: same cells)."""
+        found = set()
+        for column in self._range(low_x, high_x):
+            for row in self._range(low_y, high_y):
+                found.update(self.cells.get((column, row), ()))
+        return found
+
+    def ring(self, x: float, y: float, radius: int) -> set:
+        """The keys in the cells ``radius`` cells away (Chebyshev) from the cell of (x, y)."""
+        column, row = math.floor(x / self.cell), math.floor(y / self.cell)
+        found = set()
+        for dx in range(-radius, radius + 1):
+            for dy in (range(-radius, radius + 1) if abs(dx) == radius else (-radius, radius)):
+                found.update(self.cells.get((column + dx, row + dy), ()))
+        return found
+
+    def nearest(self, x: float, y: float, distance) -> list:
+        """The keys at the smallest ``distance(key)`` from (x, y) among those whose bounds
+        contain their nearest point to (x, y); rings of cells are searched outwards until no
+        farther cell can hold a nearer key."""
+        if self.span is None:
+            return []
+        column, row = math.floor(x / self.cell), math.floor(y / self.cell)
+        last = max(abs(column - self.span[0]), abs(column - self.span[2]),
+                   abs(row - self.span[1]), abs(row - self.span[3]))
+        best, keys, seen = math.inf, [], set()
+        for radius in range(last + 1):
+            for key in self.ring(x, y, radius) - seen:
+                seen.add(key)
+                value = distance(key)
+                if value < best:
+                    best, keys = value, [key]
+                elif value == best:
+                    keys.append(key)
+            if best <= radius * self.cell:
+                break
+        return keys
+
+
+def grid_for(boxes: list[tuple[float, float, float, float]]) -> Grid:
+    """An empty grid whose cell suits xy bounds (low x, low y, high x, high y) like these."""
+    sides = sorted(max(high_x - low_x, high_y - low_y) for low_x, low_y, high_x, high_y in boxes)
+    median = sides[len(sides) // 2] if sides else 1.0
+    return Grid(max(median / GRID_CELLS, MIN_CELL))
+
+
 def merge_overlapping(detections: list[dict]) -> list[tuple[dict, list[dict]]]:
     """Group cross-class detections overlapping with IoU >= ``MERGE_IOU``.
 
     Returns (winner, alternatives) pairs in the input order of the winners; the alternatives
-    are in decreasing score.
+    are in decreasing score. A detection joins the first winner (in decreasing score) it
+    overlaps enough; only winners sharing a grid cell with it are compared.
     """
     order = sorted(range(len(detections)), key=lambda index: -detections[index]['score'])
+    bounds = [world_bounds(detection) for detection in detections]
+    xy_bounds = [(low[0], low[1], high[0], high[1]) for low, high in bounds]
+    grid = grid_for(xy_bounds)
     winners: dict[int, list[dict]] = {}
+    rank: dict[int, int] = {}
     for index in order:
         candidate = detections[index]
-        for winner in winners:
+        for winner in sorted(grid.overlapping(*xy_bounds[index]), key=rank.__getitem__):
             if detections[winner]['class'] != candidate['class'] and \
                     box_iou(detections[winner], candidate) >= MERGE_IOU:
                 winners[winner].append(candidate)
                 break
         else:
             winners[index] = []
+            rank[index] = len(rank)
+            grid.add(index, *xy_bounds[index])
     return [(detections[index], winners[index]) for index in sorted(winners)]
 
 
@@ -200,7 +279,24 @@ def _quarter_turned(yaw: float) -> bool:
     return abs(math.remainder(yaw, math.pi / 2.0)) < AXIS_ALIGNED
 
 
-def clear_backrest(item: Placed, tables: list[Placed]) -> list[tuple[Placed, float]]:
+class Tables:
+    """The tables of a room, in order, with a grid of their footprints' bounds."""
+
+    def __init__(self, tables: list[Placed]):
+        self.items = tables
+        bounds = [_bounds_2d(table.footprint()) for table in tables]
+        self.grid = grid_for(bounds)
+        for index, box in enumerate(bounds):
+            self.grid.add(index, *box)
+
+    def overlapping(self, low_x: float, low_y: float, high_x: float, high_y: float,
+                    after: int = -1) -> list[int]:
+        """Indices (ascending, above ``after``) of the tables whose bounds may overlap these."""
+        return sorted(index for index in self.grid.overlapping(low_x, low_y, high_x, high_y)
+                      if index > after)
+
+
+def clear_backrest(item: Placed, tables: Tables) -> list[tuple[Placed, float]]:
     """Pull a chair back until its backrest is off the tops of the tables it is pushed under
     (a backrest taller than the table would pierce the top); returns (table, distance) pairs.
 
@@ -211,35 +307,51 @@ def clear_backrest(item: Placed, tables: list[Placed]) -> list[tuple[Placed, flo
         return []
     back_x, back_y = -math.sin(item.yaw), math.cos(item.yaw)  # local +y in the world
     pulls = []
-    for table in tables:
-        if not _quarter_turned(table.yaw) or \
-                item.height <= (1.0 - TABLE_TOP_SHARE) * table.height:
-            continue
+    index = -1  # the tables in order; the strip moves with each pull
+    while True:
         c, s = math.cos(item.yaw), math.sin(item.yaw)
         strip = [(item.x + c * u - s * v, item.y + s * u + c * v)
                  for u in (-item.length / 2.0, item.length / 2.0)
                  for v in ((0.5 - CHAIR_BACK_SHARE) * item.width, item.width / 2.0)]
-        low_x, low_y, high_x, high_y = _bounds_2d(strip)
+        pull = _first_pull(item, strip, tables, index)
+        if pull is None:
+            return pulls
+        index, distance = pull
+        item.x += back_x * distance
+        item.y += back_y * distance
+        pulls.append((tables.items[index], distance))
+
+
+def _first_pull(item: Placed, strip: list[tuple[float, float]], tables: Tables,
+                after: int) -> tuple[int, float] | None:
+    """The first table after ``after`` whose top the backrest ``strip`` lies under, and how
+    far the chair has to move back to clear it."""
+    back_x, back_y = -math.sin(item.yaw), math.cos(item.yaw)
+    low_x, low_y, high_x, high_y = _bounds_2d(strip)
+    for index in tables.overlapping(low_x, low_y, high_x, high_y, after):
+        table = tables.items[index]
+        if not _quarter_turned(table.yaw) or \
+                item.height <= (1.0 - TABLE_TOP_SHARE) * table.height:
+            continue
         table_low_x, table_low_y, table_high_x, table_high_y = _bounds_2d(table.footprint())
         if min(high_x, table_high_x) - max(low_x, table_low_x) <= WALL_TOLERANCE or \
                 min(high_y, table_high_y) - max(low_y, table_low_y) <= WALL_TOLERANCE:
             continue
         strip_near = min(x * back_x + y * back_y for x, y in strip)
         table_far = max(x * back_x + y * back_y for x, y in table.footprint())
-        distance = table_far - strip_near + PUSH_MARGIN
-        item.x += back_x * distance
-        item.y += back_y * distance
-        pulls.append((table, distance))
-    return pulls
+        return index, table_far - strip_near + PUSH_MARGIN
+    return None
 
 
-def orient(item: Placed, tables: list[Placed], polygon: list[list[float]] | None) -> None:
+def orient(item: Placed, tables: Tables, polygon: list[list[float]] | None) -> None:
     """Choose the front of an axis-aligned detection by the class's rule (see module doc)."""
     if abs(math.remainder(item.yaw, 2.0 * math.pi)) > AXIS_ALIGNED or \
             item.class_name not in ORIENTED_CLASSES:
         return
-    if item.class_name == 'chair' and tables:
-        table = min(tables, key=lambda t: _table_side(item, t)[0])
+    if item.class_name == 'chair' and tables.items:
+        nearest = tables.grid.nearest(
+            item.x, item.y, lambda index: _table_side(item, tables.items[index])[0])
+        table = tables.items[min(nearest)]  # the first of the nearest, in order
         normal_x, normal_y = _table_side(item, table)[1]
         _turn(item, _facing(-normal_x, -normal_y), f'faces {table.label}')
     elif item.class_name in ('table', 'sofa') and polygon:
@@ -252,14 +364,15 @@ def orient(item: Placed, tables: list[Placed], polygon: list[list[float]] | None
               f'faces the free side of {table.label}')
 
 
-def find_support(item: Placed, tables: list[Placed]) -> Placed | None:
+def find_support(item: Placed, tables: Tables) -> Placed | None:
     """The table ``item`` stands on: its footprint centre on the table and its bottom above the
     table's mid-height (the highest such table), else None (the floor)."""
     if item.class_name == 'table':
         return None
     bottom = item.detection['center'][2] - item.detection['size'][2] / 2.0
     candidates = [
-        table for table in tables
+        table for table in map(tables.items.__getitem__,
+                                tables.overlapping(item.x, item.y, item.x, item.y))
         if table.contains_xy(item.x, item.y) and bottom >= table.detection['center'][2] - 1e-9
     ]
     return max(candidates, key=lambda table: table.detection['center'][2], default=None)
@@ -284,9 +397,11 @@ def arrange(detections: list[dict], corners: dict | None) -> tuple[list[Placed],
         ]
         placed.append(item)
     polygon = corners['corners'] if corners else None
-    tables = [item for item in placed if item.class_name == 'table']
     everything = [entry for item in placed for entry in [item] + item.alternatives]
+    tables, indexed = Tables([]), False  # tables need no other table to be placed
     for item in sorted(everything, key=lambda entry: entry.class_name != 'table'):
+        if item.class_name != 'table' and not indexed:  # the tables are in place now
+            tables, indexed = Tables([item for item in placed if item.class_name == 'table']), True
         item.support = find_support(item, tables)
         orient(item, tables, polygon)
         for table, distance in clear_backrest(item, tables):

@@ -5,6 +5,8 @@ sofa, bookcase), ``Equipment`` (everything else) and, hidden, ``Alternatives`` (
 classes detected on the same box as an object). Lengths are millimetres.
 """
 import os
+from contextlib import contextmanager
+from typing import Iterator
 
 import FreeCAD as App
 import Part
@@ -14,6 +16,38 @@ from . import appearance, arrangement, library
 
 FURNITURE_CLASSES = ('table', 'chair', 'sofa', 'bookcase')
 STEP_SUFFIXES = ('.step', '.stp')
+DOCUMENT_PREFERENCES = 'User parameter:BaseApp/Preferences/Document'
+
+
+@contextmanager
+def labels_checked_once(doc) -> Iterator[None]:
+    """Within the block FreeCAD does not check each new label against all others (that check
+    makes building n objects take time in n squared); afterwards the labels are made unique in
+    one pass, as FreeCAD would (a repeated label gets 001, 002, ...). The user's preference
+    (``DuplicateLabels``) is restored."""
+    preferences = App.ParamGet(DOCUMENT_PREFERENCES)
+    allowed = preferences.GetBool('DuplicateLabels', False)
+    preferences.SetBool('DuplicateLabels', True)
+    try:
+        yield
+        if not allowed:
+            _make_labels_unique(doc)
+    finally:
+        if not allowed:
+            preferences.RemBool('DuplicateLabels')
+
+
+def _make_labels_unique(doc) -> None:
+    used = set()
+    for obj in doc.Objects:
+        label = obj.Label
+        if label in used:
+            number = 1
+            while f'{label}{number:03d}' in used:
+                number += 1
+            label = f'{label}{number:03d}'
+            obj.Label = label
+        used.add(label)
 
 
 def _group(doc, name: str):
@@ -153,6 +187,12 @@ def import_detections(doc,
     report: ``objects`` (name, label, class, group, model, stands_on, orientation,
     alternatives), ``warnings`` and ``skipped_low_score``.
     """
+    with labels_checked_once(doc):
+        return _build(doc, predictions, corners, library_dir, min_score, wall_thickness, look)
+
+
+def _build(doc, predictions: dict, corners: dict | None, library_dir: str | None,
+           min_score: float, wall_thickness: float, look) -> dict:
     look = look if look is not None else appearance.Look()
     room = _group(doc, 'Room')
     furniture = _group(doc, 'Furniture')

@@ -9,6 +9,7 @@ failure too; a headless failure also exits with code 1.
 """
 import json
 import os
+import secrets
 import traceback
 import zipfile
 
@@ -76,33 +77,74 @@ def write_result(path: str | None, result: dict) -> None:
     os.replace(temporary, path)
 
 
+PARTIAL_MARK = '.partial-'  # .<name>.partial-<pid>-<random>.FCStd: a run's temporary file
+
+
 def partial_path(out: str) -> str:
-    """The temporary file a document is saved to before it is renamed to ``out``."""
+    """A temporary file next to ``out`` that no other run uses: this process's id and a
+    random part in the name (FreeCAD wants the ``.FCStd`` suffix)."""
     folder, name = os.path.split(out)
-    return os.path.join(folder, f'.{name[:-len(".FCStd")]}.partial.FCStd')  # FreeCAD wants it
+    stem = name[:-len('.FCStd')]
+    return os.path.join(folder, f'.{stem}{PARTIAL_MARK}{os.getpid()}-{secrets.token_hex(4)}.FCStd')
+
+
+def remove_stale_partials(out: str) -> list[str]:
+    """Remove the temporary files (and FreeCAD backups of them, ``*.FCStd1``) that runs which
+    are no longer alive left next to ``out``; returns their paths. Files of live runs stay."""
+    folder, name = os.path.split(out)
+    prefix = f'.{name[:-len(".FCStd")]}{PARTIAL_MARK}'
+    removed = []
+    try:
+        entries = os.listdir(folder or '.')
+    except OSError:
+        return removed
+    for entry in entries:
+        if not entry.startswith(prefix):
+            continue
+        pid = entry[len(prefix):].split('-', 1)[0]
+        if not pid.isdigit() or _process_alive(int(pid)):
+            continue
+        path = os.path.join(folder, entry)
+        try:
+            os.remove(path)
+        except OSError:
+            continue
+        removed.append(path)
+    return removed
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
 
 
 def save_atomically(doc, out: str, look) -> None:
     """Save ``doc`` (with the GUI view ``look`` writes) to a temporary file next to ``out``
     and rename it into place.
 
-    A failing save (also one FreeCAD only reports on its console, such as a full disk, found by
-    reading the archive back) leaves the previous ``out`` untouched; a temporary file left by a
-    killed run is removed first.
+    The temporary name is this run's own, so runs writing the same ``out`` at once never touch
+    each other's files (the last rename wins, each file complete). A failing save (also one
+    FreeCAD only reports on its console, such as a full disk, found by reading the archive
+    back) leaves the previous ``out`` untouched; temporary files of runs that died (killed)
+    are removed first, and no FreeCAD backup (``*.FCStd1``) of a temporary file is left.
     """
+    remove_stale_partials(out)
     partial = partial_path(out)
-    if os.path.isfile(partial):
-        os.remove(partial)
     try:
         doc.saveCopy(partial)
         _check_complete(partial)  # FreeCAD reports some write errors only on its console
         look.write_gui_document(partial, doc)
         _check_complete(partial)
         os.replace(partial, out)
-    except BaseException:
-        if os.path.isfile(partial):
-            os.remove(partial)
-        raise
+    finally:
+        for leftover in (partial, partial + '1'):  # FreeCAD names its backup <file>1
+            if os.path.isfile(leftover):
+                os.remove(leftover)
 
 
 def _check_complete(path: str) -> None:
