@@ -29,6 +29,7 @@ from projects.synthdet.bootstrap import (  # noqa: E402
 from projects.synthdet.checkpoint import (  # noqa: E402
     TRAINING_CHECKPOINT_TYPES, CheckpointError, load_checkpoint_file, refused,
     save_inference_checkpoint, trusted_resume_path)
+from synthdet.info_files import InfoFileError  # noqa: E402
 
 INFERENCE_CHECKPOINT = 'inference.pth'
 
@@ -123,6 +124,9 @@ def main(argv: list[str] | None = None) -> int:
         hint = 'if it is your own, resume it with --trust-checkpoint'
         print(f'train: error: {refused(cfg.load_from or cfg.work_dir, error, hint)}',
               file=sys.stderr)
+        return 2
+    except InfoFileError as error:  # an info pickle that is not plain data (it may hold code)
+        print(f'train: error: {error}', file=sys.stderr)
         return 2
     if is_main_process():
         published = publish_final_checkpoint(cfg.work_dir)
