@@ -11,12 +11,14 @@ are tables keyed by file suffix, so a new format is one reader (and writer) and 
 - ``.ply``: a ``vertex`` element with ``x y z`` and optional colours, by :mod:`synthdet.ply`;
 - ``.las``/``.laz``: ASPRS LAS by ``laspy`` (+ ``lazrs``), scale and offset in float64;
 - ``.e57``: every scan of the file by ``pye57``, each moved by its pose;
-- ``.pcd``: Point Cloud Library files, ``ascii`` or ``binary``;
+- ``.pcd``: Point Cloud Library files, ``ascii``, ``binary`` or ``binary_compressed`` (LZF);
 - ``.xyz``/``.pts``/``.csv``: text columns; delimiter and header lines are detected, the
   columns come from ``columns`` (``x,y,z,r,g,b``, ``x,y,z,i``, ``_`` skips one) or the count.
 
 Scans without colours get their intensity as grey, or zeros without intensity; the notes say
-which. Errors for bad files are ``ScanFormatError`` naming the file (and the line for text).
+which. Errors for bad files are ``ScanFormatError`` naming the file (and the line for text),
+among them a header counting points the data does not hold and a text line longer than
+``MAX_LINE_BYTES``.
 """
 from __future__ import annotations
 
@@ -785,7 +787,8 @@ def _lzf_field_blocks(path: Path, source: np.ndarray, state: tuple[int, int, np.
     """The bytes of one field (``points`` items of ``item_bytes`` from output offset
     ``start``), ``chunk_points`` items at a time, decoded from ``state`` on."""
     position, produced, window = state
-    buffer = np.empty(LZF_WINDOW + chunk_points * item_bytes + 2 * LZF_LONGEST, dtype=np.uint8)
+    chunk_bytes = min(chunk_points, points) * item_bytes
+    buffer = np.empty(LZF_WINDOW + chunk_bytes + 2 * LZF_LONGEST, dtype=np.uint8)
     kept = len(window)
     buffer[:kept] = window
     for first in range(0, points, chunk_points):
