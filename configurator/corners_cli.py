@@ -9,10 +9,11 @@ import argparse
 import os
 import sys
 
-from configurator.corners import (SCAN_VOXEL, CornerDetectionError, CornerParams, outline_to_dict,
-                                  scan_outline)
+from configurator.corners import (SCAN_VOXEL, CornerDetectionError, CornerParams, detect_corners,
+                                  outline_in_scan, outline_to_dict, room_outline)
 from synthdet.contracts import write_corners
-from synthdet.scan_io import SCAN_SUFFIXES
+from synthdet.prepare import prepare_scan
+from synthdet.scan_io import SCAN_SUFFIXES, load_scan
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -69,18 +70,20 @@ def run(args: argparse.Namespace) -> int:
             print(f'corners: cannot write {output}: {problem}', file=sys.stderr)
             return 1
     try:
-        outline, prepared = scan_outline(
-            args.scan,
-            CornerParams(min_edge=args.min_edge),
-            voxel=args.voxel,
-            columns=args.columns,
-            approximate=args.approximate)
-    except (OSError, ValueError) as error:  # ScanFormatError and CornerDetectionError too
-        kind = 'no room found' if isinstance(error, CornerDetectionError) else 'bad scan'
-        print(f'corners: {kind}: {error}', file=sys.stderr)
+        prepared = prepare_scan(load_scan(args.scan, voxel=args.voxel, columns=args.columns))
+    except (OSError, ValueError) as error:  # ScanFormatError too
+        print(f'corners: bad scan: {error}', file=sys.stderr)
         return 2
+    # the reading and preparation notes (a float32 warning...) come first, also before a failure
     for line in prepared.report:
         print(f'corners: {line}', file=sys.stderr if line.startswith('warning') else sys.stdout)
+    find = room_outline if args.approximate else detect_corners
+    try:
+        outline = outline_in_scan(find(prepared.points, CornerParams(min_edge=args.min_edge)),
+                                  prepared)
+    except CornerDetectionError as error:
+        print(f'corners: no room found: {args.scan}: {error}', file=sys.stderr)
+        return 2
     for note in outline.notes:
         print(f'corners: warning: {args.scan}: {note}', file=sys.stderr)
     result = outline_to_dict(outline, args.scan)
