@@ -76,7 +76,7 @@ def build_room(doc, corners: dict, wall_thickness: float, group, look):
         sheet.set(f'A{row}', description)
         sheet.set(f'B{row}', f'={1000.0 * metres:.3f} mm')
         sheet.setAlias(f'B{row}', alias)
-    quality = corners['quality']
+    quality = corners.get('quality', {})
     approximate = bool(quality.get('approximate_floor', 0.0))
     for prop, type_name, value in (
         ('SourceScan', 'App::PropertyString', corners['scan']),
@@ -203,7 +203,7 @@ def _build(doc, predictions: dict, corners: dict | None, library_dir: str | None
     kept = [d for d in predictions['detections'] if d['score'] >= min_score]
     skipped = len(predictions['detections']) - len(kept)
     placed_items, warnings = arrangement.arrange(kept, corners)
-    if corners is not None and corners['quality'].get('approximate_floor', 0.0):
+    if corners is not None and corners.get('quality', {}).get('approximate_floor', 0.0):
         warnings.append('the floor is approximate (the points\' footprint, no traced room '
                         'outline): check the walls (Room.ApproximateFloor)')
     step_paths = find_step_models(library_dir)
