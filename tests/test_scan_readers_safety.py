@@ -351,3 +351,15 @@ def test_no_tool_runs_the_code_of_an_info_pickle(tmp_path):
         proc = run(*command)
         assert not marker.exists(), f'{name} ran the code in the info pickle'
         assert_one_line_error(proc, 2, str(evil), 'not an info pickle')
+
+
+@pytest.mark.parametrize('name', sorted(TEXT_SCANS))
+def test_a_bad_line_far_into_the_file_is_named_by_its_number(tmp_path, name):
+    path = tmp_path / name
+    header_lines = TEXT_SCANS[name][1]
+    _text_scan(path, 20_000)
+    lines = path.read_text().splitlines(keepends=True)
+    lines[header_lines + 15_000] = lines[header_lines + 15_000].replace('1.000', '1.x00', 1)
+    path.write_text(''.join(lines))
+    with pytest.raises(ScanFormatError, match=rf'{name}:{header_lines + 15_001}: '):
+        read_scan_chunks_joined(path, 512)
