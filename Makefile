@@ -64,6 +64,10 @@ EXP2_DATA_OPTIONS = $(foreach key,train_dataloader.dataset.dataset.datasets.0 \
 # (EXP2_OPTIONS="model.bbox_head.label2level=[2,1,1,1,1]"); use a new EXP2_WORK for each variant
 EXP2_OPTIONS ?=
 EXP2_CFG_OPTIONS = $(EXP2_DATA_OPTIONS) $(EXP2_OPTIONS)
+# a folder of your own labelled scans (X.ply with X.labels.json beside it, docs/evaluation.md):
+# when set, the run ends with their evaluation by the final checkpoint (tools/eval_scans.py)
+# into $(EXP2_WORK)/real_scans, e.g. make exp2-cpu REAL_SCANS=~/labelled-scans
+REAL_SCANS ?=
 exp2-cpu: export OMP_NUM_THREADS = $(EXP2_THREADS)
 exp2-cpu: setup
 	$(PY) -m generator --out $(EXP2_DATA)/Stanford3dDataset_v1.2_Aligned_Version --areas 7 8 9 \
@@ -83,6 +87,10 @@ exp2-cpu: setup
 	        --sensor $$sensor --work-dir $(EXP2_WORK)/test_$$sensor --box-fit \
 	        --cfg-options $(EXP2_CFG_OPTIONS) || exit 1; \
 	done
+ifneq ($(strip $(REAL_SCANS)),)
+	$(PY) tools/eval_scans.py $(EXP2_CONFIG) $$(cat $(EXP2_WORK)/last_checkpoint) $(REAL_SCANS) \
+	    --out $(EXP2_WORK)/real_scans --cfg-options $(EXP2_CFG_OPTIONS)
+endif
 
 # Every benchmarks/bench_*.py, one after the other; each full output is kept in
 # docs/benchmarks/<name>.txt and docs/benchmarks.md is written from them.
