@@ -468,10 +468,12 @@ def wall_points(xyz: np.ndarray, levels: Levels, params: CornerParams | None = N
         return np.zeros((0, 2))
     reach = levels.floor_z + min(params.wall_reach, 0.6 * (levels.ceiling_z - levels.floor_z))
     columns = _plan_cells(band, params.wall_column)
-    _, inverse = np.unique(columns, return_inverse=True)
-    top = np.full(int(inverse.max()) + 1, -np.inf)
-    np.maximum.at(top, inverse, band[:, 2])
-    return _subsample(band[top[inverse] >= reach, :2], params.max_fit_points)
+    reaching = columns[band[:, 2] >= reach]
+    if columns.max() < 2**24:  # a table of the columns (64 MB at most), else a sorted lookup
+        keep = (np.bincount(reaching, minlength=int(columns.max()) + 1) > 0)[columns]
+    else:
+        keep = np.isin(columns, reaching)
+    return _subsample(band[keep, :2], params.max_fit_points)
 
 
 def _plan_cells(xyz: np.ndarray, cell: float) -> np.ndarray:
