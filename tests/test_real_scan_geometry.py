@@ -3,7 +3,7 @@ a reconstructed mesh sampled per vertex (floor sparser than the walls, no ceilin
 room, furniture in front of a wall the sensor never saw, a single depth view of one side of a
 room, a y-up room and a depth camera's own frame (y down, z forward); and tools/scan2cad.py
 end to end on three of them with the tiny model of tests/test_scan2cad.py and the real
-``freecadcmd``."""
+``freecadcmd`` (and ``configurator freecad`` finding the corners itself)."""
 import math
 import zipfile
 from pathlib import Path
@@ -11,11 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from configurator.__main__ import main as configurator_main
 from configurator.corners import (CornerDetectionError, CornerParams, detect_corners,
                                   floor_prominence, room_outline)
+from synthdet.contracts import read_corners, read_predictions, write_predictions
 from synthdet.geometry import (distance_to_polygon, first_self_crossing, points_in_polygon,
                                signed_area)
-from synthdet.contracts import read_corners, read_predictions
 from synthdet.prepare import detect_up_axis, prepare_scan
 from synthdet.scan_io import LoadedScan, write_scan
 from tests.room_scans import _outside_box, _sample_box, _sample_flat, _sample_walls
@@ -303,3 +304,27 @@ def test_failed_scan2cad_run_leaves_the_previous_outputs_as_they_were(
 def test_room_outline_refuses_a_scan_with_no_room_at_all(points, message):
     with pytest.raises(CornerDetectionError, match=message):
         room_outline(points)
+
+
+def test_freecad_without_corners_gives_a_one_sided_view_an_approximate_floor(
+        real_like_scans, tmp_path):
+    """``configurator freecad`` without ``--corners`` finds them itself, approximate floor
+    allowed: a document with both detections, marked, exit 0 (before: exit 2, no document)."""
+    scan = real_like_scans['one_sided']
+    predictions = tmp_path / 'view.pred.json'
+    write_predictions(predictions, {
+        'format': 'synthdet.predictions/1', 'scan': scan.name, 'model': 'by hand',
+        'classes': ['table', 'chair'],
+        'detections': [
+            {'class': 'table', 'score': 0.9, 'center': [0.0, 4.0, -1.0],
+             'size': [1.2, 0.8, 0.75], 'yaw': 0.0},
+            {'class': 'chair', 'score': 0.8, 'center': [1.0, 4.6, -1.0],
+             'size': [0.5, 0.5, 0.9], 'yaw': 0.3},
+        ]})
+    out = tmp_path / 'view.FCStd'
+    assert configurator_main(['freecad', '--scan', str(scan), '--predictions', str(predictions),
+                              '--out', str(out)]) == 0
+    assert document_property(out, 'ApproximateFloor') == 'true'
+    with zipfile.ZipFile(out) as archive:
+        xml = archive.read('Document.xml').decode('utf-8')
+    assert 'Floor (approximate)' in xml and xml.count('DetectedClass') >= 2
