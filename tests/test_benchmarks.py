@@ -27,10 +27,12 @@ def figure(name: str) -> str:
 
 class Smoke(NamedTuple):
     """The smallest arguments of a benchmark and the regex of its last line; ``with_model``:
-    the arguments end with a checkpoint of the tiny config's model, made for the run."""
+    the arguments end with a checkpoint of the tiny config's model, made for the run; ``slow``:
+    over 30 s even at this size (processes that load the detector or train it)."""
     args: list[str]
     headline: str
     with_model: bool = False
+    slow: bool = False
 
 
 SMOKE: dict[str, Smoke | str] = {
@@ -55,18 +57,22 @@ SMOKE: dict[str, Smoke | str] = {
     'model': Smoke(['--points', '3000', '--iters', '1', '--threads', '1'],
                    r'2 cm \+ fine level \(CPU seconds\): train x' + figure('train_2cm') +
                    r' of 2 cm, x' + figure('train_1cm') + r' of 1 cm; inference x' +
-                   figure('infer_2cm') + r' of 2 cm, x' + figure('infer_1cm') + ' of 1 cm'),
+                   figure('infer_2cm') + r' of 2 cm, x' + figure('infer_1cm') + ' of 1 cm',
+                   slow=True),
     'corners': Smoke(['--rooms', '1', '--points', '5000', '--timing-rooms', '0', '--generate',
                       '0'],
                      r'corners, generator rooms: .+; all rooms \(mean error, right count, right '
                      r'order\): traced ' + figure('traced') + r' cm \(worst [\d.]+\) / \d+% / '
                      r'\d+%; paper .+; convex hull ' + figure('hull') + ' cm .+'),
+    # an untrained model: only its surest boxes, so that the FreeCAD document stays small
     'hall': Smoke(['--points', '100000', '--hall-size', '16', '12', '--rooms', '1',
-                   '--room-points', '20000', '--config', 'configs/tr3d/tiny.py', '--checkpoint'],
+                   '--room-points', '20000', '--score-thr', '0.9', '--config',
+                   'configs/tr3d/tiny.py', '--checkpoint'],
                   r'hall ' + figure('points') + r'M points -> FCStd: ' + figure('seconds') +
                   r' s, peak ' + figure('peak') + r' GB; windowed recall ' + figure('hall') +
                   ' vs room recall ' + figure('rooms'),
-                  with_model=True),
+                  with_model=True,
+                  slow=True),
     'sensors': Smoke(['--rooms', '1', '--points', '5000', '--repeats', '1'],
                      r'sensors: slowest \S+ ' + figure('seconds') + r' s per 1M-point room \(' +
                      figure('ratio') + r'x the aimed paper sensor\)'),
@@ -78,11 +84,18 @@ SMOKE: dict[str, Smoke | str] = {
                          '1'],
                         r'2 processes x 1 thread vs 1 process x 2 threads: x' + figure('ratio') +
                         r' faster per iteration of 4 rooms \(' + figure('two') + ' s vs ' +
-                        figure('one') + r' s\)'),
+                        figure('one') + r' s\)',
+                        slow=True),
     'scan_io': Smoke(['--points', '20000', '--room-points', '5000', '--chunk', '5000'],
                      r'scan_io \d+M-point LAZ: streamed load_scan peak ' + figure('streamed') +
                      r' GB in \d+ s vs read-all ' + figure('whole') + r' GB in \d+ s: ' +
                      figure('ratio') + 'x less memory'),
+    'real_scans': Smoke(['--generate', '1', '--config', 'configs/tr3d/tiny.py', '--checkpoint'],
+                        r'real scans: recall ' + figure('recall') + r' at IoU 0\.25, ' +
+                        figure('fp') + r' false positives per room, ' + figure('phantoms') +
+                        r' phantom yumi/3d printer \(' + figure('rooms') + r' rooms\)',
+                        with_model=True,
+                        slow=True),
     # its whole run at a tiny scale, headline included, is tests/test_bench_domain_shift.py's
     'domain_shift': 'tests/test_bench_domain_shift.py',
 }
@@ -104,13 +117,19 @@ def tiny_checkpoint(tmp_path_factory) -> Path:
     from mmdet3d.apis import init_model
     from mmengine.config import Config
     torch.manual_seed(0)
-    model = init_model(Config.fromfile(str(REPO / 'configs/tr3d/tiny.py')), None, device='cpu')
+    config = Config.fromfile(str(REPO / 'configs/tr3d/tiny.py'))
+    model = init_model(config, None, device='cpu')
     path = tmp_path_factory.mktemp('model') / 'initialised.pth'
-    torch.save({'state_dict': model.state_dict(), 'meta': {}}, path)
+    classes = list(config.test_dataloader.dataset.metainfo['classes'])
+    torch.save({'state_dict': model.state_dict(), 'meta': {'dataset_meta': {'classes': classes}}},
+               path)
     return path
 
 
-@pytest.mark.parametrize('name', [n for n, s in SMOKE.items() if isinstance(s, Smoke)])
+@pytest.mark.parametrize('name', [
+    pytest.param(name, marks=[pytest.mark.slow] if smoke.slow else [])
+    for name, smoke in SMOKE.items() if isinstance(smoke, Smoke)
+])
 def test_benchmark_smoke_run(name, request):
     smoke = SMOKE[name]
     args = [*smoke.args]
