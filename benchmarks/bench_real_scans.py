@@ -3,6 +3,11 @@
     .venv/bin/python benchmarks/bench_real_scans.py SCANS_DIR --checkpoint CKPT
         [--config configs/tr3d/exp2_cpu.py] [--score-thr 0.3] [--compare-thr 0.5]
         [--device cpu] [--keep DIR]
+    .venv/bin/python benchmarks/bench_real_scans.py --generate 2 --checkpoint CKPT ...
+
+``--generate N`` evaluates N small generated rooms (``tests/s3dis_fixtures.py``) written as
+labelled PLY scans in a temporary folder instead: a check of the benchmark itself, not a
+measure of a model on real rooms.
 
 1. ``tools/eval_scans.py`` evaluates every labelled scan of SCANS_DIR (``X.ply`` with
    ``X.labels.json`` beside it, docs/evaluation.md) in its own process, as a user runs it, at
@@ -29,19 +34,42 @@ sys.path.insert(0, str(REPO_ROOT))
 
 from projects.synthdet.evaluation.real_scans import (  # noqa: E402
     evaluate_detections, labels_path, summary_line)
-from synthdet.contracts import read_labels, read_predictions  # noqa: E402
+from synthdet.contracts import LABELS_FORMAT, read_labels, read_predictions  # noqa: E402
+from synthdet.contracts import write_labels  # noqa: E402
+from synthdet.scan_io import read_scan, write_scan  # noqa: E402
+from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area  # noqa: E402
 
 
 def parse_args() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('scans', type=Path, help='folder of labelled scans')
+    parser.add_argument('scans', type=Path, nargs='?', help='folder of labelled scans')
+    parser.add_argument('--generate', type=int, help='evaluate N generated rooms instead')
     parser.add_argument('--checkpoint', type=Path, required=True, help='trained model')
     parser.add_argument('--config', type=Path, default=REPO_ROOT / 'configs/tr3d/exp2_cpu.py')
     parser.add_argument('--score-thr', type=float, default=0.3, help='the threshold reported')
     parser.add_argument('--compare-thr', type=float, default=0.5, help='shown beside it')
     parser.add_argument('--device', default='cpu')
     parser.add_argument('--keep', type=Path, help='write the evaluation here and keep it')
-    return parser.parse_args()
+    args = parser.parse_args()
+    if (args.scans is None) == (args.generate is None):
+        parser.error('give a folder of labelled scans or --generate N, not both')
+    return args
+
+
+def write_generated_scans(folder: Path, rooms: int, seed: int = 0) -> None:
+    """``rooms`` small generated rooms as ``<room>.ply`` with ``<room>.labels.json``."""
+    truth = write_synthetic_area(folder / 'raw', area=1, n_rooms=rooms, seed=seed,
+                                 points_per_object=300)
+    for room, boxes in truth.items():
+        points = read_scan(folder / 'raw' / S3DIS_DIR / 'Area_1' / room / f'{room}.txt')
+        write_scan(folder / f'{room}.ply', points)
+        write_labels(folder / f'{room}.labels.json', {
+            'format': LABELS_FORMAT, 'scan': f'{room}.ply',
+            'classes': ['table', 'chair', 'sofa', 'yumi', '3dprinter'],
+            'boxes': [{'class': box['class'],
+                       'center': [(lo + hi) / 2 for lo, hi in zip(box['min'], box['max'])],
+                       'size': [hi - lo for lo, hi in zip(box['min'], box['max'])],
+                       'yaw': 0.0} for box in boxes]})
 
 
 def evaluate(args: argparse.Namespace, out: Path, lowest: float) -> tuple[dict, float]:
@@ -62,7 +90,10 @@ def main() -> None:
     args = parse_args()
     thresholds = sorted({args.score_thr, args.compare_thr})
     with tempfile.TemporaryDirectory() as scratch:
-        out = args.keep or Path(scratch)
+        out = args.keep or Path(scratch) / 'out'
+        if args.generate is not None:
+            args.scans = Path(scratch) / 'scans'
+            write_generated_scans(args.scans, args.generate)
         first, seconds = evaluate(args, out, thresholds[0])
         print(f'\n{first["rooms"]} labelled rooms evaluated in {seconds:.0f} s '
               f'({seconds / max(first["rooms"], 1):.1f} s per room, model loading included)')
