@@ -1,5 +1,4 @@
-"""Safe and fault-tolerant (issue 14), tried with real processes as an attacker and an unlucky
-user.
+"""Safe and fault-tolerant, tried with real processes as an attacker and an unlucky user.
 
 - checkpoints: a checkpoint that runs code when unpickled is refused by predict, test, train
   --resume and publish_model, and creates no file; training writes an inference checkpoint that

@@ -16,9 +16,13 @@ pipeline like a training room, and the windows' boxes are merged with the projec
 written in the input scan's own coordinates, with their yaw in that frame
 (``"format": "synthdet.predictions/1"``, see docs/training.md).
 
-Every scan is read and checked before the model is loaded; the checkpoint is loaded weights-only
-(``projects/synthdet/checkpoint.py``). Bad scans, refused checkpoints and clashing outputs end
-with one line naming the file and exit code 2; failures at run time with exit code 1.
+The arguments are checked first (the config loads, ``--out`` is a folder that can be written,
+the checkpoint exists), then every scan is read and checked, all before the model is loaded;
+the checkpoint is loaded weights-only (``projects/synthdet/checkpoint.py``). Bad arguments, bad
+scans, refused checkpoints and clashing outputs end with one line naming the file and exit code
+2; failures at run time with exit code 1. Each JSON is written under a temporary name and
+renamed into place. A scan's name is used as the file system gives it (bytes that are not UTF-8
+included) for its output file; inside the JSON, and in messages, such bytes show as U+FFFD.
 """
 import argparse
 import sys
@@ -29,7 +33,7 @@ from tqdm import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
 
 from projects.synthdet.bootstrap import (  # noqa: E402
-    add_detection_arguments, load_config, run_tool)
+    add_detection_arguments, check_output_dir, load_config, run_tool)
 from projects.synthdet.inference.detector import ModelDetector, load_model  # noqa: E402
 from projects.synthdet.inference.windows import inference_settings  # noqa: E402
 from synthdet.contracts import write_predictions  # noqa: E402
@@ -58,6 +62,12 @@ def output_path(scan: Path, out_dir: Path) -> Path:
     return out_dir / f'{scan.stem}.pred.json'
 
 
+def readable(text: str) -> str:
+    """``text`` as valid Unicode: bytes of a file name that are not UTF-8 (which Python keeps as
+    lone surrogates) become U+FFFD."""
+    return text.encode('utf-8', 'surrogateescape').decode('utf-8', 'replace')
+
+
 def check_scans(scans: list[Path], out_dir: Path, voxel: float | None,
                 columns: str | None) -> dict[Path, Path]:
     """Read every scan once (errors name the file) and map each output path to its scan."""
@@ -67,10 +77,13 @@ def check_scans(scans: list[Path], out_dir: Path, voxel: float | None,
         if target in targets:
             raise BadInput(f'{scan} and {targets[target]} would both be written to {target}; '
                            'predict them into different --out directories')
+        if target.is_dir():
+            raise BadInput(f'{target}: is a folder, so the predictions of {scan} cannot be '
+                           'written there')
         try:
             load_scan(scan, voxel=voxel, columns=columns)
         except (ValueError, OSError) as error:  # ScanFormatError names the file (and line)
-            raise BadInput(str(error)) from None
+            raise BadInput(readable(str(error))) from None
         targets[target] = scan
     return targets
 
@@ -79,12 +92,13 @@ def main(argv: list[str] | None = None) -> list[Path]:
     """Predict every scan and write its JSON; returns the written paths."""
     args = parse_args(argv)
     out_dir = Path(args.out)
-    targets = check_scans([Path(p) for p in args.points], out_dir, args.voxel, args.columns)
-    cfg = load_config(args.config, args.cfg_options)
     try:
+        check_output_dir(out_dir)
+        cfg = load_config(args.config, args.cfg_options)
         spec, density = inference_settings(cfg, args.config)
-    except ValueError as error:
+    except ValueError as error:  # OutputPathError, ConfigFileError
         raise BadInput(str(error)) from None
+    targets = check_scans([Path(p) for p in args.points], out_dir, args.voxel, args.columns)
     try:
         model = load_model(cfg, args.checkpoint, args.device, args.tta)
     except ValueError as error:  # CheckpointError
@@ -99,12 +113,12 @@ def main(argv: list[str] | None = None) -> list[Path]:
             target_density=density,
             seed=args.seed)
         for line in prepared.report:
-            tqdm.write(f'{scan.name}: {line}')
+            tqdm.write(readable(f'{scan.name}: {line}'))
         try:
             predictions = detector.predictions(prepared, spec, model_name)
         except ValueError as error:
-            raise RuntimeError(f'{scan}: {error}') from None
-        write_predictions(target, predictions)
+            raise RuntimeError(readable(f'{scan}: {error}')) from None
+        write_predictions(target, {**predictions, 'scan': readable(predictions['scan'])})
         written.append(target)
     return written
 

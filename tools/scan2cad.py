@@ -36,7 +36,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's 
 from configurator.corners import SCAN_VOXEL, CornerDetectionError, room_outline  # noqa: E402
 from configurator.corners import outline_in_scan, outline_to_dict  # noqa: E402
 from configurator.freecad_cli import FreecadFailed, build_document  # noqa: E402
-from projects.synthdet.bootstrap import add_detection_arguments, load_config  # noqa: E402
+from projects.synthdet.bootstrap import (  # noqa: E402
+    add_detection_arguments, check_output_file, load_config)
 from projects.synthdet.inference.detector import ModelDetector, load_model  # noqa: E402
 from projects.synthdet.inference.windows import inference_settings  # noqa: E402
 from synthdet.contracts import write_corners, write_predictions  # noqa: E402
@@ -90,10 +91,12 @@ def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
     if out.suffix.lower() != '.fcstd':
         raise ValueError(f'{out}: the output must end with .FCStd')
     predictions_path, corners_path = output_paths(out)
-    start = time.perf_counter()
-    loaded = load_scan(scan, voxel=args.voxel, columns=args.columns)
+    for path in (out, predictions_path, corners_path):  # the arguments before any work
+        check_output_file(path)
     cfg = load_config(args.config, args.cfg_options)
     spec, density = inference_settings(cfg, args.config)
+    start = time.perf_counter()
+    loaded = load_scan(scan, voxel=args.voxel, columns=args.columns)
     # the corners, as `configurator corners`, use every point; detection the resampled ones
     outlined = align_scan(loaded)
     prepared = resample_to_density(outlined, density, args.seed)

@@ -16,7 +16,9 @@ with its ground truth and the predictions scoring at least ``--score-thr``
 mmdet3d's test tool. ``--sensor`` tests only the generated rooms that one of the generator's
 sensor models scanned (their ``meta.json``), for a table per sensor. The checkpoint is loaded
 weights-only (``projects/synthdet/checkpoint.py``): one that holds anything else is refused, as
-is a ``--sensor`` whose rooms cannot be found (exit 2). ``--box-fit`` adds a table of how well
+is a ``--sensor`` whose rooms cannot be found (exit 2). The config, the checkpoint, ``--out``
+and ``--show-dir`` are checked before the data and the model are loaded (one line naming the
+file, exit 2). ``--box-fit`` adds a table of how well
 the predicted boxes fit the true ones per class (median best IoU, the share below IoU 0.25 and
 0.5, size ratios per axis and centre distance; ``projects/synthdet/evaluation/box_fit.py``),
 printed and written to ``box_fit.json`` / ``box_fit.txt`` next to Table 3.
@@ -40,8 +42,10 @@ from mmengine.model import BaseTTAModel, is_model_wrapper  # noqa: E402
 from mmengine.runner import Runner  # noqa: E402
 
 from projects.synthdet.bootstrap import (  # noqa: E402
-    TTAConfigError, add_runner_arguments, parse_runner_args, run_tool, runner_config, tta_settings)
-from projects.synthdet.checkpoint import CheckpointError, load_model_weights  # noqa: E402
+    ConfigFileError, OutputPathError, TTAConfigError, add_runner_arguments, check_output_dir,
+    check_output_file, parse_runner_args, run_tool, runner_config, tta_settings)
+from projects.synthdet.checkpoint import (  # noqa: E402
+    CheckpointError, load_checkpoint_file, load_state_into)
 from projects.synthdet.evaluation.box_fit import (  # noqa: E402
     SynthdetBoxFit, box_fit_document, format_box_fit)
 from projects.synthdet.evaluation.false_positives import (  # noqa: E402
@@ -136,6 +140,11 @@ def main(argv: list[str] | None = None) -> dict:
     """Run the test loop, print Table 3 and write it; returns the JSON document."""
     args = parse_args(argv)
     cfg = runner_config(args)
+    if args.out:
+        check_output_file(args.out, make_parents=True)
+    if args.show_dir:
+        check_output_dir(args.show_dir)
+    checkpoint = load_checkpoint_file(args.checkpoint)  # checked before the data are loaded
     cfg.load_from = None  # the weights come from the weights-only load below
     add_show_hook(cfg, args.show_dir, args.score_thr)
     if args.box_fit:
@@ -147,7 +156,9 @@ def main(argv: list[str] | None = None) -> dict:
     test_set = select_sensor(cfg, args.sensor)
     runner = Runner.from_cfg(cfg)
     model = runner.model.module if is_model_wrapper(runner.model) else runner.model
-    load_model_weights(model.module if isinstance(model, BaseTTAModel) else model, args.checkpoint)
+    load_state_into(model.module if isinstance(model, BaseTTAModel) else model, checkpoint,
+                    args.checkpoint)
+    del checkpoint
     metrics = runner.test()
     classes = list(runner.test_dataloader.dataset.metainfo['classes'])
     document = table3(metrics, classes, str(args.config), str(args.checkpoint), test_set)
@@ -174,4 +185,8 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 if __name__ == '__main__':
-    run_tool(main, 'test.py', bad_input=(CheckpointError, InfoFileError, TTAConfigError))
+    run_tool(
+        main,
+        'test.py',
+        bad_input=(CheckpointError, ConfigFileError, InfoFileError, OutputPathError,
+                   TTAConfigError))

@@ -9,7 +9,10 @@ Usage: python tools/train.py CONFIG [--work-dir DIR] [--resume [CKPT]] [--trust-
 process) over the config's ``auto_scale_lr.base_batch_size``, as mmdet3d's train tool does.
 
 Checkpoints are loaded weights-only (projects/synthdet/checkpoint.py); ``--trust-checkpoint``
-unpickles the one resumed checkpoint fully, and only one inside the work directory. At the end
+unpickles the one resumed checkpoint fully, and only one inside the work directory. The resumed
+checkpoint is checked before training starts: a missing file, one that is not a checkpoint (a
+text file, a truncated one), one refused by the weights-only load and one without training state
+(an inference checkpoint) each end with one line naming the file and exit code 2. At the end
 the final weights are also written as ``<work_dir>/inference.pth`` (state_dict and meta only).
 """
 import argparse
@@ -27,7 +30,7 @@ from mmengine.runner import Runner, find_latest_checkpoint  # noqa: E402
 from projects.synthdet.bootstrap import (  # noqa: E402
     add_runner_arguments, parse_runner_args, runner_config)
 from projects.synthdet.checkpoint import (  # noqa: E402
-    TRAINING_CHECKPOINT_TYPES, CheckpointError, load_checkpoint_file, refused,
+    TRAINING_CHECKPOINT_TYPES, CheckpointError, check_resumable, load_checkpoint_file, refused,
     save_inference_checkpoint, trusted_resume_path)
 from synthdet.info_files import InfoFileError  # noqa: E402
 
@@ -83,12 +86,14 @@ def build_config(args: argparse.Namespace) -> Config:
         cfg.resume, cfg.load_from = True, None
     elif args.resume:
         cfg.resume, cfg.load_from = True, args.resume
+    resume = cfg.load_from if args.resume != 'auto' else find_latest_checkpoint(cfg.work_dir)
     if args.trust_checkpoint:
-        resume = cfg.load_from if args.resume != 'auto' else find_latest_checkpoint(cfg.work_dir)
         if not args.resume or resume is None:
             raise CheckpointError(f'{cfg.work_dir}: --trust-checkpoint needs --resume and a '
                                   'checkpoint to resume from')
         cfg.load_from = trusted_resume_path(resume, cfg.work_dir)
+    elif args.resume and resume is not None:
+        check_resumable(resume)  # a bad file is one line here, not a traceback in mmengine
     return cfg
 
 

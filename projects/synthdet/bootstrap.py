@@ -6,8 +6,10 @@ work directory and the launcher. Checkpoints are loaded weights-only
 (``projects/synthdet/checkpoint.py``); nothing here changes how ``torch.load`` unpickles.
 """
 import argparse
+import math
 import os
 import sys
+import tempfile
 from pathlib import Path
 from typing import Callable, NoReturn
 
@@ -33,6 +35,104 @@ def run_tool(main: Callable[[], object],
     sys.exit(0)
 
 
+class ConfigFileError(ValueError):
+    """A CONFIG that cannot be loaded as an mmengine config; the message names the file."""
+
+
+def shown(text: object, limit: int = 24) -> str:
+    """``text`` for a message: at most ``limit`` characters (a 300-digit number is cut)."""
+    text = str(text)
+    return text if len(text) <= limit else f'{text[:limit - 3]}...'
+
+
+def int_in(low: int, high: int) -> Callable[[str], int]:
+    """An argparse ``type``: an integer in ``[low, high]``, with a short message otherwise."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'expected an integer, got {shown(text)}') from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(
+                f'expected an integer from {low:,} to {high:,}, got {shown(text)}')
+        return value
+
+    return parse
+
+
+def float_in(low: float, high: float, include_low: bool = True) -> Callable[[str], float]:
+    """An argparse ``type``: a finite number in ``[low, high]`` (``(low, high]`` without
+    ``include_low``), with a short message otherwise."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'expected a number, got {shown(text)}') from None
+        if not (math.isfinite(value) and (low <= value if include_low else low < value)
+                and value <= high):
+            interval = f'{"[" if include_low else "("}{low:g}, {high:g}]'
+            raise argparse.ArgumentTypeError(
+                f'expected a number in {interval}, got {shown(text)}')
+        return value
+
+    return parse
+
+
+class OutputPathError(ValueError):
+    """An output path that cannot be written; the message names it."""
+
+
+def _nearest_existing(path: Path) -> Path:
+    path = Path(os.path.abspath(path))
+    while not os.path.lexists(path) and path != path.parent:
+        path = path.parent
+    return path
+
+
+def _check_can_create_in(folder: Path, output: Path) -> None:
+    """Create and remove a temporary file in ``folder``: the one check that also holds for root
+    and read-only file systems."""
+    try:
+        descriptor, name = tempfile.mkstemp(prefix='.write-check-', dir=folder)
+    except OSError as error:
+        raise OutputPathError(f'{output}: cannot write in {folder} '
+                              f'({error.strerror or type(error).__name__})') from None
+    os.close(descriptor)
+    os.unlink(name)
+
+
+def check_output_dir(path: str | Path) -> None:
+    """:class:`OutputPathError` unless ``path`` is a writable folder or can be created as one
+    (nothing is created)."""
+    path = Path(path)
+    existing = _nearest_existing(path)
+    if existing == Path(os.path.abspath(path)) and not existing.is_dir():
+        raise OutputPathError(f'{path}: is a file, expected a folder')
+    if not existing.is_dir():
+        raise OutputPathError(f'{path}: cannot be created ({existing} is a file)')
+    _check_can_create_in(existing, path)
+
+
+def check_output_file(path: str | Path, make_parents: bool = False) -> None:
+    """:class:`OutputPathError` unless the file ``path`` can be written: not a folder, in a
+    writable folder that exists (or, with ``make_parents``, can be created). Nothing is
+    created."""
+    path = Path(path)
+    if path.is_dir():
+        raise OutputPathError(f'{path}: is a folder, expected a file name')
+    if make_parents:
+        check_output_dir(path.parent)
+        return
+    if not path.parent.is_dir():
+        raise OutputPathError(f'{path}: the folder {path.parent} does not exist')
+    _check_can_create_in(path.parent, path)
+
+
+SEED_RANGE = (0, 2**32 - 1)  # numpy's and torch's seeds
+
+
 def add_cfg_options(parser: argparse.ArgumentParser) -> None:
     """Add ``--cfg-options key=value ...``."""
     parser.add_argument(
@@ -50,20 +150,25 @@ def add_detection_arguments(parser: argparse.ArgumentParser, voxel: float | None
     import torch
     parser.add_argument(
         '--score-thr',
-        type=float,
+        type=float_in(0.0, 1.0),
         default=0.3,
-        help='keep detections with at least this score (default 0.3)')
+        help='keep detections with at least this score, in [0, 1] (default 0.3)')
     parser.add_argument('--device', default='cuda:0' if torch.cuda.is_available() else 'cpu')
-    parser.add_argument('--seed', type=int, default=0, help='seed of the point sampling')
+    parser.add_argument(
+        '--seed',
+        type=int_in(*SEED_RANGE),
+        default=0,
+        help=f'seed of the point sampling, {SEED_RANGE[0]} to {SEED_RANGE[1]} (default 0)')
     parser.add_argument(
         '--tta',
         action='store_true',
         help="test-time augmentation: the config's tta_pipeline and tta_model (8x the time)")
     parser.add_argument(
         '--voxel',
-        type=float,
+        type=float_in(0.0, 10.0, include_low=False),
         default=voxel,
-        help='keep one point per voxel of this size (m) while reading (default: %(default)s)')
+        help='keep one point per voxel of this size (m, at most 10) while reading '
+        '(default: %(default)s)')
     parser.add_argument('--columns', help='text scans: the columns, e.g. x,y,z,r,g,b or x,y,z,i')
     add_cfg_options(parser)
 
@@ -101,11 +206,33 @@ def parse_runner_args(parser: argparse.ArgumentParser,
     return args
 
 
+CONFIG_SUFFIXES = ('.py', '.json', '.yml', '.yaml')  # the files mmengine's Config reads
+
+
+def check_config_path(path: str | Path) -> None:
+    """:class:`ConfigFileError` for a CONFIG that is missing or not a config file by its name."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigFileError(f'{path}: config file not found')
+    if path.suffix.lower() not in CONFIG_SUFFIXES:
+        raise ConfigFileError(f'{path}: not a config file (expected '
+                              f'{", ".join(CONFIG_SUFFIXES)}, e.g. configs/tr3d/exp2.py)')
+
+
 def load_config(path: str | Path, cfg_options: dict | None = None) -> Config:
-    """Load a config (registering its ``custom_imports``) and apply ``--cfg-options``."""
-    cfg = Config.fromfile(path)
-    if cfg_options:
-        cfg.merge_from_dict(cfg_options)
+    """Load a config (registering its ``custom_imports``) and apply ``--cfg-options``;
+    :class:`ConfigFileError` naming the file (and line) if it cannot be loaded."""
+    check_config_path(path)
+    try:
+        cfg = Config.fromfile(path)
+        if cfg_options:
+            cfg.merge_from_dict(cfg_options)
+    except SyntaxError as error:
+        raise ConfigFileError(f'{path}:{error.lineno}: not a config file (invalid Python: '
+                              f'{error.msg})') from None
+    except Exception as error:  # mmengine raises what the file's code raises
+        message = str(error).strip().split('\n')[0] or type(error).__name__
+        raise ConfigFileError(f'{path}: cannot load the config ({shown(message, 160)})') from None
     return cfg
 
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 import hashlib
 import os
 import pickle
+import re
 from pathlib import Path
 
 import numpy as np
@@ -62,11 +63,13 @@ def _training_checkpoint_types() -> list:
 TRAINING_CHECKPOINT_TYPES = _training_checkpoint_types()
 
 
-def load_checkpoint_file(path: str | os.PathLike) -> dict:
+def load_checkpoint_file(path: str | os.PathLike,
+                         hint: str = 'load only checkpoints from a source you trust') -> dict:
     """Load a checkpoint with ``weights_only=True``; returns its dictionary.
 
-    Raises :class:`CheckpointError` naming the file if it is missing, not a PyTorch checkpoint,
-    has no ``state_dict``, or holds a type outside :data:`TRAINING_CHECKPOINT_TYPES`.
+    Raises :class:`CheckpointError` naming the file if it is missing, not a PyTorch checkpoint
+    (a text file, a truncated or damaged one), has no ``state_dict``, or holds a type outside
+    :data:`TRAINING_CHECKPOINT_TYPES` (the message names what was refused, then ``hint``).
     """
     path = Path(path)
     if not path.is_file():
@@ -75,24 +78,78 @@ def load_checkpoint_file(path: str | os.PathLike) -> dict:
         with torch.serialization.safe_globals(TRAINING_CHECKPOINT_TYPES):
             checkpoint = torch.load(path, map_location='cpu', weights_only=True)
     except pickle.UnpicklingError as error:
-        raise refused(path, error, 'load only checkpoints from a source you trust') from None
-    except (RuntimeError, EOFError, OSError, ValueError) as error:
-        raise CheckpointError(f'{path}: not a PyTorch checkpoint ({error})') from None
+        if refused_item(error) is None:
+            raise not_a_checkpoint(path, error) from None
+        raise refused(path, error, hint) from None
+    except MemoryError:
+        raise CheckpointError(f'{path}: not a PyTorch checkpoint (too large to load)') from None
+    except Exception as error:  # a damaged pickle fails with any error (IndexError, KeyError)
+        raise not_a_checkpoint(path, error) from None
     if not isinstance(checkpoint, dict) or not isinstance(checkpoint.get('state_dict'), dict):
         raise CheckpointError(f'{path}: not an mmengine checkpoint (no "state_dict")')
     return checkpoint
 
 
+def not_a_checkpoint(path: str | os.PathLike, error: Exception) -> CheckpointError:
+    """The one-line error for a file ``torch.load`` cannot read (text, truncated, damaged)."""
+    with open(path, 'rb') as stream:
+        zipped = stream.read(4) == b'PK\x03\x04'  # torch.save writes a zip archive
+    if not zipped:  # a text file, say: the unpickler's error (a pop, a key) tells nothing
+        return CheckpointError(f'{path}: not a PyTorch checkpoint (torch.load cannot read it)')
+    return CheckpointError(
+        f'{path}: a truncated or damaged PyTorch checkpoint ({_first_sentence(error)})')
+
+
+def _first_sentence(error: BaseException, limit: int = 80) -> str:
+    """The first sentence of an error's message, at most ``limit`` characters."""
+    text = str(error).strip().split('\n')[0].split('. ')[0].strip() or type(error).__name__
+    return text if len(text) <= limit else text[:limit - 3] + '...'
+
+
+def refused_item(error: pickle.UnpicklingError) -> str | None:
+    """What the weights-only unpickler refused (a global's dotted name, an object's type);
+    None when the error is not a refusal but a damaged pickle."""
+    text = str(error)
+    for pattern in (r'GLOBAL (\S+)', r'but got (<class \'[^\']+\'>|\S+)',
+                    r'(getattr\(.{0,80}?\)) is not allowed'):
+        match = re.search(pattern, text)
+        if match:
+            item = match.group(1).rstrip('.')
+            return item if len(item) <= 100 else item[:97] + '...'
+    return None
+
+
 def refused(path: str | os.PathLike, error: pickle.UnpicklingError, hint: str) -> CheckpointError:
-    """The one-line error for a checkpoint the weights-only unpickler refused."""
-    reason = str(error).split('\n\n')[-1].split('. ')[0].strip()
-    return CheckpointError(f'{path}: refused: the checkpoint holds more than weights and data '
-                           f'({reason}); {hint} (README "Safety")')
+    """The one-line error for a checkpoint the weights-only unpickler refused: what it holds
+    besides weights and data, and that the file was not loaded."""
+    item = refused_item(error) or _first_sentence(error)
+    return CheckpointError(f'{path}: refused: the checkpoint holds {item}, which is not weights '
+                           f'or data (unpickling it could run code); the file was not loaded; '
+                           f'{hint} (README "Safety")')
+
+
+def check_resumable(path: str | os.PathLike) -> None:
+    """Check, weights-only, that ``path`` is a training checkpoint mmengine can resume from
+    (``meta.epoch``, ``meta.iter`` and ``message_hub``); :class:`CheckpointError` otherwise."""
+    checkpoint = load_checkpoint_file(
+        path, hint='if it is your own, resume it with --trust-checkpoint')
+    meta = checkpoint.get('meta')
+    if (not isinstance(meta, dict) or not isinstance(checkpoint.get('message_hub'), dict)
+            or not all(isinstance(meta.get(key), int) for key in ('epoch', 'iter'))):
+        raise CheckpointError(
+            f'{path}: cannot resume: no training state (meta.epoch, meta.iter, message_hub), as '
+            'in an inference checkpoint; resume from an epoch_N.pth, or start from its weights '
+            'with --cfg-options load_from=CKPT')
 
 
 def load_model_weights(model: torch.nn.Module, path: str | os.PathLike) -> dict:
     """Load a checkpoint's weights into ``model`` (every key must match); returns its ``meta``."""
-    checkpoint = load_checkpoint_file(path)
+    return load_state_into(model, load_checkpoint_file(path), path)
+
+
+def load_state_into(model: torch.nn.Module, checkpoint: dict, path: str | os.PathLike) -> dict:
+    """Load the ``state_dict`` of a checkpoint loaded by :func:`load_checkpoint_file` from
+    ``path`` into ``model`` (every key must match); returns its ``meta``."""
     state_dict = {
         key.removeprefix('module.'): value
         for key, value in checkpoint['state_dict'].items()
@@ -102,9 +159,13 @@ def load_model_weights(model: torch.nn.Module, path: str | os.PathLike) -> dict:
     except RuntimeError as error:
         first = str(error).splitlines()[1].strip() if '\n' in str(error) else str(error)
         raise CheckpointError(
-            f'{path}: weights do not fit the config\'s model ({first})') from None
+            f'{path}: weights do not fit the config\'s model ({_shortened(first)})') from None
     meta = checkpoint.get('meta')
     return meta if isinstance(meta, dict) else {}
+
+
+def _shortened(text: str, limit: int = 200) -> str:
+    return text if len(text) <= limit else text[:limit - 3] + '...'
 
 
 def _plain(value: object) -> object:
@@ -134,20 +195,27 @@ def inference_checkpoint(checkpoint: dict) -> dict:
     return {'meta': meta if isinstance(meta, dict) else {}, 'state_dict': checkpoint['state_dict']}
 
 
-def save_inference_checkpoint(checkpoint: dict, out: str | os.PathLike) -> Path:
+def save_inference_checkpoint(checkpoint: dict,
+                              out: str | os.PathLike,
+                              digest_suffix: bool = False) -> Path:
     """Write :func:`inference_checkpoint` of ``checkpoint`` to ``out`` atomically; returns it.
 
-    The file is reloaded with plain ``weights_only=True`` before it is renamed into place.
+    With ``digest_suffix`` the file is named ``<out stem>-<first 8 hex digits of its
+    SHA-256>.pth`` (mmdet's published-model name) and ``out`` itself is never written. The file
+    is written under a temporary name of this process, reloaded with plain
+    ``weights_only=True`` and then renamed into place; on any failure the temporary is removed.
     """
     out = Path(out)
-    partial = out.with_name(out.name + '.partial')
-    torch.save(inference_checkpoint(checkpoint), partial)
+    partial = out.with_name(f'.{out.name}.{os.getpid()}.partial')
     try:
+        torch.save(inference_checkpoint(checkpoint), partial)
         torch.load(partial, map_location='cpu', weights_only=True)
-    except Exception:
+        if digest_suffix:
+            out = out.with_name(f'{out.stem}-{sha256_prefix(partial)}.pth')
+        os.replace(partial, out)
+    except BaseException:
         partial.unlink(missing_ok=True)
         raise
-    os.replace(partial, out)
     return out
 
 
