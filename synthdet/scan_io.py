@@ -624,7 +624,7 @@ def _read_pcd(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
     if colour is None:
         notes.append(_no_colour_note(path, intensity is not None))
     intensity_scale = _Scale()
-    total = 0
+    total = invalid = 0
     for block in blocks:
         total += len(block)
         for start in range(0, len(block), chunk_points):
@@ -636,10 +636,17 @@ def _read_pcd(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
                 chunk[:, 3:] = _pcd_colours(part[colour])
             elif intensity is not None:
                 chunk[:, 3:] = _grey(intensity_scale(part[intensity]))
-            yield chunk
+            # An organised cloud (a depth camera's frame, HEIGHT > 1) keeps one record per
+            # pixel and marks the pixels without a depth by NaN coordinates: they are no points.
+            pixel_without_depth = np.isnan(chunk[:, :3]).all(axis=1)
+            invalid += int(pixel_without_depth.sum())
+            yield chunk[~pixel_without_depth]
     if header.data == 'ascii' and header.declared and total != header.points:
         raise ScanFormatError(f'{path}: the header counts {header.points:,} points but the data '
                               f'holds {total:,} lines of points')
+    if invalid:
+        notes.append(f'{path}: {invalid:,} of {total:,} records have no coordinates (NaN: pixels '
+                     f'without a depth in an organised cloud), left out')
 
 
 def _pcd_binary_tables(path: Path, header: _PcdHeader, chunk_points: int) -> Iterator[np.ndarray]:

@@ -363,3 +363,42 @@ def test_a_bad_line_far_into_the_file_is_named_by_its_number(tmp_path, name):
     path.write_text(''.join(lines))
     with pytest.raises(ScanFormatError, match=rf'{name}:{header_lines + 15_001}: '):
         read_scan_chunks_joined(path, 512)
+
+
+def _organised_pcd(path: Path, xyz: np.ndarray, width: int, data: str) -> Path:
+    """A depth camera's frame as PCL saves it: WIDTH x HEIGHT records, one per pixel."""
+    header = (f'VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n'
+              f'WIDTH {width}\nHEIGHT {len(xyz) // width}\nVIEWPOINT 0 0 0 1 0 0 0\n'
+              f'POINTS {len(xyz)}\nDATA {data}\n')
+    if data == 'binary':
+        body = xyz.astype('<f4').tobytes()
+    else:
+        body = ''.join(' '.join(f'{v:.6g}' for v in row) + '\n' for row in xyz).encode()
+    path.write_bytes(header.encode() + body)
+    return path
+
+
+@pytest.mark.parametrize('data', ['binary', 'ascii'])
+def test_pixels_without_depth_of_an_organised_pcd_are_left_out(tmp_path, data):
+    rng = np.random.default_rng(7)
+    xyz = rng.uniform(-2.0, 4.0, (240, 3)).astype(np.float32)
+    no_depth = rng.random(240) < 0.3
+    xyz[no_depth] = np.nan
+    path = _organised_pcd(tmp_path / f'frame_{data}.pcd', xyz, width=20, data=data)
+    notes: list[str] = []
+    points = np.concatenate(list(read_scan_chunks(path, chunk_points=50, notes=notes)))
+    np.testing.assert_allclose(points[:, :3], xyz[~no_depth], rtol=1e-5)
+    assert any(f'{int(no_depth.sum())} of 240 records have no coordinates' in note
+               for note in notes)
+
+
+def test_a_pcd_point_with_one_nan_coordinate_is_still_an_error(tmp_path):
+    xyz = np.ones((40, 3), np.float32)
+    xyz[5, 1] = np.nan
+    path = _organised_pcd(tmp_path / 'bad.pcd', xyz, width=8, data='binary')
+    with pytest.raises(ScanFormatError, match='non-finite coordinate'):
+        read_scan(path)
+    all_nan = _organised_pcd(tmp_path / 'empty.pcd', np.full((40, 3), np.nan, np.float32),
+                             width=8, data='binary')
+    with pytest.raises(ScanFormatError, match='holds no points'):
+        read_scan(all_nan)
