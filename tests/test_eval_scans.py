@@ -216,9 +216,11 @@ def test_folders_skip_unlabelled_scans_and_named_scans_need_labels(tmp_path: Pat
         write_scan(tmp_path / name, points)
     write_labels(tmp_path / 'a.labels.json', labels([], scan='a.ply'))
     write_labels(tmp_path / 'b.labels.json', labels([], scan='b.xyz'))
+    write_labels(tmp_path / 'd.labels.json', labels([], scan='d.ply'))
     found, skipped = find_labelled_scans([tmp_path])
     assert [item.scan.name for item in found] == ['a.ply', 'b.xyz']
-    assert skipped == [f'{tmp_path / "c.pcd"}: no c.labels.json beside it, skipped']
+    assert skipped == [f'{tmp_path / "c.pcd"}: no c.labels.json beside it, skipped',
+                       f'{tmp_path / "d.labels.json"}: no scan d.* beside it, skipped']
     with pytest.raises(LabelsError, match=r'c\.pcd: no labels file .*c\.labels\.json'):
         find_labelled_scans([tmp_path / 'c.pcd'])
     write_scan(tmp_path / 'a.xyz', points)

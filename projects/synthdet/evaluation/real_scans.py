@@ -81,7 +81,8 @@ def _labelled(scan: Path) -> LabelledScan:
 def find_labelled_scans(paths: Iterable[str | os.PathLike]) -> tuple[list[LabelledScan],
                                                                     list[str]]:
     """The labelled scans of ``paths`` (scan files, or folders: every scan file in them) and
-    one line for each scan of a folder skipped for want of a labels file.
+    one line for each scan of a folder skipped for want of a labels file (and each labels file
+    without a scan).
 
     Raises :class:`LabelsError` for a named scan without labels, a path that does not exist, a
     folder without any labelled scan, an invalid labels file, or two scans of one name.
@@ -98,6 +99,12 @@ def find_labelled_scans(paths: Iterable[str | os.PathLike]) -> tuple[list[Labell
             skipped += [
                 f'{scan}: no {labels_path(scan).name} beside it, skipped' for scan in scans
                 if scan not in labelled
+            ]
+            stems = {scan.stem for scan in scans}
+            skipped += [
+                f'{labels}: no scan {labels.name[:-len(LABELS_SUFFIX)]}.* beside it, skipped'
+                for labels in sorted(path.glob(f'*{LABELS_SUFFIX}'))
+                if labels.name[:-len(LABELS_SUFFIX)] not in stems
             ]
             found += [_labelled(scan) for scan in labelled]
         elif path.is_file():
