@@ -130,7 +130,7 @@ def align_scan(loaded: LoadedScan,
     xyz = points[:, :3]
     sample = xyz[::max(1, len(xyz) // FIT_POINTS)]
 
-    up_axis = detect_up_axis(sample)
+    up_axis = detect_up_axis(sample, origin=loaded.origin)
     rotation = _up_rotation(up_axis)
     report.append(f'up axis: {up_axis}' +
                   ('' if up_axis == '+z' else ' (turned to z; results use the scan\'s axes '
@@ -303,7 +303,7 @@ def _floor_end(xyz: np.ndarray, heights: np.ndarray, axis: int,
     return low_plane + low_band >= high_plane + high_band
 
 
-def detect_up_axis(xyz: np.ndarray) -> str:
+def detect_up_axis(xyz: np.ndarray, origin: np.ndarray | None = None) -> str:
     """The scan's up direction (``'+z'``, ``'+y'``, ``'-x'``...).
 
     A depth camera's frame (points filling a view frustum along +z) has y pointing down:
@@ -313,10 +313,12 @@ def detect_up_axis(xyz: np.ndarray) -> str:
     unless another axis beats it by ``UP_AXIS_MARGIN`` and z is not the shortest extent (a
     reconstructed mesh's floor can hold fewer points than one wall). On a turned axis the
     floor is the end with the furniture (:func:`_floor_end`). A z-up scan is never turned
-    upside down.
+    upside down. ``origin`` is the local origin the points were shifted by (the frustum test
+    needs the file's own coordinates, where the camera is at 0).
     """
     xyz = np.asarray(xyz, dtype=np.float64)[::max(1, len(xyz) // FIT_POINTS)]
-    if _is_camera_frustum(xyz):
+    in_file_frame = xyz if origin is None else xyz + np.asarray(origin, dtype=np.float64)
+    if _is_camera_frustum(in_file_frame):
         return '-y'
     levelled = [_levelled_end_masses(xyz, axis) for axis in range(3)]
     plane = [max(masses[:2]) for _, masses in levelled]

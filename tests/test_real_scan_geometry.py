@@ -18,7 +18,7 @@ from synthdet.contracts import read_corners, read_predictions, write_predictions
 from synthdet.geometry import (distance_to_polygon, first_self_crossing, points_in_polygon,
                                signed_area)
 from synthdet.prepare import detect_up_axis, prepare_scan
-from synthdet.scan_io import LoadedScan, write_scan
+from synthdet.scan_io import LoadedScan, load_scan, write_scan
 from tests.room_scans import _outside_box, _sample_box, _sample_flat, _sample_walls
 from tests.test_scan2cad import TINY, _predict, tiny  # noqa: F401 (tiny: the model fixture)
 from tests.test_tr3d_tools import load_tool
@@ -178,6 +178,19 @@ def test_camera_frame_of_a_depth_view_has_y_down():
     camera = np.column_stack([view[:, 0], -view[:, 2], view[:, 1]])
     assert detect_up_axis(camera) == '-y'
     assert detect_up_axis(view[:, :3]) == '+z'  # the same view upright
+
+
+def test_camera_frame_read_from_a_file_has_y_down(tmp_path):
+    """Read from a file, the points come in a local frame (shifted by whole metres): the
+    camera is still found at the file's origin."""
+    room = room_scan(width=7.0, depth=6.0, furniture=5, seed=7)
+    view = depth_view(room, np.array([3.5, 0.3, 1.4]))
+    frame = view.copy()
+    frame[:, :3] = np.column_stack([view[:, 0], -view[:, 2], view[:, 1]])
+    path = tmp_path / 'frame.ply'
+    write_scan(path, frame)
+    prepared = prepare_scan(load_scan(path))
+    assert 'up axis: -y' in '\n'.join(prepared.report)
 
 
 def test_tilted_z_up_room_with_a_sparse_floor_keeps_z():
