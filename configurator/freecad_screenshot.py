@@ -48,13 +48,13 @@ def virtual_display(width: int, height: int, timeout: float = 30.0) -> Iterator[
     """
     read_end, write_end = os.pipe()
     try:
-        server = subprocess.Popen(
-            ['Xvfb', '-displayfd', str(write_end), '-screen', '0', f'{width}x{height}x24',
-             '-nolisten', 'tcp'],
-            pass_fds=(write_end, ),
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-            preexec_fn=ends_with_parent(os.getpid()))
+        command = ['Xvfb', '-displayfd', str(write_end), '-screen', '0', f'{width}x{height}x24',
+                   '-nolisten', 'tcp']
+        server = subprocess.Popen(command,
+                                  pass_fds=(write_end, ),
+                                  stdout=subprocess.DEVNULL,
+                                  stderr=subprocess.DEVNULL,
+                                  preexec_fn=ends_with_parent(os.getpid()))
     except FileNotFoundError:
         os.close(read_end)
         os.close(write_end)

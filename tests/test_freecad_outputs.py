@@ -21,42 +21,64 @@ ROOM_SIDE = 6.0
 CLASSES = ('table', 'chair', 'sofa', 'bookcase', '3dprinter', 'forklift')
 
 
-def write_inputs(folder: Path, count: int, seed: int = 0, side: float = ROOM_SIDE,
+def write_inputs(folder: Path,
+                 count: int,
+                 seed: int = 0,
+                 side: float = ROOM_SIDE,
                  name: str = 'room') -> dict[str, Path]:
-    """A scan, ``count`` detections of mixed classes spread over a square room, its corners."""
+    """A scan, ``count`` detections of mixed classes in a square room (one per square metre,
+    in random cells, so that none overlap), its corners."""
     rng = random.Random(seed)
     scan = folder / f'{name}.txt'
     scan.write_text('0 0 0 1 2 3\n1 1 1 4 5 6\n', encoding='utf-8')
+    columns = int(side)
+    cells = rng.sample(range(columns * columns), count)
     detections = [{
         'class': CLASSES[index % len(CLASSES)],
         'score': round(rng.uniform(0.5, 1.0), 3),
-        'center': [rng.uniform(0.5, side - 0.5), rng.uniform(0.5, side - 0.5), 0.4],
+        'center': [cell % columns + 0.5, cell // columns + 0.5, 0.4],
         'size': [0.5, 0.4, 0.8],
         'yaw': rng.choice([0.0, 0.4]),
-    } for index in range(count)]
+    } for index, cell in enumerate(cells)]
     predictions = folder / f'{name}.pred.json'
-    predictions.write_text(json.dumps({'format': 'synthdet.predictions/1', 'scan': scan.name,
-                                       'model': 'test', 'detections': detections}),
-                           encoding='utf-8')
+    predictions.write_text(
+        json.dumps({
+            'format': 'synthdet.predictions/1',
+            'scan': scan.name,
+            'model': 'test',
+            'detections': detections
+        }),
+        encoding='utf-8')
     corners = folder / f'{name}.corners.json'
-    corners.write_text(json.dumps({'format': 'synthdet.corners/1', 'scan': scan.name,
-                                   'corners': [[0, 0], [0, side], [side, side], [side, 0]],
-                                   'floor_z': 0.0, 'ceiling_z': 2.8, 'quality': {}}),
-                       encoding='utf-8')
+    corners.write_text(
+        json.dumps({
+            'format': 'synthdet.corners/1',
+            'scan': scan.name,
+            'corners': [[0, 0], [0, side], [side, side], [side, 0]],
+            'floor_z': 0.0,
+            'ceiling_z': 2.8,
+            'quality': {}
+        }),
+        encoding='utf-8')
     return {'scan': scan, 'predictions': predictions, 'corners': corners}
 
 
 def freecad_command(inputs: dict[str, Path], out: Path, *extra: str) -> list[str]:
-    return [sys.executable, '-m', 'configurator', 'freecad', '--scan', str(inputs['scan']),
-            '--predictions', str(inputs['predictions']), '--corners', str(inputs['corners']),
-            '--out', str(out), *extra]
+    return [
+        sys.executable, '-m', 'configurator', 'freecad', '--scan',
+        str(inputs['scan']), '--predictions',
+        str(inputs['predictions']), '--corners',
+        str(inputs['corners']), '--out',
+        str(out), *extra
+    ]
 
 
-def run_cli(command: list[str], tmp_dir: Path,
+def run_cli(command: list[str],
+            tmp_dir: Path,
             timeout: float = 600) -> subprocess.CompletedProcess:
     env = dict(os.environ, TMPDIR=str(tmp_dir))
-    return subprocess.run(command, cwd=REPO, env=env, capture_output=True, text=True,
-                          timeout=timeout)
+    return subprocess.run(
+        command, cwd=REPO, env=env, capture_output=True, text=True, timeout=timeout)
 
 
 def document_parts(path: Path) -> list[str]:
@@ -94,17 +116,25 @@ def test_runs_writing_one_document_keep_their_own_temporary_files(tmp_path):
     out_dir = tmp_path / 'out'
     out_dir.mkdir()
     out = out_dir / 'room.FCStd'
-    stale = [out_dir / f'.room.partial-{dead_pid()}-0a1b2c3d.FCStd{suffix}'
-             for suffix in ('', '1', '.gui')]
+    stale = [
+        out_dir / f'.room.partial-{dead_pid()}-0a1b2c3d.FCStd{suffix}'
+        for suffix in ('', '1', '.gui')
+    ]
     live = out_dir / f'.room.partial-{os.getpid()}-0a1b2c3d.FCStd'
     for path in stale + [live]:
         path.write_bytes(b'left by another run')
     first = write_inputs(tmp_path, 6, seed=1, name='first')
     second = write_inputs(tmp_path, 9, seed=2, name='second')
     env = dict(os.environ, TMPDIR=str(work))
-    runs = [subprocess.Popen(freecad_command(inputs, out), cwd=REPO, env=env,
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-            for inputs in (first, second)]
+    runs = [
+        subprocess.Popen(
+            freecad_command(inputs, out),
+            cwd=REPO,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True) for inputs in (first, second)
+    ]
     outputs = [run.communicate(timeout=600) for run in runs]
     for run, (stdout, stderr) in zip(runs, outputs):
         assert run.returncode == 0, stderr
@@ -123,11 +153,15 @@ def test_kill_9_ends_freecad_and_a_later_run_cleans_up(tmp_path):
     work folder it could not remove is removed by the next run."""
     work = tmp_path / 'tmp'
     work.mkdir()
-    inputs = write_inputs(tmp_path, 1000, side=20.0)
+    inputs = write_inputs(tmp_path, 1000, side=32.0)
     out = tmp_path / 'killed.FCStd'
     env = dict(os.environ, TMPDIR=str(work))
-    cli = subprocess.Popen(freecad_command(inputs, out), cwd=REPO, env=env,
-                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    cli = subprocess.Popen(
+        freecad_command(inputs, out),
+        cwd=REPO,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 120
     while not children_of(cli.pid) and time.monotonic() < deadline:
         time.sleep(0.2)
@@ -183,8 +217,10 @@ def test_screenshot_timeout_is_a_usage_error(tmp_path, capsys):
     document = tmp_path / 'doc.FCStd'
     with zipfile.ZipFile(document, 'w') as archive:
         archive.writestr('Document.xml', '<Document/>')
-    code = configurator_main(['screenshot', str(document), '--out', str(tmp_path / 'a.png'),
-                              '--timeout', '-5'])
+    code = configurator_main(
+        ['screenshot',
+         str(document), '--out',
+         str(tmp_path / 'a.png'), '--timeout', '-5'])
     error = capsys.readouterr().err
     assert code == 2 and error.count('\n') == 1 and '--timeout -5' in error
 
@@ -192,11 +228,50 @@ def test_screenshot_timeout_is_a_usage_error(tmp_path, capsys):
 def test_no_room_found_names_the_scan(tmp_path, capsys):
     scan = tmp_path / 'flat floor.txt'
     rng = random.Random(0)
-    scan.write_text(''.join(f'{rng.uniform(0, 4):.3f} {rng.uniform(0, 4):.3f} 0.0 1 2 3\n'
-                            for _ in range(500)), encoding='utf-8')
+    scan.write_text(
+        ''.join(f'{rng.uniform(0, 4):.3f} {rng.uniform(0, 4):.3f} 0.0 1 2 3\n'
+                for _ in range(500)),
+        encoding='utf-8')
     inputs = write_inputs(tmp_path, 1)
-    code = configurator_main(['freecad', '--scan', str(scan), '--predictions',
-                              str(inputs['predictions']), '--out', str(tmp_path / 'x.FCStd')])
+    code = configurator_main([
+        'freecad', '--scan',
+        str(scan), '--predictions',
+        str(inputs['predictions']), '--out',
+        str(tmp_path / 'x.FCStd')
+    ])
     error = capsys.readouterr().err
     assert code == 2
     assert error.count('\n') == 1 and f'{scan}: no room found: ' in error
+
+
+def test_the_grid_finds_what_a_comparison_with_everything_finds():
+    """Overlaps and nearest keys from the arrangement's grid equal those of a full
+    comparison, for small, huge and far-apart footprints."""
+    from configurator.freecad.synthdet_freecad.arrangement import Grid, grid_for
+    rng = random.Random(3)
+    boxes = []
+    for _ in range(300):
+        x, y = rng.choice([(rng.uniform(0, 10), rng.uniform(0, 10)),
+                           (rng.uniform(-500, 500), rng.uniform(-500, 500))])
+        half = rng.choice([rng.uniform(0.1, 1.0), rng.uniform(50, 400)])
+        boxes.append((x - half, y - half, x + half, y + half))
+    grid = grid_for(boxes)
+    assert isinstance(grid, Grid)
+    for key, box in enumerate(boxes):
+        grid.add(key, *box)
+
+    def gap(box, x, y):
+        return ((max(box[0] - x, 0.0, x - box[2]))**2 + (max(box[1] - y, 0.0, y - box[3]))**2)**0.5
+
+    for _ in range(200):
+        x, y = rng.uniform(-600, 600), rng.uniform(-600, 600)
+        query = (x, y, x + rng.uniform(0, 3), y + rng.uniform(0, 3))
+        touching = {
+            key
+            for key, box in enumerate(boxes) if box[0] <= query[2] and query[0] <= box[2]
+            and box[1] <= query[3] and query[1] <= box[3]
+        }
+        assert touching <= grid.overlapping(*query)
+        distances = [gap(box, x, y) for box in boxes]
+        assert sorted(grid.nearest(x, y, lambda key: gap(boxes[key], x, y))) == \
+            [key for key, value in enumerate(distances) if value == min(distances)]

@@ -17,6 +17,7 @@ import math
 
 GRID_CELLS = 4  # the spatial index's cell: a quarter of the median footprint side ...
 MIN_CELL = 0.05  # ... but no smaller than 5 cm
+MAX_KEY_CELLS = 64  # a larger footprint is compared with everything instead of indexed
 MERGE_IOU = 0.5
 AXIS_ALIGNED = 1e-6  # radians: a smaller |yaw| counts as an axis-aligned detection
 ORIENTED_CLASSES = ('chair', 'table', 'sofa', 'yumi')
@@ -82,12 +83,17 @@ def box_iou(first: dict, second: dict) -> float:
 
 class Grid:
     """Keys indexed by the square cells their xy bounds cover: what may overlap a rectangle,
-    or lie near a point, is found among a few keys instead of all of them."""
+    or lie near a point, is found among a few keys instead of all of them.
+
+    A key covering more than ``MAX_KEY_CELLS`` cells is kept apart and always returned, and a
+    query covering more cells than are occupied goes through the occupied ones: memory and
+    time stay bounded for any sizes and distances.
+    """
 
     def __init__(self, cell: float):
         self.cell = cell
         self.cells: dict[tuple[int, int], list] = {}
-        self.span: tuple[int, int, int, int] | None = None  # occupied cells' index bounds
+        self.large: list = []  # keys covering too many cells to index
 
     def _range(self, low: float, high: float) -> range:
         return range(math.floor(low / self.cell), math.floor(high / self.cell) + 1)
@@ -95,52 +101,59 @@ class Grid:
     def add(self, key, low_x: float, low_y: float, high_x: float, high_y: float) -> None:
         """Index ``key`` under every cell the bounds cover."""
         columns, rows = self._range(low_x, high_x), self._range(low_y, high_y)
+        if len(columns) * len(rows) > MAX_KEY_CELLS:
+            self.large.append(key)
+            return
         for column in columns:
             for row in rows:
                 self.cells.setdefault((column, row), []).append(key)
-        bounds = (columns[0], rows[0], columns[-1], rows[-1])
-        self.span = bounds if self.span is None else (
-            min(self.span[0], bounds[0]), min(self.span[1], bounds[1]),
-            max(self.span[2], bounds[2]), max(self.span[3], bounds[3]))
 
     def overlapping(self, low_x: float, low_y: float, high_x: float, high_y: float) -> set:
         """Every key whose bounds may overlap these (a superset: same cells)."""
-        found = set()
-        for column in self._range(low_x, high_x):
-            for row in self._range(low_y, high_y):
+        columns, rows = self._range(low_x, high_x), self._range(low_y, high_y)
+        found = set(self.large)
+        if len(columns) * len(rows) > len(self.cells):
+            for (column, row), keys in self.cells.items():
+                if column in columns and row in rows:
+                    found.update(keys)
+            return found
+        for column in columns:
+            for row in rows:
                 found.update(self.cells.get((column, row), ()))
         return found
 
-    def ring(self, x: float, y: float, radius: int) -> set:
-        """The keys in the cells ``radius`` cells away (Chebyshev) from the cell of (x, y)."""
-        column, row = math.floor(x / self.cell), math.floor(y / self.cell)
-        found = set()
-        for dx in range(-radius, radius + 1):
-            for dy in (range(-radius, radius + 1) if abs(dx) == radius else (-radius, radius)):
-                found.update(self.cells.get((column + dx, row + dy), ()))
-        return found
-
     def nearest(self, x: float, y: float, distance) -> list:
-        """The keys at the smallest ``distance(key)`` from (x, y) among those whose bounds
-        contain their nearest point to (x, y); rings of cells are searched outwards until no
-        farther cell can hold a nearer key."""
-        if self.span is None:
-            return []
+        """The keys at the smallest ``distance(key)`` from (x, y), a distance to a point inside
+        the key's bounds. Rings of cells are searched outwards until no farther cell can hold
+        a nearer key; once a ring has more cells than are occupied, all keys are compared."""
         column, row = math.floor(x / self.cell), math.floor(y / self.cell)
-        last = max(abs(column - self.span[0]), abs(column - self.span[2]),
-                   abs(row - self.span[1]), abs(row - self.span[3]))
-        best, keys, seen = math.inf, [], set()
-        for radius in range(last + 1):
-            for key in self.ring(x, y, radius) - seen:
+        best, nearest, seen = math.inf, [], set()
+
+        def compare(keys) -> None:
+            nonlocal best, nearest
+            for key in keys:
+                if key in seen:
+                    continue
                 seen.add(key)
                 value = distance(key)
                 if value < best:
-                    best, keys = value, [key]
+                    best, nearest = value, [key]
                 elif value == best:
-                    keys.append(key)
-            if best <= radius * self.cell:
-                break
-        return keys
+                    nearest.append(key)
+
+        compare(self.large)
+        radius = 0
+        while True:
+            if 8 * radius > len(self.cells):
+                for keys in self.cells.values():
+                    compare(keys)
+                return nearest
+            for dx in range(-radius, radius + 1):
+                for dy in (range(-radius, radius + 1) if abs(dx) == radius else (-radius, radius)):
+                    compare(self.cells.get((column + dx, row + dy), ()))
+            if best <= radius * self.cell:  # every key nearer lies within this ring
+                return nearest
+            radius += 1
 
 
 def grid_for(boxes: list[tuple[float, float, float, float]]) -> Grid:
@@ -289,11 +302,16 @@ class Tables:
         for index, box in enumerate(bounds):
             self.grid.add(index, *box)
 
-    def overlapping(self, low_x: float, low_y: float, high_x: float, high_y: float,
+    def overlapping(self,
+                    low_x: float,
+                    low_y: float,
+                    high_x: float,
+                    high_y: float,
                     after: int = -1) -> list[int]:
         """Indices (ascending, above ``after``) of the tables whose bounds may overlap these."""
-        return sorted(index for index in self.grid.overlapping(low_x, low_y, high_x, high_y)
-                      if index > after)
+        return sorted(
+            index for index in self.grid.overlapping(low_x, low_y, high_x, high_y)
+            if index > after)
 
 
 def clear_backrest(item: Placed, tables: Tables) -> list[tuple[Placed, float]]:
@@ -349,8 +367,8 @@ def orient(item: Placed, tables: Tables, polygon: list[list[float]] | None) -> N
             item.class_name not in ORIENTED_CLASSES:
         return
     if item.class_name == 'chair' and tables.items:
-        nearest = tables.grid.nearest(
-            item.x, item.y, lambda index: _table_side(item, tables.items[index])[0])
+        nearest = tables.grid.nearest(item.x, item.y,
+                                      lambda index: _table_side(item, tables.items[index])[0])
         table = tables.items[min(nearest)]  # the first of the nearest, in order
         normal_x, normal_y = _table_side(item, table)[1]
         _turn(item, _facing(-normal_x, -normal_y), f'faces {table.label}')
@@ -372,7 +390,7 @@ def find_support(item: Placed, tables: Tables) -> Placed | None:
     bottom = item.detection['center'][2] - item.detection['size'][2] / 2.0
     candidates = [
         table for table in map(tables.items.__getitem__,
-                                tables.overlapping(item.x, item.y, item.x, item.y))
+                               tables.overlapping(item.x, item.y, item.x, item.y))
         if table.contains_xy(item.x, item.y) and bottom >= table.detection['center'][2] - 1e-9
     ]
     return max(candidates, key=lambda table: table.detection['center'][2], default=None)

@@ -191,8 +191,8 @@ def import_detections(doc,
         return _build(doc, predictions, corners, library_dir, min_score, wall_thickness, look)
 
 
-def _build(doc, predictions: dict, corners: dict | None, library_dir: str | None,
-           min_score: float, wall_thickness: float, look) -> dict:
+def _build(doc, predictions: dict, corners: dict | None, library_dir: str | None, min_score: float,
+           wall_thickness: float, look) -> dict:
     look = look if look is not None else appearance.Look()
     room = _group(doc, 'Room')
     furniture = _group(doc, 'Furniture')

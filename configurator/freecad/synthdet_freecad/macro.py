@@ -7,6 +7,7 @@ Headless options come from ``SYNTHDET_JOB`` (a ``synthdet.freecad-job/1`` JSON, 
 If ``SYNTHDET_RESULT`` is set, a ``synthdet.freecad-result/1`` JSON is written there, on
 failure too; a headless failure also exits with code 1.
 """
+import contextlib
 import json
 import os
 import secrets
@@ -14,6 +15,8 @@ import traceback
 import zipfile
 
 import FreeCAD as App
+# standard library only, importable wherever schema's synthdet.contracts is
+from synthdet.processes import process_alive
 
 from . import appearance, document, schema
 
@@ -88,39 +91,20 @@ def partial_path(out: str) -> str:
     return os.path.join(folder, f'.{stem}{PARTIAL_MARK}{os.getpid()}-{secrets.token_hex(4)}.FCStd')
 
 
-def remove_stale_partials(out: str) -> list[str]:
+def remove_stale_partials(out: str) -> None:
     """Remove the temporary files (and FreeCAD backups of them, ``*.FCStd1``) that runs which
-    are no longer alive left next to ``out``; returns their paths. Files of live runs stay."""
+    are no longer alive left next to ``out``. Files of live runs stay."""
     folder, name = os.path.split(out)
     prefix = f'.{name[:-len(".FCStd")]}{PARTIAL_MARK}'
-    removed = []
     try:
         entries = os.listdir(folder or '.')
     except OSError:
-        return removed
+        return
     for entry in entries:
-        if not entry.startswith(prefix):
-            continue
         pid = entry[len(prefix):].split('-', 1)[0]
-        if not pid.isdigit() or _process_alive(int(pid)):
-            continue
-        path = os.path.join(folder, entry)
-        try:
-            os.remove(path)
-        except OSError:
-            continue
-        removed.append(path)
-    return removed
-
-
-def _process_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # another user's process
-        return True
-    return True
+        if entry.startswith(prefix) and pid.isdigit() and not process_alive(int(pid)):
+            with contextlib.suppress(OSError):  # removed by another run meanwhile
+                os.remove(os.path.join(folder, entry))
 
 
 def save_atomically(doc, out: str, look) -> None:
