@@ -150,11 +150,20 @@ def _size(value: object, source: str, where: str) -> list[float]:
 
 
 def expect_text(value: object, source: str, where: str) -> str:
-    """``value`` as a string without NUL characters."""
+    """``value`` as a string without NUL characters, in valid Unicode: the bytes of a file name
+    that are not UTF-8 (lone surrogates in Python) become U+FFFD, so it can be written as
+    UTF-8."""
     if not isinstance(value, str):
         fail(source, where, f'expected a string, got {_describe(value)}')
     if '\x00' in value:
         fail(source, where, 'text contains a NUL character')
+    try:
+        value.encode('utf-8')
+    except UnicodeEncodeError:
+        errors = 'surrogateescape' if all(
+            '\udc80' <= c <= '\udcff' for c in value if '\ud800' <= c <= '\udfff') \
+            else 'surrogatepass'
+        value = value.encode('utf-8', errors).decode('utf-8', 'replace')
     return value
 
 

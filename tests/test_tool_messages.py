@@ -218,6 +218,16 @@ def test_deeply_nested_json_is_one_line(tmp_path):
             reader(nested)
 
 
+def test_json_writers_turn_a_file_name_that_is_not_utf8_into_valid_text(tmp_path):
+    from synthdet.contracts import PREDICTIONS_FORMAT, write_predictions
+    name = os.fsdecode(b'/scans/hall_\xff.ply')
+    out = tmp_path / 'hall.pred.json'
+    write_predictions(out, {'format': PREDICTIONS_FORMAT, 'scan': name, 'model': 'm',
+                            'classes': [], 'detections': []})
+    assert read_predictions(out)['scan'] == '/scans/hall_\N{REPLACEMENT CHARACTER}.ply'
+    assert os.listdir(tmp_path) == ['hall.pred.json']
+
+
 def test_predict_keeps_a_scan_name_that_is_not_utf8(files, tmp_path):
     name = os.fsdecode(b'hall_\xff')  # Latin-1 "y with diaeresis": not UTF-8
     scan = tmp_path / f'{name}.txt'

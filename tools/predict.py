@@ -118,7 +118,7 @@ def main(argv: list[str] | None = None) -> list[Path]:
             predictions = detector.predictions(prepared, spec, model_name)
         except ValueError as error:
             raise RuntimeError(readable(f'{scan}: {error}')) from None
-        write_predictions(target, {**predictions, 'scan': readable(predictions['scan'])})
+        write_predictions(target, predictions)  # the contract makes names valid UTF-8
         written.append(target)
     return written
 
