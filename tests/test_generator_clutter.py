@@ -67,7 +67,7 @@ def test_every_kind_builds_a_closed_mesh_of_its_size(kind):
 
 @pytest.fixture(scope='module')
 def catalog(tmp_path_factory):
-    import bpy  # noqa: F401  (before open3d, see docs/stack)
+    import bpy  # noqa: F401  (before open3d: both ship libtbb and the first one loaded wins)
     from generator.assets import default_library
     from generator.layout import catalog_from_library
     return catalog_from_library(default_library(tmp_path_factory.mktemp('assets')))

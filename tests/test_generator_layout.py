@@ -28,7 +28,7 @@ TOL = 1e-5  # meta.json rounds to 6 decimals
 
 @pytest.fixture(scope='module')
 def catalog(tmp_path_factory):
-    import bpy  # noqa: F401  (before open3d, see docs/stack)
+    import bpy  # noqa: F401  (before open3d: both ship libtbb and the first one loaded wins)
     from generator.assets import ASSET_CLASSES, default_library
     from generator.layout import catalog_from_library
     assert tuple(ASSET_CLASSES) == GENERATED_CLASSES

@@ -51,7 +51,7 @@ test_pipeline = [
 # derives this from its own.
 tta_pipeline = with_test_time_augmentation(test_pipeline)
 
-# Robustness to real scans (issue #16), switched on by none of the experiments yet: a config
+# Robustness to real scans, switched on by none of the experiments yet: a config
 # adds them with `train_pipeline = with_robustness(_base_.train_pipeline,
 # _base_.robust_augmentations)` (projects/synthdet/config_helpers.py), which inserts them right
 # after PointSample. Quarter turns about z (the boxes stay axis-aligned and exact), a tablet's

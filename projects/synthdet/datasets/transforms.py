@@ -1,4 +1,4 @@
-"""Training augmentations that make TR3D robust to real scans (issue #16, item 5).
+"""Training augmentations that make TR3D robust to real scans.
 
 Registered in mmdet3d's ``TRANSFORMS`` when ``projects.synthdet.datasets.synthdet_s3dis`` is
 imported (the configs' ``custom_imports``). They work on mmdet3d's ``results`` dicts after
@@ -9,7 +9,7 @@ imported (the configs' ``custom_imports``). They work on mmdet3d's ``results`` d
 from numpy's global generator, which mmengine seeds (``randomness.seed``, one seed per loader
 worker), so a seeded run repeats its augmentations.
 
-The colour dropout and the xyz jitter of the issue are mmdet3d's ``RandomDropPointsColor`` and
+Colour dropout and xyz jitter are mmdet3d's ``RandomDropPointsColor`` and
 ``RandomJitterPoints``; ``robust_augmentations`` in ``configs/tr3d/_base_/s3dis-synthdet.py``
 lists them with these.
 """
