@@ -1,8 +1,10 @@
 """The shared start of ``tools/train.py``, ``test.py`` and ``predict.py``.
 
-Command-line options common to the tools, config loading with ``--cfg-options`` (loading a
-config imports its ``custom_imports``, which registers the plugin's modules with mmdet3d), the
-work directory and the launcher. Checkpoints are loaded weights-only
+Command-line options common to the tools (numbers checked against their ranges with short
+messages), config loading with ``--cfg-options`` (loading a config imports its
+``custom_imports``, which registers the plugin's modules with mmdet3d; a file that is not a
+config is one line naming it), the checks of output paths before any work, the work directory
+and the launcher. Checkpoints are loaded weights-only
 (``projects/synthdet/checkpoint.py``); nothing here changes how ``torch.load`` unpickles.
 """
 import argparse
@@ -105,7 +107,7 @@ def _check_can_create_in(folder: Path, output: Path) -> None:
 
 def check_output_dir(path: str | Path) -> None:
     """:class:`OutputPathError` unless ``path`` is a writable folder or can be created as one
-    (nothing is created)."""
+    (the folder is not created; a probe file is created and removed)."""
     path = Path(path)
     existing = _nearest_existing(path)
     if existing == Path(os.path.abspath(path)) and not existing.is_dir():
@@ -117,8 +119,8 @@ def check_output_dir(path: str | Path) -> None:
 
 def check_output_file(path: str | Path, make_parents: bool = False) -> None:
     """:class:`OutputPathError` unless the file ``path`` can be written: not a folder, in a
-    writable folder that exists (or, with ``make_parents``, can be created). Nothing is
-    created."""
+    writable folder that exists (or, with ``make_parents``, can be created). The file is not
+    created; a probe file beside it is created and removed."""
     path = Path(path)
     if path.is_dir():
         raise OutputPathError(f'{path}: is a folder, expected a file name')
