@@ -95,6 +95,13 @@ GOALS = {
 }
 # What a reader needs beside an output that was not measured with today's code.
 NOTES = {
+    'scanner': [
+        '',
+        'The scans\' ratio stays below the bare casting ratio: the work besides casting (ray '
+        'generation, noise, the laser scanner\'s spacing filter, labelling) costs both ray '
+        'engines the same time; the `scan/bare` column shows how far each Embree scan is from '
+        'its bare cast.'
+    ],
     'domain_shift': [
         '',
         'Not re-run with the regeneration of this page (about 1.5 h of training): the output '
