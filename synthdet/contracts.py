@@ -64,6 +64,10 @@ def load_json(path: str | os.PathLike) -> object:
             f'{path}:{error.lineno}:{error.colno}: invalid JSON: {error.msg}') from None
     except RecursionError:  # no contract nests deeper than a few levels
         raise SchemaError(f'{path}: invalid JSON: arrays or objects nested too deeply') from None
+    except ValueError as error:  # Python's limit of digits in an integer (a hint to lift it)
+        reason = ('a number with too many digits' if 'digits' in str(error) else
+                  str(error).split(';')[0][:80])
+        raise SchemaError(f'{path}: invalid JSON: {reason}') from None
 
 
 def write_json_atomic(path: str | os.PathLike, data: object, indent: int | None = 1) -> None:
@@ -118,12 +122,16 @@ def expect_number(value: object, source: str, where: str, unit: float = 1.0) -> 
     (the conversion to FreeCAD's millimetres or degrees)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         fail(source, where, f'expected a number, got {_describe(value)}')
-    if not math.isfinite(value):
+    try:
+        number = float(value)
+    except OverflowError:  # an integer beyond the range of a float
+        number = math.inf
+    if not math.isfinite(number):
         fail(source, where, f'expected a finite number, got {_describe(value)}')
-    if not math.isfinite(float(value) * unit):
+    if not math.isfinite(number * unit):
         fail(source, where, f'{_describe(value)} is not finite once converted to FreeCAD\'s '
              f'units (x {unit:g})')
-    return float(value)
+    return number
 
 
 def _extent(value: object, source: str, where: str) -> float:

@@ -218,6 +218,21 @@ def test_deeply_nested_json_is_one_line(tmp_path):
             reader(nested)
 
 
+def test_huge_numbers_in_json_are_one_short_line(tmp_path):
+    detection = '{"class": "chair", "score": %s, "center": [0, 0, 0], "size": [1, 1, 1]}'
+    document = ('{"format": "synthdet.predictions/1", "scan": "s", "model": "m", "classes": [], '
+                '"detections": [%s]}')
+    for digits, expected in ((400, 'detections[0].score: expected a finite number'),
+                             (5000, 'invalid JSON: a number with too many digits')):
+        path = tmp_path / f'{digits}.pred.json'
+        path.write_text(document % (detection % ('9' * digits)))
+        with pytest.raises(SchemaError) as error:
+            read_predictions(path)
+        message = str(error.value)
+        assert message.startswith(f'{path}: ') and expected in message, message
+        assert len(message) - len(str(path)) < 120 and 'sys.' not in message, message
+
+
 def test_json_writers_turn_a_file_name_that_is_not_utf8_into_valid_text(tmp_path):
     from synthdet.contracts import PREDICTIONS_FORMAT, write_predictions
     name = os.fsdecode(b'/scans/hall_\xff.ply')
