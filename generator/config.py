@@ -1,8 +1,9 @@
 """Generator configuration: defaults, loading from JSON/YAML and validation.
 
 Every number a user may change lives in :data:`DEFAULTS`. A user file (``--config FILE``) overrides
-any subset of it; unknown keys, wrong types, negative counts, probabilities outside [0, 1] and
-inverted ranges are rejected with an error that names the file and the key, before any work starts.
+any subset of it; unknown keys, wrong types, numbers that are not finite, negative counts,
+probabilities outside [0, 1], inverted ranges and ranges beyond :data:`MAX_RANGE_VALUE` are
+rejected with an error that names the file and the key (values cut short), before any work starts.
 
 Default probabilities reproduce the synthetic counts of the paper's Table 1 for 3 areas x 50
 rooms (chair 364, table 252, sofa 86, yumi 200, 3dprinter 192), with the procedural asset library:
@@ -21,6 +22,7 @@ every room is a factory room.
 """
 import copy
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -237,11 +239,27 @@ def _merge(target: dict, user: dict, reference: dict, source: str, prefix: str) 
             target[key] = value
 
 
+MAX_RANGE_VALUE = 10_000  # the largest value of a [min, max] range: metres, degrees or counts
+
+
+def _shown(value: object, limit: int = 32) -> str:
+    """``repr(value)`` for a message, at most ``limit`` characters (a 300-digit number is cut)."""
+    text = repr(value)
+    return text if len(text) <= limit else f'{text[:limit - 3]}...'
+
+
 def _number(config: dict, section: str, key: str, source: str) -> float:
     value = config[section][key]
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConfigError(f'{source}: "{section}.{key}" must be a number, got {value!r}')
-    return float(value)
+        raise ConfigError(f'{source}: "{section}.{key}" must be a number, got {_shown(value)}')
+    try:
+        number = float(value)
+    except OverflowError:  # an integer beyond the range of a float
+        number = math.inf
+    if not math.isfinite(number):
+        raise ConfigError(f'{source}: "{section}.{key}" must be a finite number, got '
+                          f'{_shown(value)}')
+    return number
 
 
 def _range(config: dict, section: str, key: str, source: str, integer: bool = False) -> None:
@@ -251,12 +269,15 @@ def _range(config: dict, section: str, key: str, source: str, integer: bool = Fa
             or any(isinstance(v, bool) or not isinstance(v, kind) for v in value)):
         what = 'integers' if integer else 'numbers'
         raise ConfigError(f'{source}: "{section}.{key}" must be a list of two {what} [min, max], '
-                          f'got {value!r}')
+                          f'got {_shown(value)}')
     low, high = value
     if low < 0:
-        raise ConfigError(f'{source}: "{section}.{key}" must not be negative, got {value!r}')
+        raise ConfigError(f'{source}: "{section}.{key}" must not be negative, got {_shown(value)}')
     if low > high:
-        raise ConfigError(f'{source}: "{section}.{key}" has min > max: {value!r}')
+        raise ConfigError(f'{source}: "{section}.{key}" has min > max: {_shown(value)}')
+    if not (0 <= low and high <= MAX_RANGE_VALUE):  # NaN fails too
+        raise ConfigError(f'{source}: "{section}.{key}" must lie in [0, {MAX_RANGE_VALUE:,}], '
+                          f'got {_shown(value)}')
 
 
 def _distribution(config: dict, section: str, key: str | None, source: str) -> None:
@@ -267,7 +288,7 @@ def _distribution(config: dict, section: str, key: str | None, source: str) -> N
     for name, p in probs.items():
         if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0.0 <= p <= 1.0:
             raise ConfigError(f'{source}: "{where}.{name}" must be a probability in '
-                              f'[0, 1], got {p!r}')
+                              f'[0, 1], got {_shown(p)}')
     if abs(sum(probs.values()) - 1.0) > 1e-6:
         raise ConfigError(f'{source}: "{where}" probabilities sum to '
                           f'{sum(probs.values()):g}, not 1')
@@ -306,7 +327,7 @@ def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
         value = layout[key]
         if isinstance(value, bool) or not isinstance(value, int) or value < 0:
             raise ConfigError(f'{source}: "layout.{key}" must be a non-negative integer, '
-                              f'got {value!r}')
+                              f'got {_shown(value)}')
     if layout['wall_slots'] > 4:
         raise ConfigError(f'{source}: "layout.wall_slots" = {layout["wall_slots"]}: tables and '
                           f'sofas share at most 4 wall slots')
@@ -349,7 +370,7 @@ def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
         value = scanner[key]
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ConfigError(f'{source}: "scanner.{key}" must be a positive integer, '
-                              f'got {value!r}')
+                              f'got {_shown(value)}')
 
 
 def _validate_appearance(config: dict[str, Any], source: str) -> None:
@@ -393,13 +414,13 @@ def _validate_sensors(scanner: dict[str, Any], source: str) -> None:
         if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))
                                   or not 0.0 < value <= largest):
             raise ConfigError(f'{source}: "scanner.tls.{key}" must be null or a number in '
-                              f'(0, {largest:g}], got {value!r}')
+                              f'(0, {largest:g}], got {_shown(value)}')
     if _number({'scanner.tls': tls}, 'scanner.tls', 'oversample', source) < 1.0:
         raise ConfigError(f'{source}: "scanner.tls.oversample" must be at least 1')
     finest = _number({'scanner.tls': tls}, 'scanner.tls', 'min_angular_step_deg', source)
     if not 0.0 < finest <= 10.0:
         raise ConfigError(f'{source}: "scanner.tls.min_angular_step_deg" must be in (0, 10], '
-                          f'got {finest!r}')
+                          f'got {_shown(finest)}')
     elevation = _number({'scanner.tls': tls}, 'scanner.tls', 'min_elevation_deg', source)
     if not -90.0 <= elevation < 90.0:
         raise ConfigError(f'{source}: "scanner.tls.min_elevation_deg" must be in [-90, 90)')
@@ -408,20 +429,20 @@ def _validate_sensors(scanner: dict[str, Any], source: str) -> None:
             or any(isinstance(v, bool) or not isinstance(v, (int, float)) or v < 0
                    for v in noise)):
         raise ConfigError(f'{source}: "scanner.tls.range_noise" must be [a, b], two non-negative '
-                          f'numbers (std a + b * distance), got {noise!r}')
+                          f'numbers (std a + b * distance), got {_shown(noise)}')
     for key, low, high in (('fov_deg', 1.0, 170.0), ('pitch_deg', -90.0, 90.0)):
         value = tablet[key]
         if (not isinstance(value, (list, tuple)) or len(value) != 2
                 or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)
                 or not all(low <= v <= high for v in value)):
             raise ConfigError(f'{source}: "scanner.tablet.{key}" must be two numbers in '
-                              f'[{low:g}, {high:g}] degrees, got {value!r}')
+                              f'[{low:g}, {high:g}] degrees, got {_shown(value)}')
     if tablet['pitch_deg'][0] > tablet['pitch_deg'][1]:
         raise ConfigError(f'{source}: "scanner.tablet.pitch_deg" has min > max')
     poses = tablet['poses']
     if isinstance(poses, bool) or not isinstance(poses, int) or poses < 2:
         raise ConfigError(f'{source}: "scanner.tablet.poses" must be an integer >= 2, '
-                          f'got {poses!r}')
+                          f'got {_shown(poses)}')
 
 
 def _validate_hall(config: dict[str, Any], source: str) -> None:

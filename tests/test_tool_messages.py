@@ -205,6 +205,14 @@ def test_generator_numbers_out_of_range_are_usage_errors_with_short_messages(tmp
         proc = run('-m', 'generator', '--out', tmp_path / 'rooms', option, value, timeout=120)
         assert_clean_error(proc, 2, 'error', option)
         assert_short_messages(proc)
+    for name, config in (('doors', {'room': {'doors': [1, 10**300]}}),
+                         ('width', {'room': {'width': [4.0, 1e300]}}),
+                         ('noise', {'scanner': {'range_noise': 10**400}})):
+        path = tmp_path / f'{name}.json'
+        path.write_text(json.dumps(config))
+        proc = run('-m', 'generator', '--out', tmp_path / 'rooms', '--config', path, timeout=120)
+        assert_clean_error(proc, 2, str(path), name)
+        assert_short_messages(proc)
     assert not (tmp_path / 'rooms').exists()
     proc = run('-m', 'generator', '--help', timeout=120)
     assert '1 to 100,000,000' in proc.stdout  # the documented range of --points
