@@ -1,6 +1,7 @@
 """TR3D on CPU at 1 cm vs 2 cm voxels on one generated room: train step, inference, peak memory.
 
 Usage: python benchmarks/bench_model.py [--points 100000] [--iters 3] [--threads 1]
+                                        [--in-process]
 
 One room (6 x 6 x 3 m, floor, ceiling, walls and ~10 objects, written by
 ``tests/s3dis_fixtures.write_synthetic_area``) is sampled to ``--points`` points. Every voxel
@@ -11,7 +12,9 @@ step on a batch of one scene; inference is ``predict`` with NMS. Times are media
 the cost on any machine) and as wall seconds (inflated on a shared machine). Workers get
 ``OMP_NUM_THREADS=--threads``: the OpenMP runtime reads it at start-up only, and
 ``torch.set_num_threads`` alone leaves MinkowskiEngine's CPU kernels spin-waiting on a busy
-machine.
+machine. ``--in-process`` times the three models one after another in this process instead (a
+quick check of the benchmark itself: one start-up instead of three, but the peak memory is then
+the largest so far, not each model's).
 
 A third model is 2 cm voxels with ``TR3DNeck(backbone_fine_level=True)``: a finest head level on
 the first backbone stage's voxels (16 cm apart at 2 cm voxels, as TR3D's finest level at 1 cm),
@@ -156,6 +159,10 @@ def main() -> None:
     parser.add_argument('--iters', type=int, default=3, help='timed runs after one warm-up')
     parser.add_argument('--threads', type=int, default=1, help='torch CPU threads')
     parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument(
+        '--in-process',
+        action='store_true',
+        help='time the models in this process (peak memory then not per model)')
     parser.add_argument('--worker', choices=MODELS_TIMED, help=argparse.SUPPRESS)
     parser.add_argument('--room', type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -169,13 +176,17 @@ def main() -> None:
         results = {}
         env = dict(os.environ, OMP_NUM_THREADS=str(args.threads))
         for name in MODELS_TIMED:
+            if args.in_process:
+                results[name] = run_worker(room_file, name, args.iters, args.threads)
+                continue
             command = [sys.executable, __file__, '--worker', name]
             command += ['--room', str(room_file), '--iters', str(args.iters)]
             command += ['--threads', str(args.threads)]
             run = subprocess.run(command, check=True, capture_output=True, text=True, env=env)
             results[name] = json.loads(run.stdout.strip().splitlines()[-1])
     print(f'TR3D (published S3DIS model), {args.points} points, one 6x6x3 m room, '
-          f'{args.threads} thread(s), median of {args.iters}; CPU = process CPU seconds')
+          f'{args.threads} thread(s), median of {args.iters}; CPU = process CPU seconds' +
+          ('; all in one process: peak RSS is the largest so far' if args.in_process else ''))
     print(f"{'model':>8} {'voxels':>8} {'train CPU s':>12} {'train wall s':>13} "
           f"{'infer CPU s':>12} {'infer wall s':>13} {'peak RSS MB':>12}")
     for name, r in results.items():

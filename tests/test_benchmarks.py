@@ -11,6 +11,8 @@ import re
 import subprocess
 import sys
 import tempfile
+from collections.abc import Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import NamedTuple
 
@@ -54,7 +56,7 @@ SMOKE: dict[str, Smoke | str] = {
                      r'x \(1 process each\), ' + figure('two') + r'x \(2 each\); synthdet 2 '
                      r'workers vs mmdet3d as shipped: ' + figure('shipped') + r'x; CPU-time '
                      r'ratio \(1 process each\): ' + figure('cpu') + 'x'),
-    'model': Smoke(['--points', '3000', '--iters', '1', '--threads', '1'],
+    'model': Smoke(['--points', '3000', '--iters', '1', '--threads', '1', '--in-process'],
                    r'2 cm \+ fine level \(CPU seconds\): train x' + figure('train_2cm') +
                    r' of 2 cm, x' + figure('train_1cm') + r' of 1 cm; inference x' +
                    figure('infer_2cm') + r' of 2 cm, x' + figure('infer_1cm') + ' of 1 cm',
@@ -80,8 +82,8 @@ SMOKE: dict[str, Smoke | str] = {
                                 r'voxel grid first: 10th-percentile voxels per object paper ' +
                                 figure('paper') + 'x, tls ' + figure('tls') + 'x, tablet ' +
                                 figure('tablet') + 'x'),
-    'dist_train': Smoke(['--rooms-per-area', '1', '--points', '5000', '--iters', '2', '--warmup',
-                         '1'],
+    'dist_train': Smoke(['--rooms-per-area', '1', '--points', '5000', '--iters', '1', '--warmup',
+                         '0'],
                         r'2 processes x 1 thread vs 1 process x 2 threads: x' + figure('ratio') +
                         r' faster per iteration of 4 rooms \(' + figure('two') + ' s vs ' +
                         figure('one') + r' s\)',
@@ -110,8 +112,7 @@ def test_every_benchmark_has_a_smoke_run():
             assert f'bench_{name}' in (REPO / smoke).read_text(), name
 
 
-@pytest.fixture(scope='module')
-def tiny_checkpoint(tmp_path_factory) -> Path:
+def tiny_checkpoint(folder: Path) -> Path:
     """A checkpoint of ``configs/tr3d/tiny.py``'s model with its initial weights (seeded)."""
     import torch
     from mmdet3d.apis import init_model
@@ -119,32 +120,55 @@ def tiny_checkpoint(tmp_path_factory) -> Path:
     torch.manual_seed(0)
     config = Config.fromfile(str(REPO / 'configs/tr3d/tiny.py'))
     model = init_model(config, None, device='cpu')
-    path = tmp_path_factory.mktemp('model') / 'initialised.pth'
+    path = folder / 'initialised.pth'
     classes = list(config.test_dataloader.dataset.metainfo['classes'])
     torch.save({'state_dict': model.state_dict(), 'meta': {'dataset_meta': {'classes': classes}}},
                path)
     return path
 
 
-@pytest.mark.parametrize('name', [
-    pytest.param(name, marks=[pytest.mark.slow] if smoke.slow else [])
-    for name, smoke in SMOKE.items() if isinstance(smoke, Smoke)
-])
-def test_benchmark_smoke_run(name, request):
+def smoke_run(name: str, checkpoint: Future | None) -> subprocess.CompletedProcess:
+    """Run one benchmark at its smallest size as its own process with one OpenMP thread."""
     smoke = SMOKE[name]
-    args = [*smoke.args]
-    if smoke.with_model:
-        args.append(str(request.getfixturevalue('tiny_checkpoint')))
-    done = subprocess.run([sys.executable, f'benchmarks/bench_{name}.py', *args],
+    args = [*smoke.args, str(checkpoint.result())] if smoke.with_model else smoke.args
+    return subprocess.run([sys.executable, f'benchmarks/bench_{name}.py', *args],
                           cwd=REPO,
                           env=dict(os.environ, OMP_NUM_THREADS='1'),
                           capture_output=True,
                           text=True,
                           timeout=600)
+
+
+@pytest.fixture(scope='module')
+def smoke_runs(request, tmp_path_factory) -> Iterator[dict[str, Future]]:
+    """The smoke runs of the selected tests, started at once, two at a time (the benchmarks run
+    one thread each; a 2-core machine then does the set in about half the wall time), slowest
+    first, those that need the tiny checkpoint last: it is made in this process meanwhile."""
+    selected = [
+        item.callspec.params['name'] for item in request.session.items
+        if item.originalname == 'test_benchmark_smoke_run'
+    ]
+    names = sorted(selected, key=lambda name: (not SMOKE[name].slow, SMOKE[name].with_model))
+    with ThreadPoolExecutor(max_workers=1) as maker, ThreadPoolExecutor(max_workers=2) as runs:
+        checkpoint = None
+        if any(SMOKE[name].with_model for name in names):
+            checkpoint = maker.submit(tiny_checkpoint, tmp_path_factory.mktemp('model'))
+        try:
+            yield {name: runs.submit(smoke_run, name, checkpoint) for name in names}
+        finally:  # a failed test leaves the runs not started yet
+            runs.shutdown(cancel_futures=True)
+
+
+@pytest.mark.parametrize('name', [
+    pytest.param(name, marks=[pytest.mark.slow] if smoke.slow else [])
+    for name, smoke in SMOKE.items() if isinstance(smoke, Smoke)
+])
+def test_benchmark_smoke_run(name, smoke_runs):
+    done = smoke_runs[name].result()
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-4000:]
     lines = [line for line in done.stdout.splitlines() if line.strip()]
     assert lines, done.stderr[-2000:]
-    headline = re.fullmatch(smoke.headline, lines[-1].strip())
+    headline = re.fullmatch(SMOKE[name].headline, lines[-1].strip())
     assert headline, f'last line not in the documented format: {lines[-1]!r}'
     for key, value in headline.groupdict().items():
         assert math.isfinite(float(value.replace(',', ''))), f'{key} = {value}'
