@@ -10,7 +10,6 @@ Files of ``x y z`` lines (no colours) are read with ``columns=3``.
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 import numba
 import numpy as np
@@ -224,39 +223,6 @@ def read_point_file(path: str | Path,
         reason = 'file is empty (no points)' if not bad_lines else 'no valid point line'
         raise PointFileError(path, 1, reason)
     return out[:rows], bad_lines
-
-
-def read_point_blocks(path: str | Path,
-                      block_bytes: int,
-                      columns: int = NUM_COLUMNS) -> Iterator[np.ndarray]:
-    """Read a point text file as float64 arrays of the lines in blocks of about
-    ``block_bytes`` (cut at line ends), so memory stays a few blocks whatever the file's size.
-
-    The same parsers and errors as :func:`read_point_file` (a bad line raises
-    :class:`PointFileError` with its line number in the file); an empty file yields nothing.
-    """
-    if columns not in COLUMN_CHOICES:
-        raise ValueError(f'columns must be one of {COLUMN_CHOICES}, got {columns}')
-    path = Path(path)
-    first_line, rest = 1, b''
-    with open(path, 'rb') as stream:
-        while True:
-            data = stream.read(block_bytes)
-            cut = data.rfind(b'\n') + 1 if data else len(rest)
-            if data and cut == 0:  # no line end in this block yet
-                rest += data
-                continue
-            block, rest = rest + data[:cut], data[cut:]
-            if block:
-                out = np.empty((max_rows(len(block), columns), columns))
-                rows, _ = _parse_fast(np.frombuffer(block, dtype=np.uint8), out, _POW10)
-                if rows < 0:
-                    points, _ = _parse_reference(path, block, False, columns, first_line)
-                    rows, out = len(points), points
-                first_line += block.count(b'\n')
-                yield out[:rows]
-            if not data:
-                return
 
 
 # --------------------------------------------------------------------------- writing
