@@ -32,8 +32,8 @@ PROFILES = {
     },
 }
 TINY = [
-    '--rooms-train', '2', '--rooms-test', '1', '--iters', '1', '--points', '20000',
-    '--sample-points', '4000', '--seed', '3', '--test-profiles', 'paper', 'mixed',
+    '--rooms-train', '2', '--rooms-test', '1', '--iters', '1', '--points', '5000',
+    '--sample-points', '1000', '--seed', '3', '--test-profiles', 'paper', 'mixed',
     '--progress-every', '5'
 ]
 

@@ -67,8 +67,8 @@ SMOKE: dict[str, Smoke | str] = {
                      r'order\): traced ' + figure('traced') + r' cm \(worst [\d.]+\) / \d+% / '
                      r'\d+%; paper .+; convex hull ' + figure('hull') + ' cm .+'),
     # an untrained model: only its surest boxes, so that the FreeCAD document stays small
-    'hall': Smoke(['--points', '100000', '--hall-size', '16', '12', '--rooms', '1',
-                   '--room-points', '20000', '--score-thr', '0.9', '--config',
+    'hall': Smoke(['--points', '30000', '--hall-size', '8', '7', '--rooms', '1',
+                   '--room-points', '10000', '--score-thr', '0.9', '--config',
                    'configs/tr3d/tiny.py', '--checkpoint'],
                   r'hall ' + figure('points') + r'M points -> FCStd: ' + figure('seconds') +
                   r' s, peak ' + figure('peak') + r' GB; windowed recall ' + figure('hall') +
