@@ -6,9 +6,10 @@ from them (``make bench``).
 
 Every ``benchmarks/bench_<name>.py`` runs in turn, as its own process, with the arguments of
 ``ARGUMENTS`` (the documented, paper-scale settings; a benchmark not listed runs without
-arguments). The benchmarks of ``OPT_IN`` (hours of training) run only when ``--only`` names
-them; their kept outputs are still shown. Each one prints a side-by-side comparison measured in
-that one run and ends with a summary line. Its full output (without progress-bar lines) is kept in
+arguments). The benchmarks of ``OPT_IN`` run only when ``--only`` names them (``domain_shift``:
+hours of training; ``real_scans`` needs a checkpoint and a folder of labelled scans, so it is
+run directly with them); their kept outputs are still shown. Each one prints a side-by-side
+comparison measured in that one run and ends with a summary line. Its full output (without progress-bar lines) is kept in
 ``docs/benchmarks/<name>.txt`` and its record (exact command, exit code, wall time, the
 machine's load average before and after, the finishing time, the machine kind: CPU model,
 cores, Python, and the commit) in ``docs/benchmarks/<name>.json``. Absolute paths of the machine
@@ -51,7 +52,7 @@ ARGUMENTS = {
     'domain_shift': [],  # its defaults are the documented scale (about 1.5 h on 2 cores)
 }
 # Run only when named: `make bench BENCH_ARGS="--only domain_shift"` (docs/results.md).
-OPT_IN = {'domain_shift'}
+OPT_IN = {'domain_shift', 'real_scans'}
 WHAT = {
     'scanner':
     'ray casting: batched Embree scanner vs per-ray bpy `BVHTree`, `Object` and '
@@ -221,7 +222,7 @@ def render(records: list[dict], not_run: list[str], output_dir: Path) -> str:
         'Written by `make bench` (`tools/collect_benchmarks.py`), which runs every '
         '`benchmarks/bench_*.py` one after the other (' +
         ', '.join(f'`{name}`' for name in sorted(OPT_IN)) + ' only when named with `--only`: '
-        'hours of training), keeps each full output in '
+        'hours of training, or a trained checkpoint and your labelled scans), keeps each full output in '
         f'`{shown}/<name>.txt` (progress bars left out, the machine\'s absolute paths scrubbed) '
         'and writes this page from them; `make bench BENCH_ARGS="--only scanner convert"` runs '
         'some again and keeps the others\' outputs. Every benchmark measures all sides of its '
