@@ -12,7 +12,7 @@ the right clockwise order (what the FreeCAD floor needs). ``--generate N`` runs
 ``python -m generator`` for N rooms without and N rooms with its noise models (box, L and U
 shapes in equal shares, ``--points`` each) in a temporary folder; ``--generated DIR`` adds
 existing generator rooms. For generator rooms the ``meta.json`` polygon is the truth; they are
-the issue's accuracy goal (<= 3 cm, >= 95 % right count; <= 5 cm with noise).
+the accuracy goal (<= 3 cm, >= 95 % right count; <= 5 cm with noise).
 Then it times the methods on 1M-point rooms.
 
 The baselines share the traced method's floor and ceiling levels and wall band: ``paper`` is the

@@ -1,5 +1,5 @@
 """Domain shift: TR3D trained at CPU scale on the paper profile vs the mixed default, tested on
-held-out generator profiles (issue #16 part 6; docs/results.md "Domain shift").
+held-out generator profiles (docs/results.md "Domain shift").
 
 Usage: python benchmarks/bench_domain_shift.py [--work-dir work_dirs/domain_shift]
            [--rooms-train 50] [--rooms-test 20] [--iters 250] [--points 1000000] [--seed 0]
@@ -67,7 +67,7 @@ MODEL_CONFIGS = {
     MIXED: REPO / 'configs/tr3d/domain_shift_mixed_cpu.py',
 }
 METRICS = ('mAP@0.25', 'mAP@0.5')
-GOAL_DROP = 0.05  # issue #16: the mixed model loses at most this mAP@0.25 on a held-out profile
+GOAL_DROP = 0.05  # the goal: the mixed model loses at most this mAP@0.25 on a held-out profile
 RESULT_FORMAT = 'synthdet.domain_shift/1'
 
 

@@ -19,7 +19,7 @@
    descending score order; boxes compared axis-aligned, as TR3D predicts them).
 
 Last line: ``hall <N>M points -> FCStd: <s> s, peak <G> GB; windowed recall <r> vs room recall
-<r>``. The issue's goals: windowed recall at least 0.95 of room recall, peak under 8 GB.
+<r>``. The goals: windowed recall at least 0.95 of room recall, peak under 8 GB.
 """
 import argparse
 import json

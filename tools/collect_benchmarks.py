@@ -84,7 +84,7 @@ WHAT = {
     'TR3D at CPU scale trained on the paper profile vs the mixed default, tested on held-out '
     'generator profiles (about 1.5 h; only with `--only domain_shift`)',
 }
-# The issues' goals, shown next to the results.
+# Each benchmark's goal, shown next to its result.
 GOALS = {
     'scanner': '>= 10x the fastest bpy loop in rays/s, 1 thread each',
     'generate': '<= 600 s for 150 rooms',
