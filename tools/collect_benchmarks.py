@@ -10,8 +10,8 @@ arguments). The benchmarks of ``OPT_IN`` run only when ``--only`` names them (``
 hours of training; ``real_scans`` needs a checkpoint and a folder of labelled scans, so it is
 run directly with them); their kept outputs are still shown. Each one prints a side-by-side
 comparison measured in that one run and ends with a summary line. Its full output (without
-progress-bar lines) is kept in ``docs/benchmarks/<name>.txt`` and its record (exact command, exit code, wall time, the
-machine's load average before and after, the finishing time, the machine kind: CPU model,
+progress-bar lines) is kept in ``docs/benchmarks/<name>.txt`` and its record (exact command,
+exit code, wall time, the machine's load average before and after, the finishing time, the machine kind: CPU model,
 cores, Python, and the commit) in ``docs/benchmarks/<name>.json``. Absolute paths of the machine
 are scrubbed from what is kept (:func:`scrub`): the checkout becomes relative, an installed
 package ``site-packages/...``, a temporary folder ``$TMPDIR/...``.
@@ -223,7 +223,8 @@ def render(records: list[dict], not_run: list[str], output_dir: Path) -> str:
         '`benchmarks/bench_*.py` one after the other (' +
         ', '.join(f'`{name}`' for name in sorted(OPT_IN)) + ' only when named with `--only`: '
         'hours of training, or a trained checkpoint and your labelled scans), keeps each full '
-        f'output in `{shown}/<name>.txt` (progress bars left out, the machine\'s absolute paths scrubbed) '
+        f'output in `{shown}/<name>.txt` (progress bars left out, the machine\'s absolute paths '
+        'scrubbed) '
         'and writes this page from them; `make bench BENCH_ARGS="--only scanner convert"` runs '
         'some again and keeps the others\' outputs. Every benchmark measures all sides of its '
         'comparison in the same run, on the same input, with the same warm-up, repeats and '
