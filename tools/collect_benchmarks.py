@@ -7,14 +7,14 @@ from them (``make bench``).
 Every ``benchmarks/bench_<name>.py`` runs in turn, as its own process, with the arguments of
 ``ARGUMENTS`` (the documented, paper-scale settings; a benchmark not listed runs without
 arguments). The benchmarks of ``OPT_IN`` run only when ``--only`` names them (``domain_shift``:
-hours of training; ``real_scans`` needs a checkpoint and a folder of labelled scans, so it is
-run directly with them); their kept outputs are still shown. Each one prints a side-by-side
-comparison measured in that one run and ends with a summary line. Its full output (without
-progress-bar lines) is kept in ``docs/benchmarks/<name>.txt`` and its record (exact command,
-exit code, wall time, the machine's load average before and after, the finishing time, the machine kind: CPU model,
-cores, Python, and the commit) in ``docs/benchmarks/<name>.json``. Absolute paths of the machine
-are scrubbed from what is kept (:func:`scrub`): the checkout becomes relative, an installed
-package ``site-packages/...``, a temporary folder ``$TMPDIR/...``.
+hours of training; ``real_scans`` needs a checkpoint and a folder of labelled scans, so it is run
+directly with them); their kept outputs are still shown. Each one prints a side-by-side comparison
+measured in that one run and ends with a summary line. Its full output (without progress-bar lines)
+is kept in ``docs/benchmarks/<name>.txt`` and its record (exact command, exit code, wall time, the
+machine's load average before and after, the finishing time, the machine kind: CPU model, cores,
+Python, and the commit) in ``docs/benchmarks/<name>.json``. Absolute paths of the machine are
+scrubbed from what is kept (:func:`scrub`): the checkout becomes relative, an installed package
+``site-packages/...``, a temporary folder ``$TMPDIR/...``.
 ``docs/benchmarks.md`` is then written from all kept outputs: a table of the last lines and
 every output in full. With ``--only``, the other benchmarks keep their earlier outputs;
 ``--render-only`` runs nothing and rewrites the page from the kept outputs.
