@@ -12,6 +12,7 @@ import math
 import subprocess
 import sys
 from dataclasses import dataclass
+from typing import Iterator
 
 import numpy as np
 import pytest
@@ -324,6 +325,21 @@ def test_yumis_face_the_front_of_their_table_printers_turn_by_quarter_turns(room
     assert len(printer_turns) >= 2, printer_turns  # turned printers do occur
 
 
+def side_by_side(objects: list[dict]) -> Iterator[tuple[int, int, float]]:
+    """``(i, j, plan distance)`` of every pair of objects whose heights overlap and neither
+    of which stands on the other: the pairs the clearance rule applies to."""
+    quads = [footprint(obj) for obj in objects]
+    for i, a in enumerate(objects):
+        for j in range(i + 1, len(objects)):
+            b = objects[j]
+            if a['on'] == b['instance'] or b['on'] == a['instance']:
+                continue
+            (a0, a1), (b0, b1) = z_range(a), z_range(b)
+            if a1 <= b0 + TOL or b1 <= a0 + TOL:
+                continue  # one above the other
+            yield i, j, quad_distance(quads[i], quads[j])
+
+
 def test_objects_keep_the_clearance_apart(rooms):
     """docs: no two objects intersect, and every placement keeps ``layout.clearance`` (5 cm)
     from the others (an item and the table it stands on excepted). Clutter may touch; that it
@@ -332,19 +348,10 @@ def test_objects_keep_the_clearance_apart(rooms):
     for room in rooms:
         clearance = room.config['layout']['clearance']
         objects = room.objects(*GENERATED_CLASSES)
-        quads = [footprint(obj) for obj in objects]
-        for i, a in enumerate(objects):
-            for j in range(i + 1, len(objects)):
-                b = objects[j]
-                if a['on'] == b['instance'] or b['on'] == a['instance']:
-                    continue
-                (a0, a1), (b0, b1) = z_range(a), z_range(b)
-                if a1 <= b0 + TOL or b1 <= a0 + TOL:
-                    continue  # one above the other
-                distance = quad_distance(quads[i], quads[j])
-                assert distance >= clearance - TOL, (
-                    f"{room.name}: {a['instance']} and {b['instance']} are {distance:.4f} m apart")
-                closest = min(closest, distance)
+        for i, j, distance in side_by_side(objects):
+            pair = f"{objects[i]['instance']} and {objects[j]['instance']}"
+            assert distance >= clearance - TOL, f'{room.name}: {pair} are {distance:.4f} m apart'
+            closest = min(closest, distance)
     assert closest < 0.1  # the rule binds: some objects stand close to each other
 
 

@@ -23,7 +23,8 @@ from generator.household import (FURNITURE_KINDS, HOUSEHOLD_KINDS, household_mes
 from generator.layout import generate_layout, layout_meta
 from synthdet.contracts import ROOM_FORMAT, validate_room
 from tests.test_generator_layout import (TOL, catalog, footprint, front, inside_convex,  # noqa
-                                         inside_polygon, quad_distance, walls, z_range)
+                                         inside_polygon, quad_distance, side_by_side, walls,
+                                         z_range)
 
 REPO = Path(__file__).resolve().parents[1]
 MIXED = REPO / 'generator' / 'profiles' / 'mixed_rooms.json'
@@ -96,20 +97,13 @@ def test_objects_stay_inside_the_room_and_apart(rooms_by_kind, kind):
         quads = [footprint(obj) for obj in objects]
         for obj, quad in zip(objects, quads):
             assert all(inside_polygon(corner, polygon) for corner in quad), obj['instance']
-        for i, a in enumerate(objects):
-            for j in range(i + 1, len(objects)):
-                b = objects[j]
-                if a['on'] == b['instance'] or b['on'] == a['instance']:
-                    continue
-                (a0, a1), (b0, b1) = z_range(a), z_range(b)
-                if a1 <= b0 + TOL or b1 <= a0 + TOL:
-                    continue
-                distance = quad_distance(quads[i], quads[j])
-                detection = 'clutter' not in (a['class'], b['class'])
-                assert distance >= (clearance if detection else 0.0) - TOL, (
-                    f"{kind}: {a['instance']} and {b['instance']} are {distance:.4f} m apart")
-                if not detection:  # touching is allowed, entering is not
-                    assert not inside_convex(quads[i], quads[j]).any()
+        for i, j, distance in side_by_side(objects):
+            a, b = objects[i], objects[j]
+            detection = 'clutter' not in (a['class'], b['class'])
+            assert distance >= (clearance if detection else 0.0) - TOL, (
+                f"{kind}: {a['instance']} and {b['instance']} are {distance:.4f} m apart")
+            if not detection:  # touching is allowed, entering is not
+                assert not inside_convex(quads[i], quads[j]).any()
 
 
 @pytest.mark.parametrize('kind', OTHER_KINDS)
