@@ -26,6 +26,7 @@ from synthdet.contracts import (LABELS_FORMAT, SchemaError, read_labels, validat
 from synthdet.geometry import box_corners_xy
 from synthdet.scan_io import read_scan, write_scan
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
+from tests.test_makefile import exp2_dry_run
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = REPO / 'configs' / 'tr3d' / 'tiny.py'
@@ -395,8 +396,7 @@ def test_cli_bad_inputs_exit_2_naming_the_file(scans: dict, tmp_path: Path) -> N
 
 def test_make_exp2_cpu_ends_with_the_evaluation_of_real_scans() -> None:
     def dry_run(*variables: str) -> list[str]:
-        proc = subprocess.run(['make', '-n', 'exp2-cpu', *variables], cwd=REPO,
-                              capture_output=True, text=True, timeout=60)
+        proc = exp2_dry_run(*variables)
         assert proc.returncode == 0, proc.stderr
         return proc.stdout.replace('\\\n', ' ').strip().splitlines()
 

@@ -10,8 +10,10 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _dry_run(*variables: str) -> subprocess.CompletedProcess:
-    return subprocess.run(['make', '-n', 'exp2-cpu', *variables], cwd=ROOT,
+def exp2_dry_run(*variables: str) -> subprocess.CompletedProcess:
+    """``make -n exp2-cpu``: the recipe's commands only (no directory lines, also when the
+    tests themselves run under make)."""
+    return subprocess.run(['make', '--no-print-directory', '-n', 'exp2-cpu', *variables], cwd=ROOT,
                           capture_output=True, text=True, timeout=60)
 
 
@@ -24,7 +26,7 @@ def _train_command(stdout: str) -> str:
 
 
 def test_one_process_trains_with_train_py():
-    proc = _dry_run('EXP2_PROCS=1')
+    proc = exp2_dry_run('EXP2_PROCS=1')
     assert proc.returncode == 0, proc.stderr
     command = _train_command(proc.stdout)
     assert 'tools/train.py configs/tr3d/exp2_cpu.py' in command
@@ -33,7 +35,7 @@ def test_one_process_trains_with_train_py():
 
 @pytest.mark.parametrize('procs, batch', [(None, 2), (2, 2), (4, 1)])
 def test_processes_share_the_batch_of_four(procs, batch: int):
-    proc = _dry_run(*([f'EXP2_PROCS={procs}'] if procs else []))
+    proc = exp2_dry_run(*([f'EXP2_PROCS={procs}'] if procs else []))
     procs = procs or 2  # the default
     assert proc.returncode == 0, proc.stderr
     command = _train_command(proc.stdout)
@@ -44,14 +46,14 @@ def test_processes_share_the_batch_of_four(procs, batch: int):
 
 
 def test_uneven_split_is_refused():
-    proc = _dry_run('EXP2_PROCS=3')
+    proc = exp2_dry_run('EXP2_PROCS=3')
     assert proc.returncode != 0
     assert 'EXP2_PROCS=3: must be 1, 2 or 4' in proc.stderr
 
 
 def test_a_variant_config_is_trained_and_tested():
     variant = 'configs/tr3d/exp2_cpu_voxel_grid.py'
-    proc = _dry_run(f'EXP2_CONFIG={variant}')
+    proc = exp2_dry_run(f'EXP2_CONFIG={variant}')
     assert proc.returncode == 0, proc.stderr
     assert f'tools/dist_train.sh {variant} 2 ' in _train_command(proc.stdout)
     lines = proc.stdout.replace('\\\n', ' ').splitlines()
