@@ -1,7 +1,7 @@
 """Every benchmark in ``benchmarks/`` runs at its smallest size, as its own process with the
 project's interpreter: it exits 0 and ends with its headline line in the documented format
 with finite figures. A changed signature that a benchmark uses then fails here, not in the
-docs. A new ``benchmarks/bench_<name>.py`` needs one line in ``SMOKE``."""
+docs. A new ``benchmarks/bench_<name>.py`` needs an entry in ``SMOKE``, keyed by its file name."""
 from __future__ import annotations
 
 import json
@@ -38,78 +38,90 @@ class Smoke(NamedTuple):
 
 
 SMOKE: dict[str, Smoke | str] = {
-    'scanner': Smoke(['--rays', '2000', '--slow-rays', '100', '--scan-points', '2000',
-                      '--repeats', '1', '--batch-rays', '4096'],
-                     r'scanner vs fastest bpy loop \(bpy \S+ loop\), 1 thread each, median of 1: '
-                     r'default sensor scans with glass ' + figure('scan') + r'x rays/s \(paper '
-                     r'[\d.]+x, tls [\d.]+x, tablet [\d.]+x\); bare ray casting ' +
-                     figure('bare') + r'x; our scan / bare Embree cast ' + figure('bound') + 'x'),
-    'writer': Smoke(['--points', '2000', '--repeats', '1'],
-                    r'text writer speedup vs the fastest alternative \(.+\), best of 1: ' +
-                    figure('ratio') + 'x'),
-    'generate': Smoke(['--rooms-per-area', '1', '--points', '5000', '--workers', '1'],
-                      r'3x50 rooms x 5,000 points, 1 workers: ' + figure('seconds') +
-                      r' s \(.+\) = ' + figure('ratio') + 'x of the 10-minute goal'),
-    'convert': Smoke(['--rooms', '2', '--points-per-object', '1000', '--workers', '2',
-                      '--repeats', '1'],
-                     r'convert speedup vs mmdet3d at equal parallelism: ' + figure('one') +
-                     r'x \(1 process each\), ' + figure('two') + r'x \(2 each\); synthdet 2 '
-                     r'workers vs mmdet3d as shipped: ' + figure('shipped') + r'x; CPU-time '
-                     r'ratio \(1 process each\): ' + figure('cpu') + 'x'),
-    'model': Smoke(['--points', '3000', '--iters', '1', '--threads', '1', '--in-process'],
-                   r'2 cm \+ fine level \(CPU seconds\): train x' + figure('train_2cm') +
-                   r' of 2 cm, x' + figure('train_1cm') + r' of 1 cm; inference x' +
-                   figure('infer_2cm') + r' of 2 cm, x' + figure('infer_1cm') + ' of 1 cm',
-                   slow=True),
-    'corners': Smoke(['--rooms', '1', '--points', '5000', '--timing-rooms', '0', '--generate',
-                      '0'],
-                     r'corners, generator rooms: .+; all rooms \(mean error, right count, right '
-                     r'order\): traced ' + figure('traced') + r' cm \(worst [\d.]+\) / \d+% / '
-                     r'\d+%; paper .+; convex hull ' + figure('hull') + ' cm .+'),
+    'bench_scanner.py':
+        Smoke(['--rays', '2000', '--slow-rays', '100', '--scan-points', '2000',
+               '--repeats', '1', '--batch-rays', '4096'],
+              r'scanner vs fastest bpy loop \(bpy \S+ loop\), 1 thread each, median of 1: '
+              r'default sensor scans with glass ' + figure('scan') + r'x rays/s \(paper '
+              r'[\d.]+x, tls [\d.]+x, tablet [\d.]+x\); bare ray casting ' +
+              figure('bare') + r'x; our scan / bare Embree cast ' + figure('bound') + 'x'),
+    'bench_writer.py':
+        Smoke(['--points', '2000', '--repeats', '1'],
+              r'text writer speedup vs the fastest alternative \(.+\), best of 1: ' +
+              figure('ratio') + 'x'),
+    'bench_generate.py':
+        Smoke(['--rooms-per-area', '1', '--points', '5000', '--workers', '1'],
+              r'3x50 rooms x 5,000 points, 1 workers: ' + figure('seconds') +
+              r' s \(.+\) = ' + figure('ratio') + 'x of the 10-minute goal'),
+    'bench_convert.py':
+        Smoke(['--rooms', '2', '--points-per-object', '1000', '--workers', '2',
+               '--repeats', '1'],
+              r'convert speedup vs mmdet3d at equal parallelism: ' + figure('one') +
+              r'x \(1 process each\), ' + figure('two') + r'x \(2 each\); synthdet 2 '
+              r'workers vs mmdet3d as shipped: ' + figure('shipped') + r'x; CPU-time '
+              r'ratio \(1 process each\): ' + figure('cpu') + 'x'),
+    'bench_model.py':
+        Smoke(['--points', '3000', '--iters', '1', '--threads', '1', '--in-process'],
+              r'2 cm \+ fine level \(CPU seconds\): train x' + figure('train_2cm') +
+              r' of 2 cm, x' + figure('train_1cm') + r' of 1 cm; inference x' +
+              figure('infer_2cm') + r' of 2 cm, x' + figure('infer_1cm') + ' of 1 cm',
+              slow=True),
+    'bench_corners.py':
+        Smoke(['--rooms', '1', '--points', '5000', '--timing-rooms', '0', '--generate',
+               '0'],
+              r'corners, generator rooms: .+; all rooms \(mean error, right count, right '
+              r'order\): traced ' + figure('traced') + r' cm \(worst [\d.]+\) / \d+% / '
+              r'\d+%; paper .+; convex hull ' + figure('hull') + ' cm .+'),
     # an untrained model: only its surest boxes, so that the FreeCAD document stays small
-    'hall': Smoke(['--points', '30000', '--hall-size', '8', '7', '--rooms', '1',
-                   '--room-points', '10000', '--score-thr', '0.9', '--config',
-                   'configs/tr3d/tiny.py', '--checkpoint'],
-                  r'hall ' + figure('points') + r'M points -> FCStd: ' + figure('seconds') +
-                  r' s, peak ' + figure('peak') + r' GB; windowed recall ' + figure('hall') +
-                  ' vs room recall ' + figure('rooms'),
-                  with_model=True,
-                  slow=True),
-    'sensors': Smoke(['--rooms', '1', '--points', '5000', '--repeats', '1'],
-                     r'sensors: slowest \S+ ' + figure('seconds') + r' s per 1M-point room \(' +
-                     figure('ratio') + r'x the aimed paper sensor\)'),
-    'structure_thinning': Smoke(['--rooms', '1', '--points', '20000', '--sample', '2000'],
-                                r'voxel grid first: 10th-percentile voxels per object paper ' +
-                                figure('paper') + 'x, tls ' + figure('tls') + 'x, tablet ' +
-                                figure('tablet') + 'x'),
-    'dist_train': Smoke(['--rooms-per-area', '1', '--points', '5000', '--iters', '1', '--warmup',
-                         '0'],
-                        r'2 processes x 1 thread vs 1 process x 2 threads: x' + figure('ratio') +
-                        r' faster per iteration of 4 rooms \(' + figure('two') + ' s vs ' +
-                        figure('one') + r' s\)',
-                        slow=True),
-    'scan_io': Smoke(['--points', '20000', '--room-points', '5000', '--chunk', '5000'],
-                     r'scan_io \d+M-point LAZ: streamed load_scan peak ' + figure('streamed') +
-                     r' GB in \d+ s vs read-all ' + figure('whole') + r' GB in \d+ s: ' +
-                     figure('ratio') + 'x less memory'),
-    'real_scans': Smoke(['--generate', '1', '--config', 'configs/tr3d/tiny.py', '--checkpoint'],
-                        r'real scans: recall ' + figure('recall') + r' at IoU 0\.25, ' +
-                        figure('fp') + r' false positives per room, ' + figure('phantoms') +
-                        r' phantom yumi/3d printer \(' + figure('rooms') + r' rooms\)',
-                        with_model=True,
-                        slow=True),
+    'bench_hall.py':
+        Smoke(['--points', '30000', '--hall-size', '8', '7', '--rooms', '1',
+               '--room-points', '10000', '--score-thr', '0.9', '--config',
+               'configs/tr3d/tiny.py', '--checkpoint'],
+              r'hall ' + figure('points') + r'M points -> FCStd: ' + figure('seconds') +
+              r' s, peak ' + figure('peak') + r' GB; windowed recall ' + figure('hall') +
+              ' vs room recall ' + figure('rooms'),
+              with_model=True,
+              slow=True),
+    'bench_sensors.py':
+        Smoke(['--rooms', '1', '--points', '5000', '--repeats', '1'],
+              r'sensors: slowest \S+ ' + figure('seconds') + r' s per 1M-point room \(' +
+              figure('ratio') + r'x the aimed paper sensor\)'),
+    'bench_structure_thinning.py':
+        Smoke(['--rooms', '1', '--points', '20000', '--sample', '2000'],
+              r'voxel grid first: 10th-percentile voxels per object paper ' +
+              figure('paper') + 'x, tls ' + figure('tls') + 'x, tablet ' +
+              figure('tablet') + 'x'),
+    'bench_dist_train.py':
+        Smoke(['--rooms-per-area', '1', '--points', '5000', '--iters', '1', '--warmup',
+               '0'],
+              r'2 processes x 1 thread vs 1 process x 2 threads: x' + figure('ratio') +
+              r' faster per iteration of 4 rooms \(' + figure('two') + ' s vs ' +
+              figure('one') + r' s\)',
+              slow=True),
+    'bench_scan_io.py':
+        Smoke(['--points', '20000', '--room-points', '5000', '--chunk', '5000'],
+              r'scan_io \d+M-point LAZ: streamed load_scan peak ' + figure('streamed') +
+              r' GB in \d+ s vs read-all ' + figure('whole') + r' GB in \d+ s: ' +
+              figure('ratio') + 'x less memory'),
+    'bench_real_scans.py':
+        Smoke(['--generate', '1', '--config', 'configs/tr3d/tiny.py', '--checkpoint'],
+              r'real scans: recall ' + figure('recall') + r' at IoU 0\.25, ' +
+              figure('fp') + r' false positives per room, ' + figure('phantoms') +
+              r' phantom yumi/3d printer \(' + figure('rooms') + r' rooms\)',
+              with_model=True,
+              slow=True),
     # its whole run at a tiny scale, headline included, is tests/test_bench_domain_shift.py's
-    'domain_shift': 'tests/test_bench_domain_shift.py',
+    'bench_domain_shift.py': 'tests/test_bench_domain_shift.py',
 }
 
 
 def test_every_benchmark_has_a_smoke_run():
-    found = {p.stem[len('bench_'):] for p in (REPO / 'benchmarks').glob('bench_*.py')}
+    found = {p.name for p in (REPO / 'benchmarks').glob('bench_*.py')}
     assert sorted(found - set(SMOKE)) == [], 'benchmarks without an entry in SMOKE'
     assert sorted(set(SMOKE) - found) == [], 'SMOKE entries without a benchmark'
     for name, smoke in SMOKE.items():
         if isinstance(smoke, str):  # run by another test file, which must name it
-            assert f'bench_{name}' in (REPO / smoke).read_text(), name
+            assert name in (REPO / smoke).read_text(), name
 
 
 def tiny_checkpoint(folder: Path) -> Path:
@@ -131,7 +143,7 @@ def smoke_run(name: str, checkpoint: Future | None) -> subprocess.CompletedProce
     """Run one benchmark at its smallest size as its own process with one OpenMP thread."""
     smoke = SMOKE[name]
     args = [*smoke.args, str(checkpoint.result())] if smoke.with_model else smoke.args
-    return subprocess.run([sys.executable, f'benchmarks/bench_{name}.py', *args],
+    return subprocess.run([sys.executable, f'benchmarks/{name}', *args],
                           cwd=REPO,
                           env=dict(os.environ, OMP_NUM_THREADS='1'),
                           capture_output=True,
