@@ -72,11 +72,11 @@ def load_json(path: str | os.PathLike) -> object:
 
 def write_json_atomic(path: str | os.PathLike, data: object, indent: int | None = 1) -> None:
     """Write ``data`` as UTF-8 JSON next to ``path`` and rename it into place."""
-    _write_text_atomic(path,
+    write_text_atomic(path,
                        json.dumps(data, indent=indent, ensure_ascii=False, allow_nan=False) + '\n')
 
 
-def _write_text_atomic(path: str | os.PathLike, text: str) -> None:
+def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` under a temporary name beside ``path`` and rename it into place; nothing
     is left behind if encoding or writing fails."""
     path = os.fspath(path)
@@ -395,7 +395,7 @@ def write_corners(path: str | os.PathLike, document: dict) -> None:
     """Validate a ``synthdet.corners/1`` document and write it atomically, one key a line."""
     document = validate_corners(document, os.fspath(path))
     lines = [f'  {json.dumps(key)}: {json.dumps(value)}' for key, value in document.items()]
-    _write_text_atomic(path, '{\n' + ',\n'.join(lines) + '\n}\n')
+    write_text_atomic(path, '{\n' + ',\n'.join(lines) + '\n}\n')
 
 
 def write_room(path: str | os.PathLike, document: dict) -> None:

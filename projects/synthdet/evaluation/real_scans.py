@@ -40,7 +40,8 @@ from mmengine.config import Config
 from projects.synthdet.core.rotated_iou import rotated_iou_3d as rotated_iou_tensor
 from projects.synthdet.inference.detector import ModelDetector, load_model
 from projects.synthdet.inference.windows import inference_settings
-from synthdet.contracts import read_labels, write_json_atomic, write_predictions
+from synthdet.contracts import (read_labels, write_json_atomic, write_predictions,
+                                write_text_atomic)
 from synthdet.prepare import PreparedScan, prepare_scan
 from synthdet.room_data import Box, Scan
 from synthdet.scan_io import SCAN_SUFFIXES, load_scan
@@ -330,12 +331,6 @@ def format_result(result: dict) -> str:
 # --------------------------------------------------------------------------- the model
 
 
-def _write_text_atomic(path: Path, text: str) -> None:
-    temporary = path.with_name(f'.{path.name}.tmp{os.getpid()}')
-    temporary.write_text(text, encoding='utf-8')
-    os.replace(temporary, path)
-
-
 def draw_scan(out: Path, prepared: PreparedScan, labels: dict, detections: Sequence[dict],
               score_thr: float, title: str) -> None:
     """A top view (``synthdet.topview.draw_top_view``) of the prepared scan in the scan's own
@@ -410,5 +405,5 @@ def evaluate_scans(cfg: Config,
     result = evaluate_detections(entries, detector.classes, score_thr)
     result['model'] = model_name
     write_json_atomic(out_dir / 'real_scans.json', result, indent=1)
-    _write_text_atomic(out_dir / 'real_scans.txt', format_result(result) + '\n')
+    write_text_atomic(out_dir / 'real_scans.txt', format_result(result) + '\n')
     return result
