@@ -28,6 +28,16 @@ def with_pre_sampling(steps: list[str], *pre_sampling: str) -> list[str]:
     return steps[:index] + list(pre_sampling) + steps[index:]
 
 
+def with_robustness_steps(steps: list[str]) -> list[str]:
+    """The step names with the base config's robustness augmentations right after PointSample."""
+    index = steps.index('PointSample') + 1
+    return steps[:index] + ROBUSTNESS + steps[index:]
+
+
+ROBUSTNESS = [
+    'RandomQuarterTurn', 'RandomDensityFalloff', 'RandomPointDropout', 'RandomJitterPoints',
+    'RandomColourJitter', 'RandomDropPointsColor'
+]
 THINNING = ('ThinRoomStructure', )
 GRID_AND_THINNING = ('VoxelGridSample', 'ThinRoomStructure')
 
@@ -41,10 +51,12 @@ EXPECTED = {
     'exp3': ([1, 2, 3, 4, 6, 7, 8, 9], 5, 'data/s3dis/', 100000, TRAIN_STEPS, TEST_STEPS),
     'exp3_finetune': ([1, 2, 3, 4, 6, 7, 8, 9], 5, 'data/s3dis/', 100000, TRAIN_STEPS,
                       TEST_STEPS),
-    'exp2_cpu': ([7, 8], 9, 'data/s3dis/', 40000, with_pre_sampling(TRAIN_STEPS, *THINNING),
+    'exp2_cpu': ([7, 8], 9, 'data/s3dis/', 40000,
+                 with_robustness_steps(with_pre_sampling(TRAIN_STEPS, *THINNING)),
                  with_pre_sampling(TEST_STEPS, *THINNING)),
     'exp2_cpu_voxel_grid': ([7, 8], 9, 'data/s3dis/', 40000,
-                            with_pre_sampling(TRAIN_STEPS, *GRID_AND_THINNING),
+                            with_robustness_steps(with_pre_sampling(TRAIN_STEPS,
+                                                                    *GRID_AND_THINNING)),
                             with_pre_sampling(TEST_STEPS, *GRID_AND_THINNING)),
     'tiny': ([1], 1, 'data/s3dis_tiny/', 10000,
              [s for s in TRAIN_STEPS if s not in AUGMENTATION], TEST_STEPS),
@@ -90,13 +102,16 @@ PRE_SAMPLING = {
 
 
 @pytest.mark.parametrize('name', sorted(PRE_SAMPLING))
-def test_cpu_configs_change_only_points_thinning_voxels_and_levels_of_exp2(name):
+def test_cpu_configs_change_only_points_thinning_voxels_levels_and_robustness_of_exp2(name):
     exp2, cfg = load('exp2'), load(name)
+    robust = [step for step in cfg.train_pipeline if step.type in ROBUSTNESS]
+    assert robust == ([] if name == 'tiny' else list(exp2.robust_augmentations))
     for key in ('train_pipeline', 'test_pipeline'):
         pre_sampling = [step for step in cfg[key] if step.type in PRE_SAMPLING_STEPS]
         assert pre_sampling == PRE_SAMPLING[name]
         derived = [
-            step for step in cfg[key] if step.type not in ('PointSample', *PRE_SAMPLING_STEPS)
+            step for step in cfg[key]
+            if step.type not in ('PointSample', *PRE_SAMPLING_STEPS, *ROBUSTNESS)
         ]
         original = [
             step for step in exp2[key]

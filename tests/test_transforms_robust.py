@@ -18,7 +18,7 @@ from mmengine.runner import set_random_seed
 
 import projects.synthdet.datasets.synthdet_s3dis  # noqa: F401  (registers the transforms)
 from generator.__main__ import main as generate
-from projects.synthdet.config_helpers import with_robustness
+from projects.synthdet.config_helpers import with_robustness, without_robustness
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.datasets.transforms import (RandomColourJitter, RandomDensityFalloff,
                                                    RandomPointDropout, RandomQuarterTurn,
@@ -328,6 +328,20 @@ def test_with_robustness_inserts_after_point_sample():
         with_robustness(colour_first, base.robust_augmentations)
 
 
+def test_experiment_2_trains_with_robustness_and_the_domain_shift_baseline_without():
+    exp2_cpu = Config.fromfile(CONFIGS / 'exp2_cpu.py')
+    robust = [step['type'] for step in exp2_cpu.train_pipeline]
+    assert robust[robust.index('PointSample') + 1:][:len(ROBUST_TYPES)] == ROBUST_TYPES
+    assert not set(ROBUST_TYPES) & {step['type'] for step in exp2_cpu.test_pipeline}
+    plain = without_robustness(exp2_cpu.train_pipeline, exp2_cpu.robust_augmentations)
+    assert [step['type'] for step in plain] == [t for t in robust if t not in ROBUST_TYPES]
+    paper = Config.fromfile(CONFIGS / 'domain_shift_cpu.py')
+    assert not paper.robustness
+    assert not set(ROBUST_TYPES) & {step['type'] for step in paper.train_pipeline}
+    mixed = Config.fromfile(CONFIGS / 'domain_shift_mixed_cpu.py')
+    assert set(ROBUST_TYPES) <= {step['type'] for step in mixed.train_pipeline}
+
+
 @pytest.fixture(scope='module')
 def generated_room(tmp_path_factory) -> Path:
     """One room of the real generator (bpy, Embree), converted to info pickles."""
@@ -377,8 +391,7 @@ def test_robust_pipeline_runs_on_a_generated_room(generated_room):
     num_points = 40000
     n_boxes = len(dataset.get_data_info(0)['ann_info']['gt_labels_3d'])
     assert n_boxes > 0
-    default, _ = _dataset(generated_room,
-                          with_robustness(cfg.train_pipeline, cfg.robust_augmentations))
+    default, _ = _dataset(generated_room, cfg.train_pipeline)  # exp2_cpu trains with them
     counts = []
     for seed in range(6):
         set_random_seed(seed)
@@ -387,7 +400,8 @@ def test_robust_pipeline_runs_on_a_generated_room(generated_room):
     # every augmentation applied at full strength
     strong, _ = _dataset(
         generated_room,
-        with_robustness(cfg.train_pipeline, at_full_strength(cfg.robust_augmentations)))
+        with_robustness(without_robustness(cfg.train_pipeline, cfg.robust_augmentations),
+                        at_full_strength(cfg.robust_augmentations)))
     set_random_seed(0)
     # the room is a laser scan of 50,000 points, whose far objects hold a dozen: at full
     # strength the density falloff keeps 10 % of them and the dropout half the rest

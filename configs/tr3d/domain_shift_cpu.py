@@ -21,6 +21,7 @@ _base_ = ['./exp2_cpu.py']
 from projects.synthdet.config_helpers import area_datasets, area_info_file  # noqa: E402
 from projects.synthdet.config_helpers import with_test_time_augmentation  # noqa: E402
 from projects.synthdet.config_helpers import without_pre_sampling  # noqa: E402
+from projects.synthdet.config_helpers import without_robustness  # noqa: E402
 
 data_root = 'work_dirs/domain_shift/data/'
 train_area = [11]
@@ -29,7 +30,8 @@ max_iters = 200
 robustness = False  # the robustness augmentations (domain_shift_mixed_cpu.py) are off
 model = dict(
     neck=dict(backbone_fine_level=False), bbox_head=dict(label2level=(1, 0, 1, 0, 0)))
-train_pipeline = without_pre_sampling(_base_.train_pipeline)
+train_pipeline = without_robustness(
+    without_pre_sampling(_base_.train_pipeline), _base_.robust_augmentations)
 test_pipeline = without_pre_sampling(_base_.test_pipeline)
 tta_pipeline = with_test_time_augmentation(test_pipeline)
 

@@ -9,6 +9,9 @@
 #   (exp2.py: (1, 0, 1, 0, 0)). On 32 and 64 cm levels the small printers and the backless
 #   benches were predicted at their class's mean size (docs/results.md);
 # - 40,000 sampled points per room instead of 100,000, in training and testing;
+# - the robustness augmentations of the base config (`robust_augmentations`: quarter turns,
+#   density falloff and point dropout, 5 mm jitter, colour jitter and colour-less rooms) in
+#   training, so that real scans (other colours, sparser and partial) look less foreign;
 # - before the sampling, `ThinRoomStructure` keeps 10 % of the floor, wall and ceiling points,
 #   in training and testing (on a laser-scanned room 90 % of the points lie on the structure, so
 #   40,000 sampled points left its objects a median of 71 points; thinned, 519:
@@ -29,6 +32,7 @@
 # 2-core machine): 4.2 s per training iteration of 4 rooms on average, 0.6 s per test room.
 _base_ = ['./exp2.py']
 from projects.synthdet.config_helpers import area_datasets, with_num_points  # noqa: E402
+from projects.synthdet.config_helpers import with_robustness  # noqa: E402
 from projects.synthdet.config_helpers import with_structure_thinning  # noqa: E402
 from projects.synthdet.config_helpers import with_test_time_augmentation  # noqa: E402
 
@@ -43,6 +47,7 @@ train_pipeline, test_pipeline = (
     with_structure_thinning(
         with_num_points(pipeline, num_points), dict(type='ThinRoomStructure', keep=0.1))
     for pipeline in (_base_.train_pipeline, _base_.test_pipeline))
+train_pipeline = with_robustness(train_pipeline, _base_.robust_augmentations)
 tta_pipeline = with_test_time_augmentation(test_pipeline)
 train_dataloader = dict(
     batch_size=4,

@@ -94,6 +94,14 @@ def without_pre_sampling(pipeline: Sequence[Mapping[str, Any]]) -> list[dict]:
     return [dict(step) for step in pipeline if step['type'] not in PRE_SAMPLING_STEPS]
 
 
+def without_robustness(pipeline: Sequence[Mapping[str, Any]],
+                       augmentations: Sequence[Mapping[str, Any]]) -> list[dict]:
+    """A copy of ``pipeline`` without the steps of ``augmentations`` (the inverse of
+    ``with_robustness``, for a config whose base trains with them)."""
+    types = {step['type'] for step in augmentations}
+    return [dict(step) for step in pipeline if step['type'] not in types]
+
+
 def with_robustness(pipeline: Sequence[Mapping[str, Any]],
                     augmentations: Sequence[Mapping[str, Any]]) -> list[dict]:
     """A copy of the train ``pipeline`` with ``augmentations`` (``robust_augmentations`` of
