@@ -35,6 +35,10 @@ demo: setup
 # their validation; docs/results.md). Rooms written by an older generator are kept as they are:
 # empty data/s3dis to regenerate them.
 EXP2_DATA ?= data/s3dis
+# the generator profile of the rooms (generator/profiles): mixed_rooms puts offices, meeting
+# rooms, living rooms and bedrooms beside the factory rooms, so that the model learns what is not
+# a YuMi or a 3D printer (docs/generator.md, "Room kinds"); EXP2_PROFILE= for factory rooms only
+EXP2_PROFILE ?= mixed_rooms
 EXP2_WORK ?= work_dirs/exp2_cpu
 # the config trained and tested, e.g. a variant of exp2_cpu.py (configs/tr3d/exp2_cpu_voxel_grid.py)
 EXP2_CONFIG ?= configs/tr3d/exp2_cpu.py
@@ -71,7 +75,8 @@ REAL_SCANS ?=
 exp2-cpu: export OMP_NUM_THREADS = $(EXP2_THREADS)
 exp2-cpu: setup
 	$(PY) -m generator --out $(EXP2_DATA)/Stanford3dDataset_v1.2_Aligned_Version --areas 7 8 9 \
-	    --rooms-per-area 50 --points 1000000 --seed 0 --workers 2
+	    --rooms-per-area 50 --points 1000000 --seed 0 --workers 2 \
+	    $(if $(strip $(EXP2_PROFILE)),--profile $(EXP2_PROFILE))
 	$(PY) tools/check_annotations.py $(EXP2_DATA)/Stanford3dDataset_v1.2_Aligned_Version --areas 7 8 9
 	$(PY) tools/create_data.py s3dis --root-path $(EXP2_DATA) --out-dir $(EXP2_DATA) --areas 7 8 9 --workers 2
 	$(PY) tools/dataset_stats.py $(EXP2_DATA) --areas 7 8 9

@@ -61,3 +61,20 @@ def test_a_variant_config_is_trained_and_tested():
     # all of area 9 in one pass and with test-time augmentation, then the loop over the sensors
     assert len(tests) == 3 and ['--tta' in line for line in tests] == [False, True, False]
     assert all(f'tools/test.py {variant} ' in line for line in tests)
+
+
+def _generator_command(stdout: str) -> str:
+    lines = [line for line in stdout.replace('\\\n', ' ').splitlines() if '-m generator' in line]
+    assert len(lines) == 1, stdout
+    return lines[0]
+
+
+def test_rooms_are_generated_in_the_mixed_room_kinds_unless_a_profile_is_given():
+    default = exp2_dry_run()
+    assert default.returncode == 0, default.stderr
+    assert _generator_command(default.stdout).split()[-2:] == ['--profile', 'mixed_rooms']
+    assert (ROOT / 'generator' / 'profiles' / 'mixed_rooms.json').is_file()
+    factory = exp2_dry_run('EXP2_PROFILE=')
+    assert '--profile' not in _generator_command(factory.stdout)
+    tablet = exp2_dry_run('EXP2_PROFILE=tablet')
+    assert _generator_command(tablet.stdout).split()[-2:] == ['--profile', 'tablet']
