@@ -40,7 +40,7 @@ EXP2_DATA ?= data/s3dis
 # a YuMi or a 3D printer (docs/generator.md, "Room kinds"); EXP2_PROFILE= for factory rooms only
 EXP2_PROFILE ?= mixed_rooms
 EXP2_WORK ?= work_dirs/exp2_cpu
-# the config trained and tested, e.g. a variant of exp2_cpu.py (configs/tr3d/exp2_cpu_voxel_grid.py)
+# the config trained and tested: exp2_cpu.py or a variant of it
 EXP2_CONFIG ?= configs/tr3d/exp2_cpu.py
 # One OpenMP thread per process by default: on a busy machine torch's default (all cores)
 # oversubscribes the cores. With EXP2_PROCS=1, set EXP2_THREADS=2 on an idle 2-core machine.

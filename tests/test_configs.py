@@ -39,7 +39,6 @@ ROBUSTNESS = [
     'RandomColourJitter', 'RandomDropPointsColor'
 ]
 THINNING = ('ThinRoomStructure', )
-GRID_AND_THINNING = ('VoxelGridSample', 'ThinRoomStructure')
 
 
 # config: train areas, test area, data_root, sampled points, train steps, test steps
@@ -54,10 +53,6 @@ EXPECTED = {
     'exp2_cpu': ([7, 8], 9, 'data/s3dis/', 40000,
                  with_robustness_steps(with_pre_sampling(TRAIN_STEPS, *THINNING)),
                  with_pre_sampling(TEST_STEPS, *THINNING)),
-    'exp2_cpu_voxel_grid': ([7, 8], 9, 'data/s3dis/', 40000,
-                            with_robustness_steps(with_pre_sampling(TRAIN_STEPS,
-                                                                    *GRID_AND_THINNING)),
-                            with_pre_sampling(TEST_STEPS, *GRID_AND_THINNING)),
     'tiny': ([1], 1, 'data/s3dis_tiny/', 10000,
              [s for s in TRAIN_STEPS if s not in AUGMENTATION], TEST_STEPS),
 }
@@ -93,10 +88,6 @@ def test_resolved_datasets_and_pipelines(name):
 
 PRE_SAMPLING = {
     'exp2_cpu': [dict(type='ThinRoomStructure', keep=0.1)],
-    'exp2_cpu_voxel_grid': [
-        dict(type='VoxelGridSample', voxel_size=0.02),
-        dict(type='ThinRoomStructure', keep=0.1)
-    ],
     'tiny': []
 }
 
@@ -119,7 +110,7 @@ def test_cpu_configs_change_only_points_thinning_voxels_levels_and_robustness_of
         ]
         assert derived == original
     changed = dict(exp2.model, voxel_size=0.02)
-    if name.startswith('exp2_cpu'):  # and the 16 cm head level, with the printers on it
+    if name == 'exp2_cpu':  # and the 16 cm head level, with the printers on it
         changed['neck'] = dict(exp2.model.neck, backbone_fine_level=True)
         changed['bbox_head'] = dict(exp2.model.bbox_head, label2level=(2, 1, 1, 1, 0))
     assert exp2.model.voxel_size == 0.01 and cfg.model == changed
@@ -204,3 +195,31 @@ def test_training_density_counts_the_structure_thinning():
     assert density_from_config(config(dict(type='ThinRoomStructure', keep=0.25))) == \
         pytest.approx(80.0)
     assert density_from_config(config(dict(type='ThinRoomStructure'))) == pytest.approx(200.0)
+
+
+@pytest.mark.parametrize('name, train_area, test_area, robust', [
+    ('domain_shift_cpu', [11], 21, False),
+    ('domain_shift_mixed_cpu', [12], 28, True),
+])
+def test_domain_shift_configs_are_exp2_at_cpu_scale_by_iterations(name, train_area, test_area,
+                                                                  robust):
+    exp2, cfg = load('exp2'), load(name)
+    assert cfg.robustness is robust
+    robust_steps = [step for step in cfg.train_pipeline if step.type in ROBUSTNESS]
+    assert robust_steps == (list(exp2.robust_augmentations) if robust else [])
+    for key in ('train_pipeline', 'test_pipeline'):  # no thinning: the benchmark's kept models
+        derived = [step for step in cfg[key] if step.type not in ROBUSTNESS]
+        assert derived == with_num_points(exp2[key], 40000)
+    assert cfg.model == dict(exp2.model, voxel_size=0.02,
+                             neck=dict(exp2.model.neck, backbone_fine_level=False))
+    datasets = cfg.train_dataloader.dataset.dataset.datasets
+    assert [d.ann_file for d in datasets] == [f's3dis_infos_Area_{a}.pkl' for a in train_area]
+    assert all(d.pipeline == cfg.train_pipeline for d in datasets)
+    assert cfg.test_dataloader.dataset.ann_file == f's3dis_infos_Area_{test_area}.pkl'
+    assert cfg.test_dataloader.dataset.pipeline == cfg.test_pipeline
+    assert cfg.train_dataloader.batch_size == 4 and cfg.train_dataloader.dataset.times == 1
+    assert cfg.train_dataloader.sampler.type == 'InfiniteSampler'
+    assert cfg.val_dataloader is None and cfg.val_cfg is None
+    assert cfg.train_cfg == dict(type='IterBasedTrainLoop', max_iters=cfg.max_iters)
+    assert cfg.param_scheduler.milestones == [cfg.max_iters * 4 // 5]
+    assert cfg.default_hooks.checkpoint.save_best is None

@@ -52,7 +52,7 @@ def test_uneven_split_is_refused():
 
 
 def test_a_variant_config_is_trained_and_tested():
-    variant = 'configs/tr3d/exp2_cpu_voxel_grid.py'
+    variant = 'configs/tr3d/tiny.py'
     proc = exp2_dry_run(f'EXP2_CONFIG={variant}')
     assert proc.returncode == 0, proc.stderr
     assert f'tools/dist_train.sh {variant} 2 ' in _train_command(proc.stdout)

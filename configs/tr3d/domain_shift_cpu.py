@@ -1,41 +1,34 @@
-# The domain-shift benchmark's paper-profile model (benchmarks/bench_domain_shift.py,
-# docs/results.md "Domain shift"): exp2_cpu.py's model, classes, 2 cm voxels and 40,000 sampled
-# points, trained on the rooms of one generator profile and tested on those of others.
-# Differences from exp2_cpu.py:
-# - data: the benchmark's work folder (`data_root`), one training area (`train_area`: 11, the
-#   paper profile's training rooms) and one test area (`test_area`: 21, its test rooms); the
-#   benchmark writes each model's config with its own data root and areas, and tests each test
-#   profile's area with --cfg-options test_dataloader.dataset.ann_file=s3dis_infos_Area_N.pkl;
-# - an iteration-based schedule (`max_iters` iterations of batch 4, measured: see the benchmark)
-#   instead of epochs, the learning rate dropped 10x for the last fifth (as exp2_cpu's earlier
-#   5-epoch schedule did for its last epoch); mmengine's InfiniteSampler draws the rooms;
-# - no validation while training (the benchmark tests every profile afterwards with the final
-#   checkpoint); a checkpoint every quarter of the schedule, so a stopped training resumes;
-# - no structure thinning (nor a voxel grid): the benchmark's models were trained and tested
-#   before exp2_cpu.py switched `ThinRoomStructure` on, and the benchmark refuses kept models
-#   whose config changed;
-# - for the same reason TR3D's two head levels (32 and 64 cm) and exp2.py's label2level, without
-#   the 16 cm level exp2_cpu.py added later.
-# configs/tr3d/domain_shift_mixed_cpu.py is the mixed-profile model.
-_base_ = ['./exp2_cpu.py']
+# The domain-shift benchmark's paper-profile model (benchmarks/bench_domain_shift.py): exp2.py's
+# classes, model and label2level at CPU scale (2 cm voxels, so head levels of 32 and 64 cm;
+# 40,000 sampled points; batch 4), trained on one generator profile's rooms and tested on the
+# test rooms of every profile. No structure thinning and no robustness augmentations: the
+# benchmark refuses kept models whose config changed. The benchmark writes each model's config
+# with its own data root and areas; areas 11 and 21 are the paper profile's training and test
+# rooms. An iteration schedule (InfiniteSampler; the learning rate drops 10x for the last fifth),
+# no validation (every profile is tested with the final checkpoint) and a checkpoint every
+# quarter, so a stopped training resumes. domain_shift_mixed_cpu.py overrides what differs.
+_base_ = ['./exp2.py']
 from projects.synthdet.config_helpers import area_datasets, area_info_file  # noqa: E402
+from projects.synthdet.config_helpers import with_num_points  # noqa: E402
 from projects.synthdet.config_helpers import with_test_time_augmentation  # noqa: E402
-from projects.synthdet.config_helpers import without_pre_sampling  # noqa: E402
-from projects.synthdet.config_helpers import without_robustness  # noqa: E402
 
 data_root = 'work_dirs/domain_shift/data/'
 train_area = [11]
 test_area = 21
+num_points = 40000
+voxel_size = 0.02
 max_iters = 200
-robustness = False  # the robustness augmentations (domain_shift_mixed_cpu.py) are off
-model = dict(
-    neck=dict(backbone_fine_level=False), bbox_head=dict(label2level=(1, 0, 1, 0, 0)))
-train_pipeline = without_robustness(
-    without_pre_sampling(_base_.train_pipeline), _base_.robust_augmentations)
-test_pipeline = without_pre_sampling(_base_.test_pipeline)
+robustness = False  # read by the benchmark's report
+# TR3D's two head levels, 32 and 64 cm (exp2_cpu.py adds a 16 cm one)
+model = dict(voxel_size=voxel_size, neck=dict(backbone_fine_level=False))
+
+train_pipeline = with_num_points(_base_.train_pipeline, num_points)
+test_pipeline = with_num_points(_base_.test_pipeline, num_points)
 tta_pipeline = with_test_time_augmentation(test_pipeline)
 
 train_dataloader = dict(
+    batch_size=4,
+    num_workers=1,
     sampler=dict(type='InfiniteSampler', shuffle=True),
     dataset=dict(
         times=1,
@@ -60,5 +53,11 @@ param_scheduler = dict(
     milestones=[max_iters * 4 // 5],
     gamma=0.1)
 default_hooks = dict(
-    checkpoint=dict(by_epoch=False, interval=max(1, max_iters // 4), max_keep_ckpts=1))
+    logger=dict(interval=10),
+    checkpoint=dict(
+        by_epoch=False,
+        interval=max(1, max_iters // 4),
+        max_keep_ckpts=1,
+        save_best=None,
+        rule=None))
 log_processor = dict(by_epoch=False)

@@ -1,8 +1,6 @@
-# The domain-shift benchmark's mixed-profile model (benchmarks/bench_domain_shift.py): the
-# paper-profile model of domain_shift_cpu.py trained on the rooms of the generator's default mix
-# (area 12) with the training robustness augmentations (`robust_augmentations` of
-# _base_/s3dis-synthdet.py, inserted by `with_robustness`) switched on; tested in-domain on the
-# mixed test rooms (area 28). `robustness` tells the benchmark's report that they are on.
+# The domain-shift benchmark's mixed-profile model (benchmarks/bench_domain_shift.py):
+# domain_shift_cpu.py trained on the rooms of the generator's default mix (area 12) with the
+# robustness augmentations of _base_/s3dis-synthdet.py, tested on the mixed test rooms (area 28).
 _base_ = ['./domain_shift_cpu.py']
 from projects.synthdet.config_helpers import area_datasets, area_info_file  # noqa: E402
 from projects.synthdet.config_helpers import with_robustness  # noqa: E402

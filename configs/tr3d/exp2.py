@@ -1,11 +1,8 @@
 # Experiment 2: generated data only. Train the generated areas 7 and 8, test the generated area 9,
 # on table, chair, sofa and the two synthetic classes yumi and 3dprinter.
-# The paper's Table 2 also lists the real areas 1, 2, 3 for training; this config trains on
-# 7 and 8 only so that the experiment runs without the real S3DIS download (exp2_paper.py is
-# the paper's variant).
-# label2level: table and sofa on the coarse level as in TR3D's S3DIS config; chair, the ABB
-# YuMi (about 0.4 x 0.5 x 0.6 m) and desktop 3D printers (about 0.5 m) are chair-sized objects
-# and go to the fine level, like TR3D's chair.
+# Without the real areas 1, 2, 3 of the paper's Table 2, so that it runs without the S3DIS
+# download (exp2_paper.py adds them). label2level: table and sofa on the coarse level as in
+# TR3D's S3DIS config; chair, YuMi and 3D printer (chair-sized) on the fine level.
 _base_ = ['./tr3d.py', './_base_/s3dis-synthdet.py']
 from projects.synthdet.config_helpers import area_loaders  # noqa: E402
 

@@ -1,13 +1,7 @@
-# Tiny TR3D for the tests: tests/test_tr3d_overfit.py overfits a few small generated rooms with it
-# and tests/test_tr3d_tools.py runs the tools on it. Same model and classes as exp2.py; the
-# differences make it learn a few rooms by heart in about a minute and a half on one CPU core:
-# - data: area 1 of a test folder (set data_root of the train/val/test datasets, e.g. with
-#   --cfg-options), trained and tested on the same rooms;
-# - 2 cm voxels (model.voxel_size) and 10,000 sampled points instead of 1 cm and 100,000;
-# - no augmentation (no flips, scaling or translation jitter): the test asks for memorisation;
-# - batch 1, no dataset repeat, no loader worker processes;
-# - a constant learning rate (TR3D's 1e-3 without its decay after epochs 8 and 11), 24 epochs,
-#   validation and a checkpoint after the last one only, log every 5 iterations.
+# Tiny TR3D for the tests (tests/test_tr3d_overfit.py, tests/test_tr3d_tools.py): exp2.py's
+# model and classes, made to learn a few rooms of area 1 by heart on one CPU core (set the
+# datasets' data_root with --cfg-options): trained and tested on the same rooms, 2 cm voxels,
+# 10,000 sampled points, no augmentation, batch 1, a constant learning rate for 24 epochs.
 _base_ = ['./exp2.py']
 from projects.synthdet.config_helpers import area_datasets, area_info_file  # noqa: E402
 from projects.synthdet.config_helpers import with_num_points  # noqa: E402

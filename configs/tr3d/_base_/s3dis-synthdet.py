@@ -51,13 +51,9 @@ test_pipeline = [
 # derives this from its own.
 tta_pipeline = with_test_time_augmentation(test_pipeline)
 
-# Robustness to real scans, switched on by none of the experiments yet: a config
-# adds them with `train_pipeline = with_robustness(_base_.train_pipeline,
-# _base_.robust_augmentations)` (projects/synthdet/config_helpers.py), which inserts them right
-# after PointSample. Quarter turns about z (the boxes stay axis-aligned and exact), a tablet's
-# density falling with the distance to a virtual sensor, uniform point dropout, 5 mm xyz jitter,
-# colour jitter of contrast, per-channel gain and brightness, and colour-less scans (r g b = 0).
-# docs/training.md, "Robustness augmentations", explains them and their order.
+# Augmentations that make real scans look less foreign (other colours, sparser, partial), off
+# here: a config inserts them after PointSample with `with_robustness(_base_.train_pipeline,
+# _base_.robust_augmentations)`. docs/training.md, "Robustness augmentations", explains them.
 robust_augmentations = [
     dict(type='RandomQuarterTurn', prob=0.75),
     dict(
@@ -102,10 +98,7 @@ test_evaluator = val_evaluator
 # (6-11 m x 5-9 m: median floor area 59 m^2 -> 8.0 m) and to the largest object of its library
 # (a 3-seat sofa, 2.54 m footprint diagonal -> 2.6 m overlap).
 inference_window = dict(size=8.0, overlap=2.6)
-# The point density the model was trained on, in points per m^2 of floor: the test pipeline's
-# PointSample num_points over this median training floor area (the window rule's 59 m^2), read
-# by density_from_config (windows.py) at run time, so a config that changes num_points with
-# with_num_points gets its own density (100,000 -> 1,695; exp2_cpu 40,000 -> 678; tiny 10,000
-# -> 169). tools/predict.py and tools/scan2cad.py resample denser scans down to it and warn about
-# scans more than 2x off it (synthdet.prepare.prepare_scan's target_density).
+# The trained point density (points per m^2 of floor) is the test pipeline's sampled points
+# over this median training floor area (density_from_config in windows.py); tools/predict.py and
+# tools/scan2cad.py resample denser scans down to it.
 inference_density = dict(floor_area=59.0)
