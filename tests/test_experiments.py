@@ -225,6 +225,6 @@ def test_train_options_amp_and_auto_scale_lr(tmp_path: Path) -> None:
                               capture_output=True,
                               text=True,
                               timeout=300)
-        assert proc.returncode == 2  # a usage error (README "Safety")
+        assert proc.returncode == 2  # a usage error (docs/safety.md)
         assert proc.stderr.strip().splitlines()[-1] == (
             "train: error: --amp needs a CUDA GPU (mmengine's AmpOptimWrapper); none found")

@@ -56,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
         draw_top_view(args.out, scan, gt, pred, corners, args.colour_by, args.title)
         if args.ply:
             write_labelled_ply(args.ply, scan)
-    except (ValueError, KeyError) as error:  # a bad input file: exit 2 (README, "Safety")
+    except (ValueError, KeyError) as error:  # a bad input file: exit 2 (docs/safety.md)
         print(f'visualize: error: {error}', file=sys.stderr)
         return 2
     except OSError as error:  # e.g. an unwritable output: exit 1
