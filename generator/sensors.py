@@ -27,6 +27,7 @@ import warnings
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
+import numba
 import numpy as np
 
 from generator.scanner import (ScanResult, Scanner, TriangleScene, part_bounds, row_norms,
@@ -179,16 +180,27 @@ def tls_grid(step_deg: float, min_elevation_deg: float) -> tuple[np.ndarray, np.
     return np.radians(azimuth), np.radians(elevation)
 
 
-def _grid_directions(azimuth: np.ndarray, elevation: np.ndarray) -> np.ndarray:
-    """Unit directions (E, A, 3) of the grid, elevation-major.
+def _angle_tables(azimuth: np.ndarray,
+                  elevation: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Cosines and sines of the grid's elevations and azimuths (numpy's, computed once)."""
+    return np.cos(elevation), np.sin(elevation), np.cos(azimuth), np.sin(azimuth)
 
-    The sines and cosines of the E + A angles, multiplied out into the grid (the same products
-    as over a meshgrid of the angles, without E x A sines and cosines)."""
-    directions = np.empty((len(elevation), len(azimuth), 3))
-    cos_elevation = np.cos(elevation)[:, None]
-    np.multiply(cos_elevation, np.cos(azimuth), out=directions[..., 0])
-    np.multiply(cos_elevation, np.sin(azimuth), out=directions[..., 1])
-    directions[..., 2] = np.sin(elevation)[:, None]
+
+@numba.njit(cache=True, nogil=True)
+def _grid_directions(cos_elevation: np.ndarray, sin_elevation: np.ndarray,
+                     cos_azimuth: np.ndarray, sin_azimuth: np.ndarray) -> np.ndarray:
+    """Unit directions (E * A, 3) of the grid, elevation-major, as the float32 rays Embree casts.
+
+    Each component is the float64 product of an elevation's and an azimuth's cosine or sine
+    (:func:`_grid_points` recomputes the same products for the returns), rounded to float32."""
+    columns = len(cos_azimuth)
+    directions = np.empty((len(cos_elevation) * columns, 3), dtype=np.float32)
+    for row in range(len(cos_elevation)):
+        for column in range(columns):
+            beam = row * columns + column
+            directions[beam, 0] = cos_elevation[row] * cos_azimuth[column]
+            directions[beam, 1] = cos_elevation[row] * sin_azimuth[column]
+            directions[beam, 2] = sin_elevation[row]
     return directions
 
 
@@ -206,21 +218,66 @@ def _cast_all(scanner: Scanner, origins: np.ndarray, directions: np.ndarray, bat
     return t_hit, triangle
 
 
-def _shifted(values: np.ndarray, axis: int, step: int, wrap: bool, fill) -> np.ndarray:
-    """``values`` of the grid neighbour ``step`` away along ``axis`` (``fill`` past the border)."""
-    out = np.roll(values, step, axis=axis)
-    if not wrap:
-        border = [slice(None)] * values.ndim
-        border[axis] = slice(0, step) if step > 0 else slice(step, None)
-        out[tuple(border)] = fill
-    return out
+@numba.njit(cache=True, nogil=True)
+def _windowed_ranges(t_hit: np.ndarray, min_range: float, max_range: float) -> np.ndarray:
+    """The hit distances (float32) as float64 ranges, inf outside [min_range, max_range]."""
+    ranges = np.empty(len(t_hit))
+    for beam in range(len(t_hit)):
+        value = np.float64(t_hit[beam])
+        ranges[beam] = np.inf if value < min_range or value > max_range else value
+    return ranges
+
+
+@numba.njit(cache=True, nogil=True)
+def _depth_edges(ranges: np.ndarray, triangle: np.ndarray, columns: int, on_object: np.ndarray,
+                 part: np.ndarray, jump: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per beam of a grid (flattened, ``columns`` azimuths per row): the largest range step to a
+    neighbour across an object edge (0: none), that neighbour's range and triangle (undefined
+    where the step is 0). The neighbours in this order: azimuth - 1 and + 1 (wrapping around),
+    elevation - 1 and + 1; a later one replaces an earlier one only with a larger step."""
+    size = len(ranges)
+    rows = size // columns
+    largest = np.zeros(size)
+    other = np.empty(size)
+    other_tri = np.empty(size, dtype=triangle.dtype)
+    for beam in range(size):
+        mine = ranges[beam]
+        if not np.isfinite(mine):  # a step from a lost beam is no edge
+            continue
+        row = beam // columns
+        column = beam - row * columns
+        mine_on_object = on_object[triangle[beam]]
+        for side in range(4):
+            if side == 0:
+                neighbour = beam - 1 if column > 0 else beam + columns - 1
+            elif side == 1:
+                neighbour = beam + 1 if column < columns - 1 else beam - columns + 1
+            elif side == 2:
+                if row == 0:
+                    continue
+                neighbour = beam - columns
+            else:
+                if row == rows - 1:
+                    continue
+                neighbour = beam + columns
+            theirs = ranges[neighbour]
+            gap = abs(theirs - mine)
+            if not (gap > jump and gap > largest[beam] and gap < np.inf):
+                continue
+            their_tri = triangle[neighbour]
+            if not (mine_on_object or on_object[their_tri]):
+                continue
+            if part[their_tri] == part[triangle[beam]]:
+                continue
+            largest[beam], other[beam], other_tri[beam] = gap, theirs, their_tri
+    return largest, other, other_tri
 
 
 def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.ndarray,
                   on_object: np.ndarray, part: np.ndarray, share: float,
                   jump: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Ranges, triangles and the mixed (stray) beams of one station's grid (E, A) after mixing
-    at depth edges, each flattened.
+    at depth edges, each flattened (``ranges`` and ``triangle`` are changed in place).
 
     Two grid neighbours (azimuth wraps around) straddle a depth edge when their ranges differ by
     more than ``jump``, they hit different parts and one of them is an object (``on_object`` per
@@ -231,36 +288,38 @@ def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.nda
     across the largest step, with the neighbour's triangle past half way.
     """
     columns = ranges.shape[1]
-    flat_ranges, flat_triangle = ranges.ravel(), triangle.ravel()
-    object_hit = on_object[flat_triangle] & np.isfinite(flat_ranges)
-    largest = np.zeros(ranges.size)
-    other, other_tri = flat_ranges.copy(), flat_triangle.copy()
-    for axis, step, wrap in ((1, 1, True), (1, -1, True), (0, 1, False), (0, -1, False)):
-        n_range = _shifted(ranges, axis, step, wrap, np.inf).ravel()
-        with np.errstate(invalid='ignore'):
-            gap = np.abs(n_range - flat_ranges)
-        # a finite gap: both beams returned (inf - x is inf, inf - inf is nan); the few beams
-        # with a large enough step are checked for an object edge against their neighbour
-        edge = np.flatnonzero((gap > jump) & (gap > largest) & (gap < np.inf))
-        if axis == 1:
-            row, column = np.divmod(edge, columns)
-            neighbour = row * columns + (column - step) % columns
-        else:  # rows past the border have an infinite range: not among the edges
-            neighbour = edge - step * columns
-        n_tri = flat_triangle[neighbour]
-        mine = flat_triangle[edge]
-        keep = (object_hit[edge] | object_hit[neighbour]) & (part[n_tri] != part[mine])
-        edge, neighbour, n_tri = edge[keep], neighbour[keep], n_tri[keep]
-        largest[edge], other[edge], other_tri[edge] = gap[edge], n_range[edge], n_tri
+    ranges, triangle = ranges.reshape(-1), triangle.reshape(-1)
+    largest, other, other_tri = _depth_edges(ranges, triangle, columns, on_object, part, jump)
     mixed = np.flatnonzero((largest > 0) & (rng.random(ranges.size) < share))
     fraction = rng.random(len(mixed))
-    ranges, triangle = flat_ranges.copy(), flat_triangle.copy()
     ranges[mixed] += fraction * (other[mixed] - ranges[mixed])
     far = mixed[fraction > 0.5]
     triangle[far] = other_tri[far]
     stray = np.zeros(ranges.size, dtype=bool)
     stray[mixed] = True
     return ranges, triangle, stray
+
+
+@numba.njit(cache=True, nogil=True)
+def _grid_points(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: np.ndarray,
+                 cos_azimuth: np.ndarray, sin_azimuth: np.ndarray, ranges: np.ndarray,
+                 beams: np.ndarray, noise: np.ndarray, a: float, b: float) -> np.ndarray:
+    """Points (N, 3) of ``beams`` (grid indices) at their ranges; with ``noise`` (N,) standard
+    normal draws (empty: none), each range first moves by draw x (a + b x range)."""
+    columns = len(cos_azimuth)
+    xyz = np.empty((len(beams), 3))
+    noisy = len(noise) > 0
+    for k in range(len(beams)):
+        beam = beams[k]
+        measured = ranges[beam]
+        if noisy:
+            measured = measured + noise[k] * (a + b * measured)
+        row = beam // columns
+        column = beam - row * columns
+        xyz[k, 0] = station[0] + cos_elevation[row] * cos_azimuth[column] * measured
+        xyz[k, 1] = station[1] + cos_elevation[row] * sin_azimuth[column] * measured
+        xyz[k, 2] = station[2] + sin_elevation[row] * measured
+    return xyz
 
 
 def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.random.Generator,
@@ -276,7 +335,8 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
     """
     azimuth, elevation = tls_grid(step_deg, cfg['min_elevation_deg'])
     grid = (len(elevation), len(azimuth))
-    directions = _grid_directions(azimuth, elevation).reshape(-1, 3)
+    angles = _angle_tables(azimuth, elevation)
+    directions = _grid_directions(*angles)
     a, b = cfg['range_noise']
     spacing = cfg['point_spacing']
     cubes = VoxelFilter(spacing, stations[0]) if spacing else None
@@ -284,23 +344,24 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
     for index, station in enumerate(stations):
         origins = np.broadcast_to(station, directions.shape)
         t_hit, triangle = _cast_all(scanner, origins, directions, batch, rng)
-        ranges = t_hit.astype(np.float64)
-        ranges[(ranges < cfg['min_range']) | (ranges > cfg['max_range'])] = np.inf
+        ranges = _windowed_ranges(t_hit, cfg['min_range'], cfg['max_range'])
         stray = np.zeros(ranges.size, dtype=bool)
         if cfg['mixed_pixels'] > 0:
             ranges, triangle, stray = _mixed_pixels(
                 rng, ranges.reshape(grid), triangle.reshape(grid), on_object, scanner.scene.part,
                 cfg['mixed_pixels'], cfg['edge_jump'])
         rows = np.flatnonzero(np.isfinite(ranges))
-        measured = ranges[rows]
-        if a > 0 or b > 0:
-            measured = measured + rng.standard_normal(len(rows)) * (a + b * measured)
-        # np.take gathers rows several times faster than fancy indexing, same values
-        xyz = station + np.take(directions, rows, axis=0) * measured[:, None]
+        noise = rng.standard_normal(len(rows)) if a > 0 or b > 0 else np.zeros(0)
         if cubes is not None:
+            # the returns in a random order; the first in a cube is kept
             shuffled = rng.permutation(len(rows))
-            kept = np.sort(shuffled[cubes.new_points(np.take(xyz, shuffled, axis=0))])
-            rows, xyz = rows[kept], np.take(xyz, kept, axis=0)
+            xyz = _grid_points(station, *angles, ranges, rows[shuffled],
+                               noise[shuffled] if len(noise) else noise, a, b)
+            kept = np.zeros(len(rows), dtype=bool)
+            kept[shuffled[cubes.new_points(xyz)]] = True
+            kept = np.flatnonzero(kept)
+            rows, noise = rows[kept], noise[kept] if len(noise) else noise
+        xyz = _grid_points(station, *angles, ranges, rows, noise, a, b)
         points.append(xyz)
         triangles.append(triangle[rows])
         owner.append(np.full(len(rows), index))

@@ -43,26 +43,41 @@ class VoxelFilter:
     def new_points(self, xyz: np.ndarray) -> np.ndarray:
         """Indices (ascending) of the points of ``xyz`` (scan coordinates) in voxels not seen
         before, one per voxel: its first point."""
-        scaled = xyz / self.voxel
-        np.floor(scaled, out=scaled)
-        scaled -= self.origin_key
-        keys = scaled.astype(np.int64)
-        x, y, z = keys[:, 0], keys[:, 1], keys[:, 2]
-        packable = (np.abs(x) < 2**20) & (np.abs(y) < 2**20) & (np.abs(z) < 2**20)
-        packed = ((x + 2**20) << 42) | ((y + 2**20) << 21) | (z + 2**20)
-        packed = np.where(packable, packed, -1)
+        packed = _packed_keys(np.ascontiguousarray(xyz, dtype=np.float64), self.voxel,
+                              self.origin_key)
         first = _first_of_each(packed)
         first = first[packed[first] >= 0]
         fresh = first[~_sorted_contains(self.seen, packed[first])]
         # the fresh keys are new and distinct: the sorted union is the sorted concatenation
         self.seen = np.sort(np.concatenate([self.seen, packed[fresh]]))
         far = []
-        for index in np.flatnonzero(~packable):  # points kilometres away: rare, kept exact
-            key = tuple(int(value) for value in keys[index])
+        for index in np.flatnonzero(packed < 0):  # points kilometres away: rare, kept exact
+            key = tuple(int(value) for value in self._keys(xyz[index]))
             if key not in self.wide:
                 self.wide.add(key)
                 far.append(index)
         return np.sort(np.concatenate([fresh, np.array(far, dtype=np.int64)]))
+
+    def _keys(self, point: np.ndarray) -> np.ndarray:
+        """The integer voxel coordinates (3,) of one point, relative to the origin's voxel."""
+        return (np.floor(point / self.voxel) - self.origin_key).astype(np.int64)
+
+
+@numba.njit(cache=True, nogil=True)
+def _packed_keys(xyz: np.ndarray, voxel: float, origin_key: np.ndarray) -> np.ndarray:
+    """One int64 key per point (N, 3): its voxel's integer coordinates relative to
+    ``origin_key``, 21 bits each, packed; -1 for a point 2**20 voxels or more away."""
+    packed = np.empty(len(xyz), dtype=np.int64)
+    for i in range(len(xyz)):
+        key = np.int64(0)
+        for axis in range(3):
+            index = np.int64(np.floor(xyz[i, axis] / voxel) - origin_key[axis])
+            if abs(index) >= 2**20:
+                key = np.int64(-1)
+                break
+            key = (key << 21) | (index + 2**20)
+        packed[i] = key
+    return packed
 
 
 @numba.njit(cache=True, nogil=True)
