@@ -16,7 +16,7 @@ Python, and the commit) in ``docs/benchmarks/<name>.json``. Absolute paths of th
 scrubbed from what is kept (:func:`scrub`): the checkout becomes relative, an installed package
 ``site-packages/...``, a temporary folder ``$TMPDIR/...``.
 ``docs/benchmarks.md`` is then written from all kept outputs: a table of the last lines and
-every output in full. With ``--only``, the other benchmarks keep their earlier outputs;
+the end of every output (:func:`shown_output`). With ``--only``, the other benchmarks keep their earlier outputs;
 ``--render-only`` runs nothing and rewrites the page from the kept outputs.
 The machine may be shared: ratios measured within one run are more robust to load than
 absolute times, and the load is printed with every output.
@@ -51,7 +51,7 @@ ARGUMENTS = {
     'dist_train': ['--rooms-per-area', '4', '--iters', '16', '--warmup', '4'],
     'domain_shift': [],  # its defaults are the documented scale (about 1.5 h on 2 cores)
 }
-# Run only when named: `make bench BENCH_ARGS="--only domain_shift"` (docs/results.md).
+# Run only when named, e.g. `make bench BENCH_ARGS="--only domain_shift"` (docs/results.md).
 OPT_IN = {'domain_shift', 'real_scans'}
 WHAT = {
     'scanner':
@@ -76,7 +76,7 @@ WHAT = {
     'uniform, TLS, tablet)',
     'structure_thinning':
     'points and 2 cm voxels on objects among 40,000 sampled per room and sensor: `PointSample` '
-    'alone vs `ThinRoomStructure` first vs `VoxelGridSample` before both (exp2_cpu_voxel_grid)',
+    'alone vs `ThinRoomStructure` first vs `VoxelGridSample` before both',
     'dist_train':
     'exp2_cpu training speed: 2 processes x 1 thread (`tools/dist_train.sh`, gloo) vs 1 '
     'process x 2 threads, batch of 4 rooms',
@@ -111,6 +111,12 @@ NOTES = {
     ],
 }
 OUTPUT_DIR = REPO_ROOT / 'docs' / 'benchmarks'
+# The page shows the end of each output (its comparison and summary line); the kept text file
+# holds all of it.
+SHOWN_LINES = 40
+# A Python warning as printed to stderr (`file:line: XWarning: message`), followed by the
+# indented source line it points at.
+PYTHON_WARNING = re.compile(r'^\S+:\d+: \w*Warning\b')
 
 
 def discover() -> list[str]:
@@ -131,6 +137,8 @@ def scrub(text: str) -> str:
     text = re.sub(r'(?<![\w.~$])(?:/[\w.+-]+)+/site-packages/', 'site-packages/', text)
     for temporary in sorted({tempfile.gettempdir(), '/tmp'}, key=len, reverse=True):
         text = re.sub(rf'(?<![\w.~$]){re.escape(temporary)}/', '$TMPDIR/', text)
+    # the random name of a folder made by tempfile.mkdtemp() tells nothing
+    text = re.sub(r'\$TMPDIR/tmp\w{8}/', '$TMPDIR/<random>/', text)
     return ABSOLUTE_FOLDER.sub('.../', text)
 
 
@@ -207,6 +215,20 @@ def machine() -> str:
     return f'{model}, {os.cpu_count()} cores, Python {platform.python_version()}'
 
 
+def shown_output(lines: list[str]) -> list[str]:
+    """The lines of an output that the page shows: without Python's warnings (and the source
+    line printed under each), at most the last ``SHOWN_LINES``."""
+    shown, after_warning = [], False
+    for line in lines:
+        if after_warning and line.startswith(' '):
+            after_warning = False
+            continue
+        after_warning = bool(PYTHON_WARNING.match(line))
+        if not after_warning:
+            shown.append(line)
+    return shown[-SHOWN_LINES:]
+
+
 def render(records: list[dict], not_run: list[str], output_dir: Path) -> str:
     """docs/benchmarks.md from the kept benchmark records (and the benchmarks without one)."""
     docs = REPO_ROOT / 'docs'
@@ -253,10 +275,13 @@ def render(records: list[dict], not_run: list[str], output_dir: Path) -> str:
     lines += ['', '## Outputs', '']
     for r in records:
         commit = f', commit {r["commit"]}' if r.get('commit') else ''
+        shown = shown_output(r['output'])
+        cut = ([] if len(shown) == len(r['output']) else
+               ['', f'The last {len(shown)} lines of the output, without Python\'s warnings.'])
         lines += [
             f'### {r["name"]}', '', f'`{r["command"]}` ([{where}/{r["name"]}.txt]'
             f'({where}/{r["name"]}.txt)); {r.get("machine", "machine not recorded")}, '
-            f'{r["finished"]}{commit}', *NOTES.get(r['name'], []), '', '```', *r['output'],
+            f'{r["finished"]}{commit}', *NOTES.get(r['name'], []), *cut, '', '```', *shown,
             '```', ''
         ]
     return '\n'.join(lines)

@@ -1,0 +1,44 @@
+"""docs/benchmarks.md shows the end of each benchmark's output, without Python's warnings."""
+import importlib.util
+import json
+import tempfile
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+# tools/ is a folder of scripts, not a package
+_SPEC = importlib.util.spec_from_file_location('collect_benchmarks',
+                                               REPO / 'tools' / 'collect_benchmarks.py')
+collect_benchmarks = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(collect_benchmarks)
+
+
+def test_page_shows_the_end_of_an_output_without_warnings(tmp_path):
+    output = [f'[bench] step {i}: started (log work_dirs/x/logs/{i}.log)' for i in range(60)]
+    output[3:3] = [
+        'site-packages/m/__init__.py:221: UserWarning: compiled with CPU_ONLY', '  warnings.warn('
+    ]
+    output += [
+        'x.py:9: DeprecationWarning: old', '  import old', 'table  0.9', 'summary: 3.0x faster'
+    ]
+    (tmp_path / 'demo.json').write_text(json.dumps(dict(
+        name='demo', command='.venv/bin/python benchmarks/bench_demo.py', returncode=0,
+        seconds=1.0, load_before=[0, 0, 0], load_after=[0, 0, 0],
+        finished='2026-12-06 07:00 UTC', last_line='summary: 3.0x faster')))
+    (tmp_path / 'demo.txt').write_text('\n'.join(output) + '\n')
+    page = collect_benchmarks.render([collect_benchmarks.kept_output('demo', tmp_path)], [],
+                                     tmp_path)
+    block = page.split('```')[1].strip().splitlines()
+    assert len(block) == collect_benchmarks.SHOWN_LINES
+    assert block[-2:] == ['table  0.9', 'summary: 3.0x faster']
+    assert 'Warning' not in page and 'warnings.warn(' not in page and 'import old' not in page
+    assert block[0] == '[bench] step 22: started (log work_dirs/x/logs/22.log)'
+    assert 'The last 40 lines of the output' in page
+    short = collect_benchmarks.shown_output(['a', 'b'])
+    assert short == ['a', 'b']
+
+
+def test_random_temporary_folder_names_are_scrubbed():
+    temporary = tempfile.gettempdir()
+    text = collect_benchmarks.scrub(f'output in {temporary}/tmpn37p8sz_/data and '
+                                    f'{temporary}/synthdet-bench-hall-x/hall.laz')
+    assert text == 'output in $TMPDIR/<random>/data and $TMPDIR/synthdet-bench-hall-x/hall.laz'
