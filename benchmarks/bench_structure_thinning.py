@@ -1,6 +1,6 @@
 """Points on objects after sampling a room to the model's input, per sensor model: mmdet3d's
 ``PointSample`` alone vs ``ThinRoomStructure`` then ``PointSample`` (the same number of points)
-vs ``VoxelGridSample``, ``ThinRoomStructure`` then ``PointSample`` (exp2_cpu_voxel_grid.py).
+vs ``VoxelGridSample``, ``ThinRoomStructure`` then ``PointSample``.
 
     .venv/bin/python benchmarks/bench_structure_thinning.py [--rooms 4] [--points 1000000]
                                                             [--sample 40000] [--keep 0.1]
