@@ -1,7 +1,7 @@
 """Factory clutter: shelves, cabinets, machines, pallets, crates, carts, bins and pipe runs.
 
 Pure numpy. :func:`sample_clutter` and :func:`sample_pipe_run` draw one clutter object as an
-:class:`~generator.layout.AssetSpec` of class ``clutter``: its kind, size and parameters (style,
+:class:`~generator.asset_spec.AssetSpec` of class ``clutter``: its kind, size and parameters (style,
 colours, counts), all listed in ``meta.json``. :func:`clutter_mesh` builds its triangles from the
 spec alone: closed solids (boxes and axis-aligned cylinders) in the asset's local frame (xy
 centred, z = 0 at the bottom, front towards -y, back towards +y) whose bounds are exactly the
@@ -15,6 +15,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from generator.asset_spec import AssetSpec
 from generator.assets import palette
 
 PRIMITIVE_KINDS = ('box', 'cylinder')
@@ -238,7 +239,6 @@ _SAMPLERS: dict[str, Callable[..., tuple[Size, dict]]] = {
 
 
 def _spec(kind: str, size: Size, params: dict):
-    from generator.layout import AssetSpec  # the layout imports this module
     top = None
     if kind == 'pallet' and params['load'] == 0:  # an empty pallet carries crates
         top = (size[2], (size[0], size[1]))

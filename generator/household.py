@@ -2,7 +2,7 @@
 and the furniture of those rooms that the procedural asset library does not build.
 
 Pure numpy, in the style of generator/clutter.py: :func:`sample_household` draws one object as an
-:class:`~generator.layout.AssetSpec` (kind, size and parameters, all listed in ``meta.json``) and
+:class:`~generator.asset_spec.AssetSpec` (kind, size and parameters, all listed in ``meta.json``) and
 :func:`household_mesh` builds its triangles from the spec alone, as closed boxes and cylinders in
 the local frame (xy centred, z = 0 at the bottom, front towards -y, back towards +y) whose bounds
 are exactly the spec's size.
@@ -17,6 +17,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from generator.asset_spec import AssetSpec
 from generator.assets import palette
 from generator.clutter import _Solids, clutter_mesh
 
@@ -256,7 +257,6 @@ _SAMPLERS: dict[str, Callable[..., tuple[Size, dict]]] = {
 
 def sample_household(rng: np.random.Generator, kind: str, max_height: float):
     """Draw one household object of ``kind`` at most ``max_height`` high (an AssetSpec)."""
-    from generator.layout import AssetSpec  # the layout imports this module
     size, params = _SAMPLERS[kind](rng, max_height)
     cls = FURNITURE_KINDS.get(kind, 'clutter')
     prefix = 'clutter' if cls == 'clutter' else 'furniture'

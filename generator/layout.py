@@ -28,6 +28,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from generator.asset_spec import AssetSpec, Catalog
 from generator.clutter import (CLUTTER_KINDS, PRIMITIVE_KINDS, WALL_KINDS, sample_clutter,
                                sample_pipe_run, sample_primitive)
 from generator.config import ROOM_KINDS
@@ -36,22 +37,6 @@ from synthdet.geometry import (box_corners_xy, edges_cross, points_in_polygon, r
                                signed_area)
 
 EPS = 1e-9
-
-
-@dataclass(frozen=True)
-class AssetSpec:
-    """What the layout needs to know about one asset instance: its class, name and extents."""
-
-    cls: str
-    name: str
-    asset: str
-    params: Mapping[str, Any]
-    size: tuple[float, float, float]
-    top_z: float | None = None
-    top_size: tuple[float, float] | None = None
-
-
-Catalog = Mapping[str, Sequence[AssetSpec]]
 
 
 def catalog_from_library(library: Any) -> dict[str, list[AssetSpec]]:
