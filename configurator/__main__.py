@@ -1,4 +1,4 @@
-"""``python -m configurator {corners,freecad,screenshot} ...``: run a sub-command."""
+"""``python -m configurator {corners,freecad,labels,screenshot} ...``: run a sub-command."""
 import argparse
 import importlib
 import sys
@@ -7,6 +7,7 @@ import sys
 COMMANDS = {
     'corners': 'configurator.corners_cli',
     'freecad': 'configurator.freecad_cli',
+    'labels': 'configurator.labels_cli',
     'screenshot': 'configurator.freecad_screenshot',
 }
 

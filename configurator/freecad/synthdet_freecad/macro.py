@@ -18,7 +18,7 @@ import FreeCAD as App
 # standard library only, importable wherever schema's synthdet.contracts is
 from synthdet.processes import process_alive
 
-from . import appearance, document, schema
+from . import appearance, document, labels, schema
 
 ENV_JOB = 'SYNTHDET_JOB'
 ENV_RESULT = 'SYNTHDET_RESULT'
@@ -206,8 +206,11 @@ def run_gui() -> None:
 
 
 def main() -> None:
-    """Run the import the way the current FreeCAD (GUI or headless) allows."""
-    if App.GuiUp:
+    """Run the import the way the current FreeCAD (GUI or headless) allows; headless with
+    ``SYNTHDET_READ`` set, read a document's labels instead (``labels.run_headless``)."""
+    if os.environ.get(labels.ENV_READ) and not App.GuiUp:
+        labels.run_headless()
+    elif App.GuiUp:
         run_gui()
     else:
         run_headless()

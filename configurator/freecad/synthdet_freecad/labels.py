@@ -1,0 +1,181 @@
+"""Read a (corrected) synthdet document back: every counted part's box, and the room (runs
+inside FreeCAD).
+
+A synthdet part is any object carrying the ``Synthdet`` property ``DetectedClass`` (whatever
+its FreeCAD type); its box is its global placement (the centre of its base, in the scan's own
+coordinates, millimetres) turned about z, and the ``length``, ``width`` and ``height`` cells of
+its parameter sheet. Which parts count:
+
+- a part that is nobody's alternative counts, unless it is hidden while one of its
+  alternatives is shown (the user switched to that alternative);
+- an alternative (listed in another part's ``Alternatives``) counts only when it is shown and
+  the part it is an alternative to is hidden.
+
+A deleted part is simply gone; a part added by hand (``editing.add_part``) is an ordinary part.
+The room comes from the group carrying the ``Synthdet`` property ``CornerCount``: its
+parameter sheet (``floor_z``, ``height``) and its floor sketch (the corners, in order).
+"""
+import json
+import math
+import os
+
+import FreeCAD as App
+
+READ_FORMAT = 'synthdet.freecad-labels/1'
+SIZE_ALIASES = ('length', 'width', 'height')
+REVIEWED_KEY = 'SynthdetReviewed'  # document metadata (Document.Meta): 'true' once reviewed
+ENV_READ = 'SYNTHDET_READ'  # headless: the document to read (the result goes to SYNTHDET_RESULT)
+MAX_TILT_DEG = 0.5  # a part turned further off the vertical is not a box standing upright
+
+
+class NotSynthdet(ValueError):
+    """The document holds nothing synthdet built, or a part that cannot be read as a box."""
+
+
+def _synthdet_property(obj, name: str) -> bool:
+    return name in obj.PropertiesList and obj.getGroupOfProperty(name) == 'Synthdet'
+
+
+def synthdet_parts(doc) -> list:
+    """Every object of ``doc`` that is a synthdet part (``Synthdet`` property DetectedClass)."""
+    return [obj for obj in doc.Objects if _synthdet_property(obj, 'DetectedClass')]
+
+
+def counted_parts(parts: list) -> list:
+    """The parts that are labels, by the visibility rule of the module doc, in document order."""
+    winner_of = {}
+    for part in parts:
+        if _synthdet_property(part, 'Alternatives'):
+            for alternative in part.Alternatives:
+                winner_of[alternative.Name] = part
+    shown_alternative = {
+        winner_of[part.Name].Name
+        for part in parts if part.Name in winner_of and part.Visibility
+    }
+    counted = []
+    for part in parts:
+        winner = winner_of.get(part.Name)
+        if winner is None:
+            if part.Visibility or part.Name not in shown_alternative:
+                counted.append(part)
+        elif part.Visibility and not winner.Visibility:
+            counted.append(part)
+    return counted
+
+
+def _parameter_sheet(doc, part):
+    """The spreadsheet holding the part's size cells: among its children, else by name."""
+    candidates = list(getattr(part, 'Group', [])) + [doc.getObject(f'{part.Name}_Parameters')]
+    for obj in candidates:
+        if obj is not None and obj.TypeId == 'Spreadsheet::Sheet' and \
+                obj.getCellFromAlias('length'):
+            return obj
+    raise NotSynthdet(f'part {part.Label!r} has no parameter sheet with a length cell')
+
+
+def _millimetres(sheet, alias: str, what: str) -> float:
+    value = sheet.get(alias)
+    millimetres = value.Value if hasattr(value, 'Value') else float(value)
+    if not (math.isfinite(millimetres) and millimetres > 0.0):
+        raise NotSynthdet(f'{what}: {alias} is {millimetres} mm, expected a positive length')
+    return millimetres
+
+
+def part_box(doc, part) -> dict:
+    """The part's label box in metres and radians: class, centre, size, yaw (and its name)."""
+    sheet = _parameter_sheet(doc, part)
+    size = [_millimetres(sheet, alias, f'part {part.Label!r}') for alias in SIZE_ALIASES]
+    placement = part.getGlobalPlacement()
+    up = placement.Rotation.multVec(App.Vector(0, 0, 1))
+    if up.z < math.cos(math.radians(MAX_TILT_DEG)):
+        raise NotSynthdet(f'part {part.Label!r} is tilted {math.degrees(math.acos(up.z)):.1f} '
+                          'degrees off the vertical: a label box stands upright')
+    axis = placement.Rotation.multVec(App.Vector(1, 0, 0))
+    base = placement.Base
+    return {
+        'name': part.Name,
+        'label': part.Label,
+        'class': part.DetectedClass,
+        'center': [base.x / 1000.0, base.y / 1000.0, (base.z + size[2] / 2.0) / 1000.0],
+        'size': [value / 1000.0 for value in size],
+        'yaw': math.atan2(axis.y, axis.x),
+    }
+
+
+def room_outline(doc) -> dict | None:
+    """The room's corners (metres, sketch order), floor and ceiling heights, or None."""
+    groups = [obj for obj in doc.Objects if _synthdet_property(obj, 'CornerCount')]
+    if not groups:
+        return None
+    children = list(getattr(groups[0], 'Group', []))
+    sheets = [
+        c for c in children if c.TypeId == 'Spreadsheet::Sheet' and c.getCellFromAlias('floor_z')
+    ]
+    sketches = [c for c in children if c.TypeId == 'Sketcher::SketchObject']
+    if not sheets or not sketches:
+        return None
+    floor_z = sheets[0].get('floor_z')
+    floor_z = (floor_z.Value if hasattr(floor_z, 'Value') else float(floor_z)) / 1000.0
+    height = _millimetres(sheets[0], 'height', 'room') / 1000.0
+    sketch = sketches[0]
+    placement = sketch.getGlobalPlacement()
+    corners = []
+    for geometry in sketch.Geometry:
+        if hasattr(geometry, 'StartPoint'):
+            point = placement.multVec(geometry.StartPoint)
+            corners.append([point.x / 1000.0, point.y / 1000.0])
+    return {'corners': corners, 'floor_z': floor_z, 'ceiling_z': floor_z + height}
+
+
+def read_document(path: str) -> dict:
+    """Open the document at ``path`` (read only: never saved) and return its labels and room.
+
+    Raises ``NotSynthdet`` when it holds no synthdet part or room, or a part that is no box.
+    """
+    doc = App.openDocument(path)
+    try:
+        doc.recompute()  # a cell edited without a recompute gives the sizes the user sees
+        parts = synthdet_parts(doc)
+        room = room_outline(doc)
+        if not parts and room is None:
+            raise NotSynthdet('not a synthdet document: no part has synthdet\'s '
+                              'DetectedClass property and there is no synthdet room')
+        boxes = [part_box(doc, part) for part in counted_parts(parts)]
+        return {
+            'format': READ_FORMAT,
+            'boxes': boxes,
+            'room': room,
+            'reviewed': doc.Meta.get(REVIEWED_KEY, '') == 'true',
+            'scan': source_scan(parts),
+        }
+    finally:
+        App.closeDocument(doc.Name)
+
+
+def source_scan(parts: list) -> str:
+    """The scan the parts were detected in (the first part naming one), else ''."""
+    for part in parts:
+        if _synthdet_property(part, 'SourceScan') and part.SourceScan:
+            return part.SourceScan
+    return ''
+
+
+def run_headless() -> None:
+    """Read the document named by ``SYNTHDET_READ`` and write the result JSON (status ``ok``,
+    or ``error`` with ``kind`` ``input`` for a document that is not synthdet's)."""
+    result_path = os.environ['SYNTHDET_RESULT']
+    try:
+        result = dict(read_document(os.environ[ENV_READ]), status='ok', error=None)
+    except NotSynthdet as error:
+        result = {'format': READ_FORMAT, 'status': 'error', 'kind': 'input', 'error': str(error)}
+    except Exception as error:  # the process boundary: every failure goes to the result file
+        result = {
+            'format': READ_FORMAT,
+            'status': 'error',
+            'kind': 'runtime',
+            'error': f'{type(error).__name__}: {error}'
+        }
+    temporary = f'{result_path}.tmp{os.getpid()}'
+    with open(temporary, 'w', encoding='utf-8') as stream:
+        json.dump(result, stream, ensure_ascii=False)
+    os.replace(temporary, result_path)

@@ -1,0 +1,267 @@
+"""A corrected synthdet FreeCAD document as training data: its labels and an S3DIS room.
+
+``make_labels`` reads every counted synthdet part of the document inside ``freecadcmd`` (the
+``freecad`` sub-command's runner and macro, ``synthdet_freecad.labels``), then, in the scan's
+own coordinates:
+
+- writes ``<scan stem>.labels.json`` (``synthdet.labels/1``, what ``tools/eval_scans.py``
+  reads beside a scan);
+- gives every scan point to the box it lies in, or lies within ``BOX_MARGIN`` of (the nearest
+  such box; ``point_owners``), counting only points above the box's bottom by more than
+  ``BOTTOM_CLEARANCE``: the floor under a part and the table top under a part standing on it
+  stay outside;
+- names the other points by the room's outline, as the generator's structure elements:
+  ``floor_1`` within ``SURFACE_BAND`` of the floor, ``ceiling_1`` of the ceiling, ``wall_<i>``
+  within ``SURFACE_BAND`` of the wall from corner i to corner i + 1 (1-based, the outline in
+  the document's order), the rest ``clutter_1``;
+- writes them as ``Area_<N>/<room>/<room>.txt`` and ``Annotations/<class>_<k>.txt``
+  (``x y z r g b``, millimetres, colours 0-255) for ``tools/create_data.py``.
+
+Boxes overlapping each other, a point inside two boxes, a box without points and a document
+that is not synthdet's are ``LabelsInputError`` with one line naming the document.
+"""
+import os
+import re
+import shutil
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from configurator.freecad_cli import MACRO, FreecadFailed, check_timeout, run_freecad_process
+from synthdet.classes import GENERATED_CLASSES
+from synthdet.contracts import LABELS_FORMAT, write_labels
+from synthdet.geometry import box_corners_xy
+from synthdet.processes import work_folder
+
+READ_FORMAT = 'synthdet.freecad-labels/1'
+BOX_MARGIN = 0.005  # metres a point may lie outside its box (sizes rounded to mm, rounding)
+BOTTOM_CLEARANCE = 0.0005  # metres above a box's bottom before a point is the box's
+OVERLAP_TOLERANCE = 0.001  # metres two boxes may share before they count as overlapping
+SURFACE_BAND = 0.05  # metres from the floor, ceiling or a wall a point is that surface's
+ROOM_NAME = re.compile(r'[A-Za-z0-9]+_[0-9]+')
+
+
+class LabelsInputError(ValueError):
+    """The document, scan or options cannot be turned into labels (exit code 2)."""
+
+
+def read_document(document: Path, freecadcmd: str = 'freecadcmd', timeout: float = 300.0) -> dict:
+    """The document's counted parts (``boxes``), ``room`` outline and ``reviewed`` flag, read
+    by FreeCAD. Raises ``LabelsInputError`` for a file that is not a synthdet document."""
+    document = Path(document).resolve()
+    _check_fcstd(document)
+    check_timeout(timeout)
+    with work_folder('synthdet-labels') as work_dir:
+        result_path = work_dir / 'result.json'
+        env = dict(os.environ, SYNTHDET_READ=str(document), SYNTHDET_RESULT=str(result_path))
+        env.pop('SYNTHDET_JOB', None)
+        result = run_freecad_process([freecadcmd, str(MACRO)], env, work_dir, timeout, result_path)
+    if not isinstance(result, dict) or result.get('format') != READ_FORMAT:
+        raise FreecadFailed(f'{document}: FreeCAD wrote no {READ_FORMAT} result')
+    if result.get('status') != 'ok':
+        if result.get('kind') == 'input':
+            raise LabelsInputError(f'{document}: {result.get("error")}')
+        raise FreecadFailed(f'{document}: FreeCAD could not read it: {result.get("error")}')
+    return result
+
+
+def _check_fcstd(document: Path) -> None:
+    if not document.is_file():
+        raise LabelsInputError(f'{document}: document not found')
+    try:
+        with zipfile.ZipFile(document) as archive:
+            names = archive.namelist()
+    except (OSError, zipfile.BadZipFile):
+        names = []
+    if 'Document.xml' not in names:
+        raise LabelsInputError(f'{document}: not a FreeCAD document (.FCStd)')
+
+
+def _footprint(box: dict, grow: float = 0.0) -> np.ndarray:
+    """The box footprint's four corners (x, y), grown by ``grow`` on every side."""
+    size = [box['size'][0] + 2.0 * grow, box['size'][1] + 2.0 * grow]
+    return box_corners_xy(box['center'], size, box['yaw'])
+
+
+def check_overlaps(boxes: list[dict], source: str) -> None:
+    """Raise ``LabelsInputError`` for two boxes sharing more than ``OVERLAP_TOLERANCE`` along
+    every axis (boxes standing on each other only touch)."""
+    from shapely.geometry import Polygon
+    shapes = [Polygon(_footprint(box, -OVERLAP_TOLERANCE / 2.0)) for box in boxes]
+    for first in range(len(boxes)):
+        for second in range(first + 1, len(boxes)):
+            a, b = boxes[first], boxes[second]
+            low = max(a['center'][2] - a['size'][2] / 2, b['center'][2] - b['size'][2] / 2)
+            high = min(a['center'][2] + a['size'][2] / 2, b['center'][2] + b['size'][2] / 2)
+            if high - low > OVERLAP_TOLERANCE and shapes[first].intersects(shapes[second]):
+                raise LabelsInputError(f'{source}: {a["label"]!r} and {b["label"]!r} overlap: '
+                                       'move or resize one of them')
+
+
+def _outside(xyz: np.ndarray, box: dict) -> np.ndarray:
+    """How far each point lies outside the box (0 inside; metres, the largest excess along
+    the box's axes), infinite for points not above its bottom by ``BOTTOM_CLEARANCE``."""
+    (x, y, z), (length, width, height), yaw = box['center'], box['size'], box['yaw']
+    cos, sin = np.cos(yaw), np.sin(yaw)
+    dx, dy = xyz[:, 0] - x, xyz[:, 1] - y
+    along, across = cos * dx + sin * dy, -sin * dx + cos * dy
+    bottom, top = z - height / 2.0, z + height / 2.0
+    excess = np.maximum.reduce([
+        np.abs(along) - length / 2.0,
+        np.abs(across) - width / 2.0, xyz[:, 2] - top,
+        np.zeros(len(xyz))
+    ])
+    return np.where(xyz[:, 2] > bottom + BOTTOM_CLEARANCE, excess, np.inf)
+
+
+def point_owners(xyz: np.ndarray, boxes: list[dict], source: str) -> np.ndarray:
+    """Index of the box each point belongs to, -1 for none: the box it lies in, or within
+    ``BOX_MARGIN`` of (the nearest one). Raises ``LabelsInputError`` for a point inside two
+    boxes or a box that gets no point."""
+    owners = np.full(len(xyz), -1, dtype=np.int64)
+    nearest = np.full(len(xyz), np.inf)
+    for index, box in enumerate(boxes):
+        outside = _outside(xyz, box)
+        shared = (outside == 0.0) & (nearest == 0.0)
+        if shared.any():
+            other = boxes[owners[np.argmax(shared)]]
+            raise LabelsInputError(f'{source}: {int(shared.sum())} scan points lie in both '
+                                   f'{other["label"]!r} and {box["label"]!r}: separate them')
+        closer = (outside <= BOX_MARGIN) & (outside < nearest)
+        owners[closer] = index
+        nearest[closer] = outside[closer]
+    counts = np.bincount(owners[owners >= 0], minlength=len(boxes))
+    for index in np.flatnonzero(counts == 0):
+        raise LabelsInputError(f'{source}: {boxes[index]["label"]!r} holds no scan point: '
+                               'move it onto its object or delete it')
+    return owners
+
+
+def background_elements(xyz: np.ndarray, room: dict | None) -> np.ndarray:
+    """The structure element name of each point (``floor_1``, ``ceiling_1``, ``wall_<i>``,
+    ``clutter_1``) by the room outline (all ``clutter_1`` without a room)."""
+    names = np.full(len(xyz), 'clutter_1', dtype=object)
+    if room is None:
+        return names
+    corners = np.asarray(room['corners'], dtype=np.float64)
+    distances = []
+    for index in range(len(corners)):
+        start, end = corners[index], corners[(index + 1) % len(corners)]
+        edge = end - start
+        t = np.clip(((xyz[:, :2] - start) @ edge) / max(edge @ edge, 1e-12), 0.0, 1.0)
+        distances.append(np.linalg.norm(xyz[:, :2] - (start + t[:, None] * edge), axis=1))
+    distances = np.stack(distances, axis=1)
+    nearest = np.argmin(distances, axis=1)
+    walls = distances[np.arange(len(xyz)), nearest] <= SURFACE_BAND
+    names[walls] = np.char.add('wall_', (nearest[walls] + 1).astype(str)).astype(object)
+    names[np.abs(xyz[:, 2] - room['ceiling_z']) <= SURFACE_BAND] = 'ceiling_1'
+    names[np.abs(xyz[:, 2] - room['floor_z']) <= SURFACE_BAND] = 'floor_1'
+    return names
+
+
+def _write_points(path: Path, points: np.ndarray) -> None:
+    rows = np.column_stack([points[:, :3], np.clip(np.rint(points[:, 3:6]), 0, 255)])
+    np.savetxt(path, rows, fmt='%.3f %.3f %.3f %d %d %d')
+
+
+def write_s3dis_room(room_dir: Path, points: np.ndarray, elements: np.ndarray) -> None:
+    """Write one S3DIS room (``<room>.txt`` and ``Annotations/<element>.txt``) atomically: in
+    a temporary folder beside ``room_dir``, renamed into place (a previous room replaced)."""
+    room_dir.parent.mkdir(parents=True, exist_ok=True)
+    partial = Path(tempfile.mkdtemp(prefix=f'.{room_dir.name}.partial-', dir=room_dir.parent))
+    try:
+        annotations = partial / 'Annotations'
+        annotations.mkdir()
+        order = np.argsort(elements, kind='stable')
+        names, starts = np.unique(elements[order], return_index=True)
+        for name, chunk in zip(names, np.split(order, starts[1:])):
+            _write_points(annotations / f'{name}.txt', points[chunk])
+        _write_points(partial / f'{room_dir.name}.txt', points[order])
+        if room_dir.exists():
+            old = Path(tempfile.mkdtemp(prefix=f'.{room_dir.name}.old-', dir=room_dir.parent))
+            os.replace(room_dir, old / room_dir.name)
+            os.replace(partial, room_dir)
+            shutil.rmtree(old)
+        else:
+            os.replace(partial, room_dir)
+    finally:
+        if partial.exists():
+            shutil.rmtree(partial)
+
+
+def labels_document(read: dict, scan: Path, classes: list[str] | None = None) -> dict:
+    """The ``synthdet.labels/1`` document of the read boxes (classes: the generated classes
+    and every class in the document, unless given)."""
+    found = [box['class'] for box in read['boxes']]
+    names = list(classes) if classes else list(GENERATED_CLASSES)
+    names += [name for name in dict.fromkeys(found) if name not in names]
+    return {
+        'format':
+        LABELS_FORMAT,
+        'scan':
+        scan.name,
+        'classes':
+        names,
+        'boxes': [{
+            key: box[key]
+            for key in ('class', 'center', 'size', 'yaw')
+        } for box in read['boxes']],
+        'source':
+        'synthdet FreeCAD document' + (', reviewed' if read['reviewed'] else ''),
+    }
+
+
+def make_labels(document: Path,
+                scan: Path,
+                out: Path,
+                area: int = 1,
+                room_name: str | None = None,
+                freecadcmd: str = 'freecadcmd',
+                timeout: float = 300.0) -> dict:
+    """Read the document, write the labels file and the S3DIS room into ``out``; returns a
+    summary (``labels``, ``room_dir``, ``boxes`` per class, ``points``, ``reviewed``)."""
+    from synthdet.scan_io import read_scan
+    document, scan, out = Path(document), Path(scan), Path(out)
+    room_name = room_name or f'{re.sub(r"[^A-Za-z0-9]", "", scan.stem) or "room"}_1'
+    if not ROOM_NAME.fullmatch(room_name):
+        raise LabelsInputError(f'--room {room_name!r}: expected <letters or digits>_<number>, '
+                               'e.g. hall_1 (an S3DIS room name)')
+    if area < 1:
+        raise LabelsInputError(f'--area {area}: expected a positive area number')
+    if not scan.is_file():
+        raise LabelsInputError(f'{scan}: scan file not found')
+    points = read_scan(scan)
+    read = read_document(document, freecadcmd, timeout)
+    boxes = read['boxes']
+    if not boxes:
+        raise LabelsInputError(f'{document}: the document holds no synthdet part to label')
+    check_overlaps(boxes, str(document))
+    owners = point_owners(points[:, :3], boxes, str(document))
+    elements = background_elements(points[:, :3], read['room'])
+    counts: dict[str, int] = {}
+    for index, box in enumerate(boxes):
+        counts[box['class']] = counts.get(box['class'], 0) + 1
+        elements[owners == index] = f'{box["class"]}_{counts[box["class"]]}'
+    out.mkdir(parents=True, exist_ok=True)
+    labels_path = out / f'{scan.stem}.labels.json'
+    write_labels(labels_path, labels_document(read, scan))
+    room_dir = out / f'Area_{area}' / room_name
+    write_s3dis_room(room_dir, points, elements)
+    return {
+        'labels': str(labels_path),
+        'room_dir': str(room_dir),
+        'boxes': counts,
+        'points': int(len(points)),
+        'object_points': int((owners >= 0).sum()),
+        'reviewed': read['reviewed']
+    }
+
+
+def summary_line(summary: dict) -> str:
+    """One line: what was written."""
+    boxes = ', '.join(f'{count} {name}' for name, count in summary['boxes'].items())
+    return (f'wrote {summary["labels"]} ({boxes}) and {summary["room_dir"]} '
+            f'({summary["object_points"]} of {summary["points"]} points in boxes)'
+            f'{"" if summary["reviewed"] else "; the document is not marked reviewed"}')

@@ -1,0 +1,44 @@
+"""Turn a corrected synthdet FreeCAD document into labels and an S3DIS room.
+
+``python -m configurator labels ROOM.FCStd --scan SCAN --out DIR [--area 1] [--room NAME]``
+
+Writes ``DIR/<scan stem>.labels.json`` (``synthdet.labels/1``, for ``tools/eval_scans.py``) and
+``DIR/Area_<N>/<room>/`` (S3DIS format, for ``tools/create_data.py``); see
+``configurator/labels.py`` for the rules and docs/teach.md for the workflow.
+"""
+import argparse
+import sys
+
+from configurator.freecad_cli import FreecadFailed, add_program_options
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Register the ``labels`` sub-command's options."""
+    parser.add_argument('document', help='the corrected FreeCAD document (.FCStd)')
+    parser.add_argument('--scan', required=True, help='the scan the document was made from')
+    parser.add_argument('--out', required=True, help='output folder')
+    parser.add_argument('--area', type=int, default=1, help='S3DIS area number (default 1)')
+    parser.add_argument('--room', help='S3DIS room name <name>_<number> (default: <scan stem>_1)')
+    add_program_options(parser, 'freecadcmd', 'FreeCAD command-line executable', timeout=300.0)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the sub-command; 2 for bad input (one line naming the file), 1 when FreeCAD fails,
+    128 + the signal number when interrupted."""
+    from configurator.labels import make_labels, summary_line
+    from synthdet.processes import Interrupted, stop_on_signals
+    try:
+        with stop_on_signals():
+            summary = make_labels(args.document, args.scan, args.out, args.area, args.room,
+                                  args.freecadcmd, args.timeout)
+    except ValueError as error:  # LabelsInputError, ScanFormatError, SchemaError
+        print(f'error: {error}', file=sys.stderr)
+        return 2
+    except (FreecadFailed, OSError) as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 1
+    except Interrupted as stop:
+        print(f'error: stopped by {stop}; FreeCAD was ended', file=sys.stderr)
+        return stop.exit_code
+    print(summary_line(summary))
+    return 0

@@ -1,0 +1,381 @@
+"""A corrected FreeCAD document as training data: ``python -m configurator labels``, the
+editing helpers run in real freecadcmd, and the round trip generated room -> predictions ->
+FCStd -> edited like a user would -> labels and S3DIS room -> create_data -> fine-tune.
+
+The predictions are the generated room's true boxes with three faults a user corrects: a
+phantom sofa (deleted), a chair left out (added with ``editing.add_part``) and a chair detected
+0.3 m off (moved back). The labels must then equal the generator's truth.
+"""
+import json
+import math
+import os
+import subprocess
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from configurator.__main__ import main as configurator_main
+from configurator.freecad_cli import build_document
+from configurator.labels import (BOX_MARGIN, LabelsInputError, background_elements, check_overlaps,
+                                 point_owners)
+from generator.__main__ import main as generator_main
+from synthdet.classes import GENERATED_CLASSES
+from synthdet.contracts import read_labels, write_corners, write_predictions
+from synthdet.geometry import box_corners_xy
+from synthdet.scan_io import read_scan
+from tests.tool_process import run_tool
+
+REPO = Path(__file__).resolve().parents[1]
+FREECAD_DIR = REPO / 'configurator' / 'freecad'
+ADDED, MOVED = 'chair_3', 'chair_1'  # generator instances: left out, detected off
+SHIFT = (0.3, -0.2)
+
+EDIT_SCRIPT = textwrap.dedent('''\
+    # Runs in freecadcmd: corrects the document like a user (delete, add, move), then saves.
+    import json, os, sys
+    params = json.load(open(os.environ['SYNTHDET_TEST_PARAMS'], encoding='utf-8'))
+    sys.path[:0] = [params['freecad_dir'], params['repo']]
+    import FreeCAD as App
+    from synthdet_freecad import editing, labels
+
+    doc = App.openDocument(params['document'])
+    parts = {part.Label: part for part in labels.synthdet_parts(doc)}
+    for label, change in params['edits'].items():
+        part = parts[label]
+        if change == 'delete':
+            for child in list(getattr(part, 'Group', [])):
+                doc.removeObject(child.Name)
+            doc.removeObject(part.Name)
+        else:
+            part.Placement.Base = App.Vector(1000.0 * change[0], 1000.0 * change[1],
+                                             part.Placement.Base.z)
+    for added in params['added']:
+        editing.add_part(doc, added['class'], *added['center'][:2], added['yaw'],
+                         tuple(added['size']))
+    editing.set_reviewed(doc)
+    doc.recompute()
+    doc.saveAs(params['out'])
+    with open(params['report'], 'w', encoding='utf-8') as stream:
+        json.dump({'reviewed': editing.is_reviewed(doc),
+                   'invalid': [o.Name for o in doc.Objects if not o.isValid()]}, stream)
+''')
+
+
+def run_freecad_script(folder: Path, script: str, params: dict) -> dict:
+    """Run ``script`` in real freecadcmd with ``params``; returns the JSON it reports."""
+    path, report = folder / 'script.py', folder / 'report.json'
+    path.write_text(script, encoding='utf-8')
+    params_path = folder / 'params.json'
+    params_path.write_text(json.dumps(dict(params, report=str(report))), encoding='utf-8')
+    process = subprocess.run(['freecadcmd', str(path)],
+                             env={
+                                 **os.environ, 'SYNTHDET_TEST_PARAMS': str(params_path)
+                             },
+                             cwd=folder,
+                             capture_output=True,
+                             text=True,
+                             timeout=300)
+    assert report.is_file(), process.stdout[-2000:] + process.stderr[-2000:]
+    return json.loads(report.read_text(encoding='utf-8'))
+
+
+def labels_cli(*args) -> int:
+    return configurator_main(['labels', *map(str, args)])
+
+
+def truth_box(item: dict) -> dict:
+    return {'class': item['class'], 'label': item['instance'], **item['box']}
+
+
+def box_shape(box: dict) -> tuple[np.ndarray, float, float]:
+    """Footprint corners (sorted, so a box turned by 180 degrees compares equal), bottom, top."""
+    corners = box_corners_xy(box['center'], box['size'], box['yaw'])
+    corners = corners[np.lexsort((corners[:, 1].round(4), corners[:, 0].round(4)))]
+    half = box['size'][2] / 2.0
+    return corners, box['center'][2] - half, box['center'][2] + half
+
+
+def assert_same_box(found: dict, expected: dict) -> None:
+    found_corners, found_bottom, found_top = box_shape(found)
+    corners, bottom, top = box_shape(expected)
+    assert found['class'] == expected['class']
+    assert np.abs(found_corners - corners).max() < 1e-3, (found, expected)
+    assert abs(found_bottom - bottom) < 1e-3 and abs(found_top - top) < 1e-3, (found, expected)
+
+
+@pytest.fixture(scope='module')
+def round_trip(tmp_path_factory) -> dict:
+    """A generated room, its predictions with three faults, the document built from them, the
+    document corrected in freecadcmd, and ``labels`` run on it."""
+    root = tmp_path_factory.mktemp('labels')
+    config = root / 'paper.json'  # the paper sensor: exact geometry, annotations by the hit
+    config.write_text(json.dumps({'scanner': {'sensors': {'paper': 1.0}}}))
+    assert generator_main([
+        '--out',
+        str(root / 'generated'), '--areas', '7', '--rooms-per-area', '1', '--points', '30000',
+        '--seed', '3', '--asset-cache',
+        str(root / 'assets'), '--config',
+        str(config), '--quiet', '--workers', '1'
+    ]) == 0
+    room = root / 'generated' / 'Area_7' / 'factory_1'
+    meta = json.loads((room / 'meta.json').read_text())
+    truth = [truth_box(item) for item in meta['objects'] if item['class'] in GENERATED_CLASSES]
+    by_label = {box['label']: box for box in truth}
+    detections = []
+    for box in truth:
+        if box['label'] == ADDED:
+            continue
+        center = list(box['center'])
+        if box['label'] == MOVED:
+            center[0] += SHIFT[0]
+            center[1] += SHIFT[1]
+        detections.append({
+            'class': box['class'],
+            'score': 0.9,
+            'center': center,
+            'size': box['size'],
+            'yaw': box['yaw']
+        })
+    # a phantom in an empty stretch of floor, as a detector invents one
+    detections.append({
+        'class': 'sofa',
+        'score': 0.5,
+        'center': [6.0, 4.2, 0.4],
+        'size': [1.8, 0.8, 0.8],
+        'yaw': 0.0
+    })
+    write_predictions(
+        root / 'pred.json', {
+            'format': 'synthdet.predictions/1',
+            'scan': 'factory_1.txt',
+            'model': 'truth',
+            'classes': list(GENERATED_CLASSES),
+            'detections': detections
+        })
+    write_corners(
+        root / 'corners.json', {
+            'format': 'synthdet.corners/1',
+            'scan': 'factory_1.txt',
+            'corners': meta['room']['polygon'],
+            'floor_z': 0.0,
+            'ceiling_z': meta['room']['height'],
+            'quality': {}
+        })
+    scan = room / 'factory_1.txt'
+    document = root / 'room.FCStd'
+    result = build_document(
+        scan, root / 'pred.json', document, root / 'corners.json', timeout=300.0)
+    assert {item['label'] for item in result['objects']} >= {'sofa 1', 'chair 1'}
+    # the document's 'chair 1' is the moved chair_1 (the chairs in the predictions' order)
+    edits = {'sofa 1': 'delete', 'chair 1': by_label[MOVED]['center'][:2]}
+    corrected = root / 'corrected.FCStd'
+    report = run_freecad_script(
+        root, EDIT_SCRIPT, {
+            'freecad_dir': str(FREECAD_DIR),
+            'repo': str(REPO),
+            'document': str(document),
+            'out': str(corrected),
+            'edits': edits,
+            'added': [by_label[ADDED]]
+        })
+    out = root / 'out'
+    code = labels_cli(corrected, '--scan', scan, '--out', out, '--area', 1, '--room', 'factory_1',
+                      '--timeout', 300)
+    return {
+        'root': root,
+        'room': room,
+        'truth': truth,
+        'out': out,
+        'code': code,
+        'report': report,
+        'scan': scan,
+        'document': document,
+        'corrected': corrected
+    }
+
+
+def test_labels_of_the_corrected_document_equal_the_truth(round_trip):
+    assert round_trip['code'] == 0
+    assert round_trip['report'] == {'reviewed': True, 'invalid': []}
+    labels = read_labels(round_trip['out'] / 'factory_1.labels.json')
+    assert labels['scan'] == 'factory_1.txt' and labels['source'].endswith('reviewed')
+    assert set(GENERATED_CLASSES) <= set(labels['classes'])
+    found = sorted(labels['boxes'], key=lambda box: (box['class'], box['center']))
+    truth = sorted(round_trip['truth'], key=lambda box: (box['class'], box['center']))
+    assert len(found) == len(truth)  # the phantom deleted, the missed chair added
+    for found_box, true_box in zip(found, truth):
+        assert_same_box(found_box, true_box)
+
+
+def on_a_foot_plane(xyz: np.ndarray, boxes: list[dict]) -> np.ndarray:
+    """Points on the plane where a part stands on another, under that part: a YuMi's foot and
+    the table top around it there are one plane, and the documented rule gives both to the
+    table, the generator each to what its ray hit."""
+    ambiguous = np.zeros(len(xyz), dtype=bool)
+    for box in boxes:
+        bottom = box['center'][2] - box['size'][2] / 2.0
+        if bottom < 0.01:
+            continue  # on the floor: the floor is nobody's
+        grown = dict(
+            box,
+            size=[
+                box['size'][0] + 2 * BOX_MARGIN, box['size'][1] + 2 * BOX_MARGIN, box['size'][2]
+            ])
+        inside = inside_outline(box_corners_xy(grown['center'], grown['size'], box['yaw']), xyz)
+        ambiguous |= inside & (np.abs(xyz[:, 2] - bottom) <= 1e-3)
+    return ambiguous
+
+
+def inside_outline(polygon: np.ndarray, xyz: np.ndarray) -> np.ndarray:
+    from matplotlib.path import Path as Outline
+    return Outline(polygon).contains_points(xyz[:, :2])
+
+
+def test_s3dis_room_annotations_equal_the_generators(round_trip):
+    """Every untouched object's points are the generator's (but on a foot plane, above)."""
+    written = round_trip['out'] / 'Area_1' / 'factory_1'
+    annotations = written / 'Annotations'
+    assert read_scan(written / 'factory_1.txt').shape == read_scan(round_trip['scan']).shape
+    names = sorted(path.stem for path in annotations.glob('*.txt'))
+    assert 'floor_1' in names and 'ceiling_1' in names and 'wall_1' in names
+    untouched = [box for box in round_trip['truth'] if box['label'] not in (ADDED, MOVED)]
+    assert len(untouched) >= 8
+    # the document numbers a class in the predictions' order, which is the truth's
+    compared = 0
+    for box in untouched:
+        ours = read_scan(annotations / f'{box["label"]}.txt')[:, :3]
+        theirs = read_scan(round_trip['room'] / 'Annotations' / f'{box["label"]}.txt')[:, :3]
+        ours, theirs = (
+            rows[~on_a_foot_plane(rows, round_trip['truth'])] for rows in (ours, theirs))
+        assert {tuple(row) for row in ours.round(3)} == {tuple(row) for row in theirs.round(3)}
+        compared += len(ours)
+    assert compared > 5000
+    total = sum(len(read_scan(path)) for path in annotations.glob('*.txt'))
+    assert total == len(read_scan(round_trip['scan']))
+
+
+@pytest.mark.slow
+def test_create_data_converts_the_room_and_a_fine_tune_runs(round_trip, tmp_path):
+    out = round_trip['out']
+    raw = tmp_path / 'raw' / 'Stanford3dDataset_v1.2_Aligned_Version'
+    raw.mkdir(parents=True)
+    (raw / 'Area_1').symlink_to(out / 'Area_1', target_is_directory=True)
+    data = tmp_path / 'data'
+    run_tool('tools/create_data.py', 's3dis', '--root-path', tmp_path / 'raw', '--out-dir', data,
+             '--areas', '1')
+    assert (data / 's3dis_infos_Area_1.pkl').is_file()
+    assert (data / 'points' / 'Area_1_factory_1.bin').is_file()
+    from mmengine.config import Config
+    cfg = Config.fromfile(REPO / 'configs' / 'tr3d' / 'tiny.py')
+    train_set = cfg.train_dataloader.dataset.dataset.datasets[0]
+    train_set.data_root = f'{data}/'
+    train_set.ann_file = 's3dis_infos_Area_1.pkl'
+    config = tmp_path / 'tiny_labels.py'
+    cfg.dump(config)
+    work = tmp_path / 'work'
+    run_tool('tools/train.py', config, '--work-dir', work, '--cfg-options',
+             'train_cfg.max_epochs=2', 'default_hooks.logger.interval=1', 'val_cfg=None',
+             'val_dataloader=None', 'val_evaluator=None', 'randomness.seed=0')
+    [scalars] = work.glob('*/vis_data/scalars.json')
+    records = [json.loads(line) for line in scalars.read_text().splitlines()]
+    assert [record['iter'] for record in records] == [1, 2]
+    assert all(math.isfinite(record['loss']) for record in records)
+
+
+# --------------------------------------------------------------------------- input errors
+
+
+def test_a_document_that_is_not_synthdets_is_refused(round_trip, tmp_path, capsys):
+    plain = tmp_path / 'plain.FCStd'
+    script = textwrap.dedent('''\
+        import json, os
+        import FreeCAD as App
+        params = json.load(open(os.environ['SYNTHDET_TEST_PARAMS'], encoding='utf-8'))
+        doc = App.newDocument('plain')
+        doc.addObject('Part::Box', 'Box')
+        doc.recompute()
+        doc.saveAs(params['out'])
+        json.dump({}, open(params['report'], 'w'))
+    ''')
+    run_freecad_script(tmp_path, script, {'out': str(plain)})
+    out = tmp_path / 'out'
+    assert labels_cli(plain, '--scan', round_trip['scan'], '--out', out) == 2
+    error = capsys.readouterr().err
+    assert error.count('\n') == 1 and 'plain.FCStd: not a synthdet document' in error
+    text = tmp_path / 'notes.FCStd'
+    text.write_text('not a zip')
+    assert labels_cli(text, '--scan', round_trip['scan'], '--out', out) == 2
+    assert 'notes.FCStd: not a FreeCAD document' in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_overlapping_parts_are_refused_and_nothing_is_written(round_trip, tmp_path, capsys):
+    labels = read_labels(round_trip['out'] / 'factory_1.labels.json')
+    chair = next(box for box in labels['boxes'] if box['class'] == 'chair')
+    script = EDIT_SCRIPT  # move chair 2 onto chair 1's place
+    moved = tmp_path / 'overlap.FCStd'
+    run_freecad_script(
+        tmp_path, script, {
+            'freecad_dir': str(FREECAD_DIR),
+            'repo': str(REPO),
+            'document': str(round_trip['corrected']),
+            'out': str(moved),
+            'edits': {
+                'chair 2': [chair['center'][0] + 0.1, chair['center'][1]]
+            },
+            'added': []
+        })
+    out = tmp_path / 'out'
+    assert labels_cli(moved, '--scan', round_trip['scan'], '--out', out) == 2
+    error = capsys.readouterr().err
+    assert 'overlap.FCStd' in error and 'overlap: move or resize one of them' in error
+    assert not out.exists()
+
+
+def box(label: str, center, size, yaw: float = 0.0) -> dict:
+    return {
+        'class': 'chair',
+        'label': label,
+        'center': list(center),
+        'size': list(size),
+        'yaw': yaw
+    }
+
+
+def test_points_are_given_to_the_nearest_box_and_ambiguities_refused():
+    table = box('table 1', [0.0, 0.0, 0.4], [1.0, 1.0, 0.8])
+    robot = box('yumi 1', [0.0, 0.0, 1.1], [0.4, 0.4, 0.6])
+    points = np.array([
+        [0.0, 0.0, 0.0],  # the floor under the table: nobody's
+        [0.3, 0.3, 0.8],  # on the table top: the table's
+        [0.0, 0.0, 0.8 + 0.0004],  # a robot foot point within the clearance: the table's
+        [0.1, 0.1, 0.802],  # the robot's: inside it, 2 mm above the table
+        [0.5 + BOX_MARGIN / 2, 0.0, 0.5],  # just outside the table's side: the table's
+        [0.5 + 2 * BOX_MARGIN, 0.0, 0.5],  # farther out: nobody's
+    ])
+    assert point_owners(points, [table, robot], 'doc').tolist() == [-1, 0, 0, 1, 0, -1]
+    check_overlaps([table, robot], 'doc')  # standing on it is no overlap
+    with pytest.raises(LabelsInputError, match=r"^doc: 'table 1' and 'yumi 2' overlap"):
+        check_overlaps([table, box('yumi 2', [0.4, 0.0, 0.7], [0.4, 0.4, 0.6])], 'doc')
+    twin = box('chair 2', [0.0, 0.0, 0.4], [1.0, 1.0, 0.8], math.pi / 2)
+    with pytest.raises(LabelsInputError, match=r"in both 'table 1' and 'chair 2'"):
+        point_owners(points, [table, twin], 'doc')
+    empty = box('chair 3', [5.0, 5.0, 0.4], [0.5, 0.5, 0.8])
+    with pytest.raises(LabelsInputError, match=r"^doc: 'chair 3' holds no scan point"):
+        point_owners(points, [table, empty], 'doc')
+
+
+def test_background_points_follow_the_room_outline():
+    room = {
+        'corners': [[0.0, 0.0], [0.0, 4.0], [5.0, 4.0], [5.0, 0.0]],
+        'floor_z': 0.0,
+        'ceiling_z': 3.0
+    }
+    points = np.array([[2.0, 2.0, 0.01], [2.0, 2.0, 2.98], [0.02, 2.0, 1.5], [2.0, 3.99, 1.5],
+                       [5.0, 1.0, 1.0], [2.0, 2.0, 1.5]])
+    assert background_elements(points, room).tolist() == [
+        'floor_1', 'ceiling_1', 'wall_1', 'wall_2', 'wall_3', 'clutter_1'
+    ]
+    assert set(background_elements(points, None)) == {'clutter_1'}
