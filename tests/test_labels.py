@@ -21,10 +21,10 @@ from configurator.freecad_cli import build_document
 from configurator.labels import (BOX_MARGIN, LabelsInputError, background_elements, check_overlaps,
                                  point_owners)
 from generator.__main__ import main as generator_main
-from synthdet.classes import GENERATED_CLASSES
+from synthdet.classes import GENERATED_CLASSES, class_colour
 from synthdet.contracts import read_labels, write_corners, write_predictions
 from synthdet.geometry import box_corners_xy
-from synthdet.scan_io import read_scan
+from synthdet.scan_io import read_scan, write_scan
 from tests.tool_process import run_tool
 
 REPO = Path(__file__).resolve().parents[1]
@@ -284,6 +284,54 @@ def test_create_data_converts_the_room_and_a_fine_tune_runs(round_trip, tmp_path
     assert all(math.isfinite(record['loss']) for record in records)
 
 
+def test_a_georeferenced_scan_keeps_its_coordinates_to_the_millimetre(round_trip, tmp_path):
+    """The same room moved to UTM-like coordinates: the document holds them as they are, and
+    the labels come back there."""
+    offset = np.array([500000.0, 5400000.0, 300.0])
+    points = read_scan(round_trip['scan'])
+    points[:, :3] += offset
+    scan = tmp_path / 'geo.ply'
+    write_scan(scan, points)
+    truth = [
+        dict(box, center=list(np.asarray(box['center']) + offset)) for box in round_trip['truth']
+    ]
+    write_predictions(
+        tmp_path / 'pred.json', {
+            'format':
+            'synthdet.predictions/1',
+            'scan':
+            scan.name,
+            'model':
+            'truth',
+            'detections': [{
+                'class': box['class'],
+                'score': 0.9,
+                'center': box['center'],
+                'size': box['size'],
+                'yaw': box['yaw']
+            } for box in truth]
+        })
+    corners = json.loads((round_trip['root'] / 'corners.json').read_text())
+    corners.update(
+        corners=[[x + offset[0], y + offset[1]] for x, y in corners['corners']],
+        floor_z=offset[2],
+        ceiling_z=corners['ceiling_z'] + offset[2])
+    write_corners(tmp_path / 'corners.json', corners)
+    document = tmp_path / 'geo.FCStd'
+    build_document(
+        scan, tmp_path / 'pred.json', document, tmp_path / 'corners.json', timeout=300.0)
+    assert labels_cli(document, '--scan', scan, '--out', tmp_path / 'out', '--timeout', 300) == 0
+    labels = read_labels(tmp_path / 'out' / 'geo.labels.json')
+    found = sorted(labels['boxes'], key=lambda box: (box['class'], box['center']))
+    for found_box, true_box in zip(found,
+                                   sorted(truth, key=lambda box: (box['class'], box['center']))):
+        assert_same_box(found_box, true_box)
+    assert len(found) == len(truth)
+    room = tmp_path / 'out' / 'Area_1' / 'geo_1'
+    assert len(read_scan(room / 'geo_1.txt')) == len(points)
+    assert read_scan(room / 'Annotations' / 'table_1.txt')[:, 0].min() > offset[0]
+
+
 # --------------------------------------------------------------------------- input errors
 
 
@@ -379,3 +427,81 @@ def test_background_points_follow_the_room_outline():
         'floor_1', 'ceiling_1', 'wall_1', 'wall_2', 'wall_3', 'clutter_1'
     ]
     assert set(background_elements(points, None)) == {'clutter_1'}
+
+
+GUI_DRIVER = textwrap.dedent('''\
+    # Runs in the FreeCAD GUI: opens the document, picks a floor point, answers the macro's
+    # dialog like a user (class 3dprinter, Add, Reviewed, Close), then reports.
+    import json, os
+    import FreeCAD as App
+    import FreeCADGui as Gui
+    from PySide import QtCore, QtGui
+
+    params = json.load(open(os.environ['SYNTHDET_TEST_PARAMS'], encoding='utf-8'))
+    doc = App.openDocument(params['document'])
+    Gui.Selection.addSelection(doc.Name, 'Floor', 'Face1', *params['picked'])
+    seen = {'titles': []}
+
+    def answer():
+        widget = QtGui.QApplication.activeModalWidget()
+        if isinstance(widget, QtGui.QDialog) and not seen['titles']:
+            seen['titles'].append(widget.windowTitle())
+            widget.findChild(QtGui.QComboBox).setCurrentIndex(
+                widget.findChild(QtGui.QComboBox).findText('3dprinter'))
+            buttons = {b.text(): b for b in widget.findChildren(QtGui.QPushButton)}
+            buttons['Add synthdet object'].click()
+            widget.findChild(QtGui.QCheckBox).setChecked(True)
+            buttons['Close'].click()
+
+    timer = QtCore.QTimer()
+    timer.timeout.connect(answer)
+    timer.start(100)
+    with open(params['macro'], encoding='utf-8') as stream:
+        code = compile(stream.read(), params['macro'], 'exec')
+    exec(code, {'__file__': params['macro'], '__name__': '__main__'})
+    timer.stop()
+    added = [o for o in doc.Objects if getattr(o, 'SourceModel', '') == 'added by hand'
+             and o.DetectedClass == '3dprinter']
+    part = added[0]
+    seen.update(
+        added=len(added), base=list(part.Placement.Base),
+        reviewed=doc.Meta.get('SynthdetReviewed'),
+        colour=list(doc.getObject(part.Name + '_Base').ViewObject.ShapeColor)[:3],
+        z_bound=[e[0] for e in part.ExpressionEngine])
+    with open(params['report'], 'w', encoding='utf-8') as stream:
+        json.dump(seen, stream)
+    os._exit(0)  # the offscreen platform has no OpenGL context to tear the 3D view down
+''')
+
+
+def test_macro_in_the_gui_adds_a_part_at_the_picked_point_and_marks_reviewed(round_trip, tmp_path):
+    from configurator.freecad_cli import MACRO
+    from configurator.freecad_screenshot import USER_CONFIG
+    driver, config = tmp_path / 'drive_gui.py', tmp_path / 'user.cfg'
+    driver.write_text(GUI_DRIVER, encoding='utf-8')
+    config.write_text(USER_CONFIG, encoding='utf-8')
+    report = tmp_path / 'gui.json'
+    params = tmp_path / 'gui_params.json'
+    params.write_text(
+        json.dumps({
+            'macro': str(MACRO),
+            'report': str(report),
+            'document': str(round_trip['document']),
+            'picked': [6100.0, 2500.0, 0.0]
+        }))
+    process = subprocess.run(
+        ['freecad', '-u', str(config), str(driver)],
+        env=dict(os.environ, QT_QPA_PLATFORM='offscreen', SYNTHDET_TEST_PARAMS=str(params)),
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        errors='replace',
+        timeout=300)
+    assert report.is_file(), process.stdout[-3000:]
+    seen = json.loads(report.read_text(encoding='utf-8'))
+    assert seen['titles'] == ['synthdet: correct the document'] and seen['added'] == 1
+    assert seen['base'] == pytest.approx([6100.0, 2500.0, 0.0])  # on the floor, z 0
+    assert '.Placement.Base.z' in seen['z_bound']  # follows the room's floor_z
+    assert seen['reviewed'] == 'true'
+    assert seen['colour'] == pytest.approx([v / 255 for v in class_colour('3dprinter')], abs=0.01)

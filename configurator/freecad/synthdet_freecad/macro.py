@@ -207,10 +207,16 @@ def run_gui() -> None:
 
 def main() -> None:
     """Run the import the way the current FreeCAD (GUI or headless) allows; headless with
-    ``SYNTHDET_READ`` set, read a document's labels instead (``labels.run_headless``)."""
+    ``SYNTHDET_READ`` set, read a document's labels instead (``labels.run_headless``); in the
+    GUI on a synthdet document, offer its corrections first (``edit_dialog``)."""
     if os.environ.get(labels.ENV_READ) and not App.GuiUp:
         labels.run_headless()
     elif App.GuiUp:
-        run_gui()
+        from . import edit_dialog
+        doc = App.ActiveDocument
+        if doc is not None and edit_dialog.is_synthdet_document(doc):
+            edit_dialog.run(doc, run_gui)
+        else:
+            run_gui()
     else:
         run_headless()
