@@ -41,6 +41,7 @@ BOTTOM_CLEARANCE = 0.0005  # metres above a box's bottom before a point is the b
 OVERLAP_TOLERANCE = 0.001  # metres two boxes may share before they count as overlapping
 SURFACE_BAND = 0.05  # metres from the floor, ceiling or a wall a point is that surface's
 ROOM_NAME = re.compile(r'[A-Za-z0-9]+_[0-9]+')
+CLASS_NAME = re.compile(r'[A-Za-z0-9]{1,100}')
 
 
 class LabelsInputError(ValueError):
@@ -137,6 +138,22 @@ def point_owners(xyz: np.ndarray, boxes: list[dict], source: str) -> np.ndarray:
         raise LabelsInputError(f'{source}: {boxes[index]["label"]!r} holds no scan point: '
                                'move it onto its object or delete it')
     return owners
+
+
+def instance_names(boxes: list[dict], source: str) -> list[str]:
+    """The S3DIS annotation name of each box, ``<class>_<k>`` numbered per class in order.
+    Raises ``LabelsInputError`` for a class that cannot name an annotation file (S3DIS class
+    names are letters and digits)."""
+    counts: dict[str, int] = {}
+    names = []
+    for box in boxes:
+        if not CLASS_NAME.fullmatch(box['class']):
+            raise LabelsInputError(f'{source}: part {box["label"]!r} has class '
+                                   f'{box["class"][:40]!r}: an S3DIS class name is letters and '
+                                   'digits only (rename its DetectedClass)')
+        counts[box['class']] = counts.get(box['class'], 0) + 1
+        names.append(f'{box["class"]}_{counts[box["class"]]}')
+    return names
 
 
 def background_elements(xyz: np.ndarray, room: dict | None) -> np.ndarray:
@@ -240,15 +257,17 @@ def make_labels(document: Path,
     check_overlaps(boxes, str(document))
     owners = point_owners(points[:, :3], boxes, str(document))
     elements = background_elements(points[:, :3], read['room'])
-    counts: dict[str, int] = {}
-    for index, box in enumerate(boxes):
-        counts[box['class']] = counts.get(box['class'], 0) + 1
-        elements[owners == index] = f'{box["class"]}_{counts[box["class"]]}'
+    for index, name in enumerate(instance_names(boxes, str(document))):
+        elements[owners == index] = name
     out.mkdir(parents=True, exist_ok=True)
-    labels_path = out / f'{scan.stem}.labels.json'
-    write_labels(labels_path, labels_document(read, scan))
     room_dir = out / f'Area_{area}' / room_name
     write_s3dis_room(room_dir, points, elements)
+    labels_path = out / f'{scan.stem}.labels.json'
+    write_labels(labels_path, labels_document(read, scan))
+    counts = {
+        name: sum(box['class'] == name for box in boxes)
+        for name in dict.fromkeys(box['class'] for box in boxes)
+    }
     return {
         'labels': str(labels_path),
         'room_dir': str(room_dir),

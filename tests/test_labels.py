@@ -19,7 +19,7 @@ import pytest
 from configurator.__main__ import main as configurator_main
 from configurator.freecad_cli import build_document
 from configurator.labels import (BOX_MARGIN, LabelsInputError, background_elements, check_overlaps,
-                                 point_owners)
+                                 instance_names, point_owners)
 from generator.__main__ import main as generator_main
 from synthdet.classes import GENERATED_CLASSES, class_colour
 from synthdet.contracts import read_labels, write_corners, write_predictions
@@ -413,6 +413,17 @@ def test_points_are_given_to_the_nearest_box_and_ambiguities_refused():
     empty = box('chair 3', [5.0, 5.0, 0.4], [0.5, 0.5, 0.8])
     with pytest.raises(LabelsInputError, match=r"^doc: 'chair 3' holds no scan point"):
         point_owners(points, [table, empty], 'doc')
+
+
+def test_annotation_names_are_numbered_per_class_and_safe_as_file_names():
+    boxes = [box('table 1', [0, 0, 0], [1, 1, 1]), box('chair 1', [2, 0, 0], [1, 1, 1])]
+    boxes[0]['class'] = 'table'
+    boxes.append(dict(boxes[1], label='chair 2'))
+    assert instance_names(boxes, 'doc') == ['table_1', 'chair_1', 'chair_2']
+    for bad in ('../../escape', 'fork lift', 'pallet_rack', ''):
+        boxes[1]['class'] = bad
+        with pytest.raises(LabelsInputError, match=r"^doc: part 'chair 1' has class"):
+            instance_names(boxes, 'doc')
 
 
 def test_background_points_follow_the_room_outline():
