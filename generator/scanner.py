@@ -27,6 +27,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
+import numba
 import numpy as np
 
 from synthdet.geometry import grid_cells
@@ -164,6 +165,83 @@ def _cast_slice(raycaster, origins: np.ndarray,
     return answer['tfar'], answer['primID']
 
 
+# no triangle map: the hit triangles are the scene's own
+_NO_MAP = np.zeros(0, dtype=np.int64)
+
+
+@numba.njit(cache=True, nogil=True)
+def _path_origins(path: np.ndarray, start: int, count: int) -> np.ndarray:
+    """``count`` sensor positions (count, 3) from ``path``, going round it from ``start``."""
+    origins = np.empty((count, 3))
+    for ray in range(count):
+        origins[ray] = path[(start + ray) % len(path)]
+    return origins
+
+
+@numba.njit(cache=True, nogil=True)
+def _aimed_rays(path: np.ndarray, start: int, target: np.ndarray, low: np.ndarray,
+                extent: np.ndarray, uniform: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Origins (N, 3) going round ``path`` from ``start`` and unit directions (N, 3) towards
+    ``low + uniform * extent`` of each ray's ``target`` bounds: the per-component arithmetic of
+    ``(point - origin) / (row_norms + 1e-12)``, in the same order."""
+    count = len(target)
+    origins = np.empty((count, 3))
+    directions = np.empty((count, 3))
+    for ray in range(count):
+        step = (start + ray) % len(path)
+        box = target[ray]
+        x = (low[box, 0] + uniform[ray, 0] * extent[box, 0]) - path[step, 0]
+        y = (low[box, 1] + uniform[ray, 1] * extent[box, 1]) - path[step, 1]
+        z = (low[box, 2] + uniform[ray, 2] * extent[box, 2]) - path[step, 2]
+        norm = np.sqrt((x * x + y * y) + z * z) + 1e-12
+        directions[ray, 0], directions[ray, 1], directions[ray, 2] = x / norm, y / norm, z / norm
+        origins[ray] = path[step]
+    return origins, directions
+
+
+@numba.njit(cache=True, nogil=True)
+def _returns(t_hit: np.ndarray, primitive: np.ndarray, kept: np.ndarray, movable_tri: np.ndarray,
+             tri_map: np.ndarray, keep_movable: bool,
+             most: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rows (ascending) and scene triangles of a batch's returns: finite hits, kept (``kept``
+    empty: all), mapped through ``tri_map`` (empty: none), on the structure only unless
+    ``keep_movable``; the first ``most`` of them."""
+    rows = np.empty(min(len(t_hit), max(most, 0)), dtype=np.int64)
+    triangles = np.empty(len(rows), dtype=np.int64)
+    count = 0
+    for ray in range(len(t_hit)):
+        if count == len(rows):
+            break
+        if not np.isfinite(t_hit[ray]) or (len(kept) and not kept[ray]):
+            continue
+        triangle = np.int64(primitive[ray])
+        if len(tri_map):
+            triangle = tri_map[triangle]
+        if not keep_movable and movable_tri[triangle]:
+            continue
+        rows[count], triangles[count] = ray, triangle
+        count += 1
+    return rows[:count], triangles[:count]
+
+
+@numba.njit(cache=True, nogil=True)
+def _return_points(origins: np.ndarray, directions: np.ndarray, t_hit: np.ndarray,
+                   rows: np.ndarray, noise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points (N, 3) of ``rows`` at origin + direction x distance (the float32 hit distance as
+    float64, plus ``noise`` (N,) where given) and their origins as float32 (N, 3)."""
+    xyz = np.empty((len(rows), 3))
+    origin = np.empty((len(rows), 3), dtype=np.float32)
+    for k in range(len(rows)):
+        ray = rows[k]
+        distance = np.float64(t_hit[ray])
+        if len(noise):
+            distance = distance + noise[k]
+        for axis in range(3):
+            xyz[k, axis] = origins[ray, axis] + directions[ray, axis] * distance
+            origin[k, axis] = origins[ray, axis]
+    return xyz, origin
+
+
 class Scanner:
     """Casts the paper's ray scheme on a :class:`TriangleScene` with Embree scenes (embreex)."""
 
@@ -278,18 +356,14 @@ class Scanner:
             for _ in range(max_batches):
                 if got >= wanted:
                     break
-                idx = (state['step'] + np.arange(batch)) % len(path)
+                start = state['step']
                 state['step'] = int((state['step'] + batch) % len(path))
-                # np.take gathers rows several times faster than fancy indexing, same values
-                origins = np.take(path, idx, axis=0)
                 if aimed:  # towards a random point of a random object's bounds (area-weighted)
                     target = rng.choice(len(self.targets), size=batch, p=self.target_weight)
-                    low = np.take(self.target_lo, target, axis=0)
-                    extent = np.take(self.target_extent, target, axis=0)
-                    nominal = low + rng.random((batch, 3)) * extent
-                    nominal -= origins
-                    nominal /= row_norms(nominal) + 1e-12
+                    origins, nominal = _aimed_rays(path, start, target, self.target_lo,
+                                                   self.target_extent, rng.random((batch, 3)))
                 else:
+                    origins = _path_origins(path, start, batch)
                     nominal = random_directions(rng, batch)
                 cast_dirs = nominal
                 if config['angular_jitter'] > 0:
@@ -298,24 +372,17 @@ class Scanner:
                     cast_dirs /= row_norms(cast_dirs)
                 t_hit, prim = self.cast(raycaster, origins, cast_dirs, rng)
                 state['rays'] += batch
-                hit = np.isfinite(t_hit)
-                if config['dropout'] > 0:
-                    hit &= rng.random(batch) >= config['dropout']
-                # labels of the returns only (a miss has no primitive)
-                rows = np.flatnonzero(hit)
-                tri = prim[rows] if tri_map is None else tri_map[prim[rows]]
-                if not keep_movable:
-                    structure = ~self.movable_tri[tri]
-                    rows, tri = rows[structure], tri[structure]
-                rows, tri = rows[:wanted - got], tri[:wanted - got]
+                kept = (rng.random(batch) >= config['dropout']
+                        if config['dropout'] > 0 else np.ones(0, dtype=bool))
+                # the returns' rows and labels (a miss has no primitive), at most the rest wanted
+                rows, tri = _returns(t_hit, prim, kept, self.movable_tri,
+                                     _NO_MAP if tri_map is None else tri_map, keep_movable,
+                                     wanted - got)
                 if len(rows) == 0:
                     continue
-                distance = t_hit[rows].astype(np.float64)
-                if config['range_noise'] > 0:
-                    distance = distance + rng.normal(0.0, config['range_noise'], len(rows))
-                hit_origins = np.take(origins, rows, axis=0)
-                xyz = hit_origins + np.take(nominal, rows, axis=0) * distance[:, None]
-                chunks.append((xyz, tri, hit_origins.astype(np.float32)))
+                noise = (rng.normal(0.0, config['range_noise'], len(rows))
+                         if config['range_noise'] > 0 else np.zeros(0))
+                chunks.append((*_return_points(origins, nominal, t_hit, rows, noise), tri))
                 got += len(rows)
             return got
 
@@ -339,8 +406,8 @@ class Scanner:
             warnings.warn(f'only {got_objects + got} of {n_points} points: most rays escape the '
                           f'scene (is the room closed?)')
         xyz = np.concatenate([c[0] for c in chunks]) if chunks else np.zeros((0, 3))
-        tri = np.concatenate([c[1] for c in chunks]) if chunks else np.zeros(0, np.int64)
-        origin = np.concatenate([c[2] for c in chunks]) if chunks else np.zeros((0, 3), np.float32)
+        origin = np.concatenate([c[1] for c in chunks]) if chunks else np.zeros((0, 3), np.float32)
+        tri = np.concatenate([c[2] for c in chunks]) if chunks else np.zeros(0, np.int64)
         return ScanResult(
             xyz=xyz,
             rgb=np.take(self.scene.colors, tri, axis=0),
