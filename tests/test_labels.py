@@ -516,3 +516,19 @@ def test_macro_in_the_gui_adds_a_part_at_the_picked_point_and_marks_reviewed(rou
     assert '.Placement.Base.z' in seen['z_bound']  # follows the room's floor_z
     assert seen['reviewed'] == 'true'
     assert seen['colour'] == pytest.approx([v / 255 for v in class_colour('3dprinter')], abs=0.01)
+
+
+def test_teach_finetune_config_mixes_the_user_rooms_with_the_generated_areas():
+    from mmengine.config import Config
+    cfg = Config.fromfile(REPO / 'configs' / 'tr3d' / 'teach_finetune.py')
+    base = Config.fromfile(REPO / 'configs' / 'tr3d' / 'exp2_cpu.py')
+    sets = cfg.train_dataloader.dataset.dataset.datasets
+    files = [dataset.ann_file for dataset in sets]
+    assert files == ['s3dis_infos_Area_7.pkl', 's3dis_infos_Area_8.pkl'
+                     ] + ['s3dis_infos_Area_10.pkl'] * 33
+    assert all(dataset.pipeline == base.train_pipeline for dataset in sets)
+    assert all(dataset.data_root == base.data_root for dataset in sets)
+    assert cfg.train_dataloader.dataset.times == 1 and cfg.train_dataloader.batch_size == 4
+    assert cfg.load_from == 'work_dirs/exp2_cpu/epoch_12.pth'
+    assert cfg.model == base.model and cfg.test_dataloader == base.test_dataloader
+    assert cfg.train_cfg.max_epochs == cfg.param_scheduler.end == 6

@@ -97,7 +97,7 @@ def test_registry_builds_the_model_of_every_config(path: Path) -> None:
     assert model.bbox_head.num_classes == len(cfg.model.bbox_head.label2level)
     # The paper reports its best epoch; the CPU-scale configs test their final one (exp2_cpu's
     # area 9 validates and tests; the domain-shift models do not validate).
-    final = ('exp2_cpu', 'domain_shift_cpu', 'domain_shift_mixed_cpu')
+    final = ('exp2_cpu', 'domain_shift_cpu', 'domain_shift_mixed_cpu', 'teach_finetune')
     best_metric = None if path.stem in final else 'mAP_0.25'
     assert cfg.default_hooks.checkpoint.save_best == best_metric
     assert cfg.optim_wrapper.optimizer == dict(type='AdamW', lr=0.001, weight_decay=0.0001)
@@ -138,6 +138,7 @@ def test_registry_builds_the_model_of_every_config(path: Path) -> None:
         'exp2_cpu': 40000,
         'domain_shift_cpu': 40000,
         'domain_shift_mixed_cpu': 40000,
+        'teach_finetune': 40000,
         'tiny': 10000
     }.get(path.stem, 100000)
     assert points == {expected_points}  # training and testing sample alike
