@@ -503,6 +503,60 @@ def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
     return positions[keep], look[keep]
 
 
+@numba.njit(cache=True, nogil=True)
+def _tablet_rays(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up: np.ndarray,
+                 pose: np.ndarray, pixel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Origins and unit directions (N, 3) of rays through ``pixel`` (N, 2: right, up offsets on
+    the image plane at distance 1) of each ray's ``pose``."""
+    origins = np.empty((len(pose), 3))
+    directions = np.empty((len(pose), 3))
+    for ray in range(len(pose)):
+        p = pose[ray]
+        x = look[p, 0] + pixel[ray, 0] * right[p, 0] + pixel[ray, 1] * up[p, 0]
+        y = look[p, 1] + pixel[ray, 0] * right[p, 1] + pixel[ray, 1] * up[p, 1]
+        z = look[p, 2] + pixel[ray, 0] * right[p, 2] + pixel[ray, 1] * up[p, 2]
+        norm = np.sqrt((x * x + y * y) + z * z)
+        directions[ray, 0], directions[ray, 1], directions[ray, 2] = x / norm, y / norm, z / norm
+        origins[ray] = positions[p]
+    return origins, directions
+
+
+@numba.njit(cache=True, nogil=True)
+def _tablet_returns(t_hit: np.ndarray, primitive: np.ndarray, rows: np.ndarray,
+                    noise: np.ndarray, loss: np.ndarray, range_noise: float, far_keep: float,
+                    near: float, far: float, uniform: np.ndarray,
+                    most: int) -> tuple[np.ndarray, np.ndarray]:
+    """The first ``most`` of the hit ``rows`` the tablet keeps and their measured ranges: the
+    distance plus ``noise`` x ``range_noise`` within [near, far], kept when ``uniform`` is below
+    the keep probability (falling from 1 at ``near`` to ``far_keep`` at ``far``, times one minus
+    the triangle's ``loss``)."""
+    kept = np.empty(min(len(rows), max(most, 0)), dtype=np.int64)
+    measured = np.empty(len(kept))
+    count = 0
+    for k in range(len(rows)):
+        if count == len(kept):
+            break
+        ray = rows[k]
+        distance = np.float64(t_hit[ray]) + noise[k] * range_noise
+        keep = 1.0 - (1.0 - far_keep) * (distance - near) / (far - near)
+        keep *= 1.0 - loss[primitive[ray]]
+        if distance >= near and distance <= far and uniform[k] < keep:
+            kept[count], measured[count] = ray, distance
+            count += 1
+    return kept[:count], measured[:count]
+
+
+@numba.njit(cache=True, nogil=True)
+def _tablet_points(origins: np.ndarray, directions: np.ndarray, rows: np.ndarray,
+                   measured: np.ndarray) -> np.ndarray:
+    """Points (N, 3) of ``rows`` at origin + direction x measured range."""
+    xyz = np.empty((len(rows), 3))
+    for k in range(len(rows)):
+        for axis in range(3):
+            xyz[k, axis] = origins[rows[k], axis] + directions[rows[k], axis] * measured[k]
+    return xyz
+
+
 def cast_tablet(
     scanner: Scanner,
     positions: np.ndarray,
@@ -538,21 +592,15 @@ def cast_tablet(
             break
         pose = rng.integers(len(positions), size=batch)
         pixel = (rng.random((batch, 2)) * 2 - 1) * half
-        directions = (
-            np.take(look, pose, axis=0) + pixel[:, :1] * np.take(right, pose, axis=0) +
-            pixel[:, 1:] * np.take(up, pose, axis=0))
-        directions /= row_norms(directions)
-        origins = np.take(positions, pose, axis=0)
+        origins, directions = _tablet_rays(positions, look, right, up, pose, pixel)
         t_hit, prim = scanner.cast(scanner.full_scene, origins, directions, rng)
         rays += batch
         rows = np.flatnonzero(np.isfinite(t_hit))
-        measured = t_hit[rows] + rng.standard_normal(len(rows)) * cfg['range_noise']
-        keep_p = 1.0 - (1.0 - cfg['far_keep']) * (measured - near) / (far - near)
-        keep_p *= 1.0 - loss[prim[rows]]
-        kept = (measured >= near) & (measured <= far) & (rng.random(len(rows)) < keep_p)
-        rows, measured = rows[kept][:n_points - got], measured[kept][:n_points - got]
-        points.append(
-            np.take(origins, rows, axis=0) + np.take(directions, rows, axis=0) * measured[:, None])
+        noise = rng.standard_normal(len(rows))
+        rows, measured = _tablet_returns(t_hit, prim, rows, noise, loss, cfg['range_noise'],
+                                         cfg['far_keep'], near, far, rng.random(len(rows)),
+                                         n_points - got)
+        points.append(_tablet_points(origins, directions, rows, measured))
         triangles.append(prim[rows].astype(np.int64))
         owners.append(pose[rows])
         got += len(rows)
@@ -574,10 +622,10 @@ def _result(scanner: Scanner,
     scene = scanner.scene
     on_object = scanner.movable_tri[triangle]
     return ScanResult(
-        xyz=xyz.astype(np.float64),
+        xyz=xyz.astype(np.float64, copy=False),
         rgb=np.take(scene.colors, triangle, axis=0),
-        part=scene.part[triangle].astype(np.int32),
-        triangle=triangle.astype(np.int64),
+        part=scene.part[triangle].astype(np.int32, copy=False),
+        triangle=triangle.astype(np.int64, copy=False),
         origin=origin.astype(np.float32),
         rays_cast=int(rays),
         object_points=int((on_object if stray is None else on_object & ~stray).sum()),
