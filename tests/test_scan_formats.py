@@ -1,4 +1,4 @@
-"""Scan formats (synthdet/scan_io.py): every reader, chunked and bounded reading, errors."""
+"""Scan formats (package synthdet.scan_io): every reader, chunked and bounded reading, errors."""
 import math
 
 import numpy as np

@@ -216,7 +216,7 @@ def _peak_bytes(read) -> int:
 @pytest.mark.parametrize('name', sorted(TEXT_SCANS))
 def test_a_text_line_longer_than_the_limit_is_refused_in_bounded_memory(
         tmp_path, monkeypatch, name):
-    monkeypatch.setattr(scan_io, 'MAX_LINE_BYTES', 4096)
+    monkeypatch.setattr(scan_io.common, 'MAX_LINE_BYTES', 4096)  # the limit every format reads
     path = tmp_path / name
     header_lines = TEXT_SCANS[name][1]
     _text_scan(path, 20_000, long_line=header_lines + 15_001, long_bytes=4096)
