@@ -332,6 +332,57 @@ def test_a_georeferenced_scan_keeps_its_coordinates_to_the_millimetre(round_trip
     assert read_scan(room / 'Annotations' / 'table_1.txt')[:, 0].min() > offset[0]
 
 
+SWITCH_SCRIPT = textwrap.dedent('''\
+    # Runs in freecadcmd: switches the table to its sofa alternative, as the guide says.
+    import json, os
+    import FreeCAD as App
+    params = json.load(open(os.environ['SYNTHDET_TEST_PARAMS'], encoding='utf-8'))
+    doc = App.openDocument(params['document'])
+    table = [o for o in doc.Objects if getattr(o, 'Alternatives', None)][0]
+    table.Visibility = False
+    table.Alternatives[0].Visibility = True
+    doc.saveAs(params['out'])
+    json.dump({'switched': [table.Label, table.Alternatives[0].Label]},
+              open(params['report'], 'w'))
+''')
+
+
+def test_an_alternative_counts_only_when_switched_in(round_trip, tmp_path):
+    table = next(box for box in round_trip['truth'] if box['class'] == 'table')
+    detections = [{
+        'class': name,
+        'score': score,
+        'center': table['center'],
+        'size': table['size'],
+        'yaw': table['yaw']
+    } for name, score in (('table', 0.9), ('sofa', 0.6))]
+    write_predictions(
+        tmp_path / 'pred.json', {
+            'format': 'synthdet.predictions/1',
+            'scan': 'factory_1.txt',
+            'model': 'truth',
+            'detections': detections
+        })
+    document = tmp_path / 'one.FCStd'
+    build_document(
+        round_trip['scan'],
+        tmp_path / 'pred.json',
+        document,
+        round_trip['root'] / 'corners.json',
+        timeout=300.0)
+    switched = tmp_path / 'switched.FCStd'
+    report = run_freecad_script(tmp_path, SWITCH_SCRIPT, {
+        'document': str(document),
+        'out': str(switched)
+    })
+    assert report['switched'][0] == 'table 1'
+    for path, expected in ((document, 'table'), (switched, 'sofa')):
+        out = tmp_path / f'out_{path.stem}'
+        assert labels_cli(path, '--scan', round_trip['scan'], '--out', out) == 0
+        [found] = read_labels(out / 'factory_1.labels.json')['boxes']
+        assert_same_box(found, dict(table, **{'class': expected}))
+
+
 # --------------------------------------------------------------------------- input errors
 
 
