@@ -24,7 +24,7 @@ DEMO_ARGS ?= --threads 1
 demo: setup
 	$(PY) tools/demo.py $(DEMO_ARGS)
 
-# Experiment 2 at CPU scale (docs/results.md): 3 generated areas x 50 rooms x 1M points in
+# Experiment 2 at CPU scale (docs/experiments.md, figures in docs/results.md): 3 generated areas x 50 rooms x 1M points in
 # data/s3dis, their annotations checked against the objects' boxes (tools/check_annotations.py),
 # train areas 7, 8 and test area 9 with configs/tr3d/exp2_cpu.py. Every step resumes: finished
 # rooms are kept, training continues from the newest checkpoint of work_dirs/exp2_cpu, and the
@@ -32,7 +32,7 @@ demo: setup
 # the rooms of each generator sensor (tools/test.py --sensor), each test with its box-fit table
 # (--box-fit), the area-9 test also with what its false positives hit (--false-positives).
 # About 2 hours on an idle 2-core machine in the default 2 processes (12 epochs of 8-9 min with
-# their validation; docs/results.md). Rooms written by an older generator are kept as they are:
+# their validation). Rooms written by an older generator are kept as they are:
 # empty data/s3dis to regenerate them.
 EXP2_DATA ?= data/s3dis
 # the generator profile of the rooms (generator/profiles): mixed_rooms puts offices, meeting
@@ -47,7 +47,7 @@ EXP2_CONFIG ?= configs/tr3d/exp2_cpu.py
 EXP2_THREADS ?= 1
 # Training processes (tools/dist_train.sh, gloo on the CPU) sharing the batch of 4 rooms: 1, 2 or
 # 4. On an idle 2-core machine 2 processes with EXP2_THREADS=1 train at 4.6 s per iteration
-# against 6.3 s for one process with 2 threads (docs/results.md) and end at the same accuracy;
+# against 6.3 s for one process with 2 threads (docs/history.md) and end at the same accuracy;
 # the tests stay one process.
 EXP2_PROCS ?= 2
 ifneq ($(filter-out 1 2 4,$(EXP2_PROCS)),)
