@@ -29,13 +29,14 @@ from pathlib import Path
 
 import numpy as np
 
+from configurator.freecad.synthdet_freecad.schema import LABELS_READ_FORMAT as READ_FORMAT
 from configurator.freecad_cli import MACRO, FreecadFailed, check_timeout, run_freecad_process
 from synthdet.classes import GENERATED_CLASSES
 from synthdet.contracts import LABELS_FORMAT, write_labels
 from synthdet.geometry import box_corners_xy
 from synthdet.processes import work_folder
+from synthdet.scan_io import read_scan
 
-READ_FORMAT = 'synthdet.freecad-labels/1'
 BOX_MARGIN = 0.005  # metres a point may lie outside its box (sizes rounded to mm, rounding)
 BOTTOM_CLEARANCE = 0.0005  # metres above a box's bottom before a point is the box's
 OVERLAP_TOLERANCE = 0.001  # metres two boxes may share before they count as overlapping
@@ -208,25 +209,24 @@ def write_s3dis_room(room_dir: Path, points: np.ndarray, elements: np.ndarray) -
             shutil.rmtree(partial)
 
 
-def labels_document(read: dict, scan: Path, classes: list[str] | None = None) -> dict:
-    """The ``synthdet.labels/1`` document of the read boxes (classes: the generated classes
-    and every class in the document, unless given)."""
-    found = [box['class'] for box in read['boxes']]
-    names = list(classes) if classes else list(GENERATED_CLASSES)
-    names += [name for name in dict.fromkeys(found) if name not in names]
+def labels_document(read: dict, scan: Path) -> dict:
+    """The ``synthdet.labels/1`` document of the read boxes; ``classes`` are the generated
+    classes and every other class in the document."""
+    names = list(GENERATED_CLASSES)
+    names += [
+        name for name in dict.fromkeys(box['class'] for box in read['boxes']) if name not in names
+    ]
+    boxes = [{
+        key: box[key]
+        for key in ('class', 'center', 'size', 'yaw')
+    } for box in read['boxes']]
+    source = 'synthdet FreeCAD document' + (', reviewed' if read['reviewed'] else '')
     return {
-        'format':
-        LABELS_FORMAT,
-        'scan':
-        scan.name,
-        'classes':
-        names,
-        'boxes': [{
-            key: box[key]
-            for key in ('class', 'center', 'size', 'yaw')
-        } for box in read['boxes']],
-        'source':
-        'synthdet FreeCAD document' + (', reviewed' if read['reviewed'] else ''),
+        'format': LABELS_FORMAT,
+        'scan': scan.name,
+        'classes': names,
+        'boxes': boxes,
+        'source': source
     }
 
 
@@ -239,7 +239,6 @@ def make_labels(document: Path,
                 timeout: float = 300.0) -> dict:
     """Read the document, write the labels file and the S3DIS room into ``out``; returns a
     summary (``labels``, ``room_dir``, ``boxes`` per class, ``points``, ``reviewed``)."""
-    from synthdet.scan_io import read_scan
     document, scan, out = Path(document), Path(scan), Path(out)
     room_name = room_name or f'{re.sub(r"[^A-Za-z0-9]", "", scan.stem) or "room"}_1'
     if not ROOM_NAME.fullmatch(room_name):

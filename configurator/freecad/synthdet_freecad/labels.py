@@ -21,7 +21,8 @@ import os
 
 import FreeCAD as App
 
-READ_FORMAT = 'synthdet.freecad-labels/1'
+from .schema import LABELS_READ_FORMAT as READ_FORMAT
+
 SIZE_ALIASES = ('length', 'width', 'height')
 REVIEWED_KEY = 'SynthdetReviewed'  # document metadata (Document.Meta): 'true' once reviewed
 ENV_READ = 'SYNTHDET_READ'  # headless: the document to read (the result goes to SYNTHDET_RESULT)

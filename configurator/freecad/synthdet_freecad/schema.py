@@ -14,6 +14,8 @@ from synthdet.contracts import (MM, SchemaError, expect_format, expect_number,  
 
 JOB_FORMAT = 'synthdet.freecad-job/1'
 RESULT_FORMAT = 'synthdet.freecad-result/1'
+# what the macro reports when it reads a document's labels (``labels.run_headless``)
+LABELS_READ_FORMAT = 'synthdet.freecad-labels/1'
 
 
 def validate_job(data: object, source: str = '<job>') -> dict:
