@@ -1,7 +1,7 @@
 """Furniture rules of the room kinds beyond the factory room, in plain numpy.
 
 A room's kind is drawn from the configuration's ``room_kinds`` (generator/config.py); a factory
-room follows the paper's rules (generator/layout.py), the other kinds follow their own and never
+room follows the paper's rules (generator/furnish.py), the other kinds follow their own and never
 hold a YuMi or a 3D printer:
 
 - ``office``: desks against the walls (and at times two back to back in the middle), each with a
@@ -28,9 +28,10 @@ import numpy as np
 
 from generator.clutter import sample_clutter
 from generator.household import FURNITURE_KINDS, sample_household
-from generator.layout import (CONTACT, AssetSpec, Catalog, PlacedObject, RoomLayout, _Placer,
-                              _facing_yaw, _place_against_wall, _place_on_floor, _wall_frame,
-                              _wall_lengths, _wrap_angle)
+from generator.asset_spec import AssetSpec, Catalog
+from generator.furnish import place_against_wall, place_on_floor
+from generator.placement import (CONTACT, PlacedObject, Placer, RoomLayout, facing_yaw, wall_frame,
+                                 wall_lengths, wrap_angle)
 from synthdet.geometry import rotation2d
 
 # floor size and height of each kind's rooms (metres); real offices, meeting rooms, living rooms
@@ -78,13 +79,13 @@ def _choose(rng: np.random.Generator, catalog: Catalog, cls: str,
 
 def _walls_by_length(rng, polygon: np.ndarray, min_length: float) -> list[int]:
     """Walls at least ``min_length`` long, longest first (ties in random order)."""
-    lengths = _wall_lengths(polygon)
+    lengths = wall_lengths(polygon)
     order = np.lexsort((rng.random(len(lengths)), -np.round(lengths, 3)))
     return [int(i) for i in order if lengths[i] >= min_length]
 
 
 def _at_wall(rng,
-             placer: _Placer,
+             placer: Placer,
              spec: AssetSpec | None,
              walls: Sequence[int],
              gap: Sequence[float] = (0.0, 0.08),
@@ -95,18 +96,18 @@ def _at_wall(rng,
     ``u_center`` along the wall (metres from its start) when given. None places nothing."""
     if spec is None:
         return None
-    lengths = _wall_lengths(placer.polygon)
+    lengths = wall_lengths(placer.polygon)
     usable = [w for w in walls if lengths[w] >= spec.size[0] + 0.2]
     if not usable:
         return None
 
     def propose(attempt: int) -> tuple[np.ndarray, float]:
         wall = usable[attempt % len(usable)] if u_center is None else usable[0]
-        p0, direction, length, normal = _wall_frame(placer.polygon, wall)
+        p0, direction, length, normal = wall_frame(placer.polygon, wall)
         low, high = 0.1 + spec.size[0] / 2, length - 0.1 - spec.size[0] / 2
         u = rng.uniform(low, high) if u_center is None else min(max(u_center, low), high)
         xy = p0 + direction * u + normal * (rng.uniform(*gap) + spec.size[1] / 2)
-        return np.array([xy[0], xy[1], spec.size[2] / 2]), _facing_yaw(normal)
+        return np.array([xy[0], xy[1], spec.size[2] / 2]), facing_yaw(normal)
 
     return placer.place_first_free(spec, propose, tries, clearance=clearance)
 
@@ -116,10 +117,10 @@ def _local_pose(anchor: PlacedObject, local_xy: Sequence[float], spec: AssetSpec
     """A pose at ``local_xy`` in ``anchor``'s frame, turned by ``turn`` from its yaw, standing
     at height ``z0``."""
     xy = anchor.center[:2] + rotation2d(anchor.yaw) @ np.asarray(local_xy, dtype=float)
-    return np.array([xy[0], xy[1], z0 + spec.size[2] / 2]), _wrap_angle(anchor.yaw + turn)
+    return np.array([xy[0], xy[1], z0 + spec.size[2] / 2]), wrap_angle(anchor.yaw + turn)
 
 
-def _on_top(rng, placer: _Placer, support: PlacedObject, spec: AssetSpec,
+def _on_top(rng, placer: Placer, support: PlacedObject, spec: AssetSpec,
             where: str = 'any', tries: int = 6) -> PlacedObject | None:
     """``spec`` on ``support``'s free top, facing the support's front; ``where``: at the back,
     the front or anywhere on the top."""
@@ -152,7 +153,7 @@ def _on_top(rng, placer: _Placer, support: PlacedObject, spec: AssetSpec,
     return placer.place_first_free(spec, propose, tries, on=support.instance, clearance=CONTACT)
 
 
-def _chair_at(rng, placer: _Placer, chair: AssetSpec | None, target: PlacedObject,
+def _chair_at(rng, placer: Placer, chair: AssetSpec | None, target: PlacedObject,
               side: Sequence[float],
               along: float = 0.0, gap: Sequence[float] = (0.08, 0.35),
               tries: int = 6) -> PlacedObject | None:
@@ -175,7 +176,7 @@ def _chair_at(rng, placer: _Placer, chair: AssetSpec | None, target: PlacedObjec
 
 
 def _next_to(rng,
-             placer: _Placer,
+             placer: Placer,
              anchor: PlacedObject,
              spec: AssetSpec | None,
              side: int,
@@ -196,11 +197,11 @@ def _next_to(rng,
     return placer.place_first_free(spec, propose, tries, clearance=clearance)
 
 
-def _household(rng, placer: _Placer, kind: str) -> AssetSpec:
+def _household(rng, placer: Placer, kind: str) -> AssetSpec:
     return sample_household(rng, kind, placer.top_limit)
 
 
-def _furniture(rng, placer: _Placer, catalog: Catalog, kind: str) -> AssetSpec | None:
+def _furniture(rng, placer: Placer, catalog: Catalog, kind: str) -> AssetSpec | None:
     """A household furniture object of ``kind``, or None when the library lacks its class (a
     user library without tables gets no desks either)."""
     if not catalog.get(FURNITURE_KINDS[kind]):
@@ -208,7 +209,7 @@ def _furniture(rng, placer: _Placer, catalog: Catalog, kind: str) -> AssetSpec |
     return _household(rng, placer, kind)
 
 
-def _desk_items(rng, placer: _Placer, desk: PlacedObject, monitors: float = 0.85) -> None:
+def _desk_items(rng, placer: Placer, desk: PlacedObject, monitors: float = 0.85) -> None:
     """Monitors at the back, a keyboard at the front and a few small things on a desk."""
     if rng.random() < monitors:
         for _ in range(1 + int(rng.random() < 0.3)):
@@ -230,7 +231,7 @@ def _window_spans(layout: RoomLayout) -> list[tuple[int, float, float]]:
     return [(o.wall, o.u0, o.u1) for o in layout.openings if o.kind == 'window']
 
 
-def _room_extras(rng, placer: _Placer, catalog: Catalog, layout: RoomLayout,
+def _room_extras(rng, placer: Placer, catalog: Catalog, layout: RoomLayout,
                  walls: Sequence[int],
                  floor_kinds: Mapping[str, float], wall_kinds: Mapping[str, float],
                  count: Sequence[int]) -> None:
@@ -259,12 +260,12 @@ def _room_extras(rng, placer: _Placer, catalog: Catalog, layout: RoomLayout,
         if spec is None or spec.cls != 'clutter':  # furniture keeps the clearance
             _at_wall(rng, placer, spec, walls, (0.05, 0.4))
         elif kind in wall_kinds:
-            _place_against_wall(rng, placer, spec, (0.0, 0.05))
+            place_against_wall(rng, placer, spec, (0.0, 0.05))
         else:
-            _place_on_floor(rng, placer, spec)
+            place_on_floor(rng, placer, spec)
 
 
-def _spare_chairs(rng, placer: _Placer, catalog: Catalog, walls: Sequence[int], count: int,
+def _spare_chairs(rng, placer: Placer, catalog: Catalog, walls: Sequence[int], count: int,
                   variants: Sequence[str]) -> None:
     """Chairs along the walls, facing into the room."""
     for _ in range(count):
@@ -273,14 +274,14 @@ def _spare_chairs(rng, placer: _Placer, catalog: Catalog, walls: Sequence[int], 
             _at_wall(rng, placer, chair, walls, (0.05, 0.3), tries=8)
 
 
-def _office_desk(rng, placer: _Placer, catalog: Catalog) -> AssetSpec | None:
+def _office_desk(rng, placer: Placer, catalog: Catalog) -> AssetSpec | None:
     """A household desk or a library desk, half and half."""
     if rng.random() < 0.5:
         return _furniture(rng, placer, catalog, 'desk')
     return _choose(rng, catalog, 'table', DESK_TABLES)
 
 
-def _workplace(rng, placer: _Placer, catalog: Catalog, desk: PlacedObject | None) -> None:
+def _workplace(rng, placer: Placer, catalog: Catalog, desk: PlacedObject | None) -> None:
     """A chair in front of ``desk`` (a swivel chair 3 times in 4) and things on its top."""
     if desk is None:
         return
@@ -291,7 +292,7 @@ def _workplace(rng, placer: _Placer, catalog: Catalog, desk: PlacedObject | None
     _desk_items(rng, placer, desk)
 
 
-def _desk_island(rng, placer: _Placer, catalog: Catalog) -> None:
+def _desk_island(rng, placer: Placer, catalog: Catalog) -> None:
     """Two desks back to back in the middle of an open-plan office."""
     spec = _office_desk(rng, placer, catalog)
     first = spec and _central_table(rng, placer, spec)
@@ -325,14 +326,14 @@ def _furnish_office(rng, placer, catalog, layout, walls) -> None:
                  {'bookshelf': 2, 'cabinet': 1.5, 'wardrobe': 0.5}, (3, 8))
 
 
-def _center_pose(rng, placer: _Placer, spec: AssetSpec, yaw: float,
+def _center_pose(rng, placer: Placer, spec: AssetSpec, yaw: float,
                  jitter: float = 0.6) -> tuple[np.ndarray, float]:
     lo, hi = placer.polygon.min(axis=0), placer.polygon.max(axis=0)
     xy = (lo + hi) / 2 + rng.uniform(-jitter, jitter, size=2) * (hi - lo) / 4
-    return np.array([xy[0], xy[1], spec.size[2] / 2]), _wrap_angle(yaw + rng.normal(0.0, 0.05))
+    return np.array([xy[0], xy[1], spec.size[2] / 2]), wrap_angle(yaw + rng.normal(0.0, 0.05))
 
 
-def _chairs_around(rng, placer: _Placer, chair: AssetSpec, table: PlacedObject,
+def _chairs_around(rng, placer: Placer, chair: AssetSpec, table: PlacedObject,
                    share: float) -> None:
     """Chairs around ``table``: along both long sides, one at each end; each with ``share``."""
     if _variant(table.spec) == 'round':
@@ -352,7 +353,7 @@ def _chairs_around(rng, placer: _Placer, chair: AssetSpec, table: PlacedObject,
             _chair_at(rng, placer, chair, table, side)
 
 
-def _central_table(rng, placer: _Placer, spec: AssetSpec) -> PlacedObject | None:
+def _central_table(rng, placer: Placer, spec: AssetSpec) -> PlacedObject | None:
     """``spec`` near the middle of the room, along its longer side."""
     lo, hi = placer.polygon.min(axis=0), placer.polygon.max(axis=0)
     yaw = 0.0 if hi[0] - lo[0] >= hi[1] - lo[1] else np.pi / 2
@@ -498,7 +499,7 @@ _FURNISH = {
 }
 
 
-def furnish_kind(rng: np.random.Generator, placer: _Placer, catalog: Catalog,
+def furnish_kind(rng: np.random.Generator, placer: Placer, catalog: Catalog,
                  layout: RoomLayout, kind: str) -> None:
     """Furnish ``layout``'s room by the rules of ``kind`` (any kind but the factory)."""
     walls = _walls_by_length(rng, placer.polygon, 1.0)
