@@ -70,15 +70,46 @@ def read_document(document: Path, freecadcmd: str = 'freecadcmd', timeout: float
 
 
 def _check_fcstd(document: Path) -> None:
+    """Refuse a file that is no FCStd archive, or whose objects FreeCAD would restore by running
+    code (Python feature objects: FreeCAD imports their module) or by opening other files
+    (links into external documents). ``Document.xml`` is read in chunks (bounded memory)."""
     if not document.is_file():
         raise LabelsInputError(f'{document}: document not found')
     try:
         with zipfile.ZipFile(document) as archive:
-            names = archive.namelist()
-    except (OSError, zipfile.BadZipFile):
-        names = []
-    if 'Document.xml' not in names:
-        raise LabelsInputError(f'{document}: not a FreeCAD document (.FCStd)')
+            if 'Document.xml' not in archive.namelist():
+                raise zipfile.BadZipFile
+            with archive.open('Document.xml') as stream:
+                found = _first_unsafe_element(stream)
+    except (OSError, zipfile.BadZipFile, EOFError):
+        raise LabelsInputError(f'{document}: not a FreeCAD document (.FCStd)') from None
+    if found is not None:
+        raise LabelsInputError(f'{document}: {found}: labels opens no document FreeCAD would '
+                               'run code or open other files for; delete those objects')
+
+
+# the start of a Python object's element (its module is named after a value of any length),
+# or of a link whose file (the element's first attribute) is not empty
+UNSAFE_ELEMENTS = re.compile(rb'<Python |<XLink file="(?!")')
+XML_CHUNK = 1 << 20  # bytes of Document.xml searched at a time
+XML_OVERLAP = 4096  # bytes kept from the previous chunk: a start cut by a chunk boundary
+
+
+def _first_unsafe_element(stream) -> str | None:
+    """The first Python object or external link (its file) in ``stream``, described."""
+    tail = b''
+    while True:
+        chunk = stream.read(XML_CHUNK)
+        text = tail + chunk
+        match = UNSAFE_ELEMENTS.search(text)
+        if match is not None:
+            if match.group().startswith(b'<XLink'):
+                linked = text[match.end():match.end() + 80].split(b'"')[0]
+                return f'a link to another file ({linked.decode("utf-8", "replace")!r})'
+            return 'a Python object (FreeCAD imports its module to restore it)'
+        if not chunk:
+            return None
+        tail = text[-XML_OVERLAP:]
 
 
 def _footprint(box: dict, grow: float = 0.0) -> np.ndarray:

@@ -6,16 +6,19 @@ The predictions are the generated room's true boxes with three faults a user cor
 phantom sofa (deleted), a chair left out (added with ``editing.add_part``) and a chair detected
 0.3 m off (moved back). The labels must then equal the generator's truth.
 """
+import io
 import json
 import math
 import os
 import subprocess
 import textwrap
+import zipfile
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from configurator import labels as labels_module
 from configurator.__main__ import main as configurator_main
 from configurator.freecad_cli import build_document
 from configurator.labels import (BOX_MARGIN, LabelsInputError, background_elements, check_overlaps,
@@ -408,6 +411,57 @@ def test_a_document_that_is_not_synthdets_is_refused(round_trip, tmp_path, capsy
     assert labels_cli(text, '--scan', round_trip['scan'], '--out', out) == 2
     assert 'notes.FCStd: not a FreeCAD document' in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_document_with_python_objects_or_external_links_is_never_opened(
+        round_trip, tmp_path, capsys):
+    script = textwrap.dedent('''\
+        import json, os
+        import FreeCAD as App
+        params = json.load(open(os.environ['SYNTHDET_TEST_PARAMS'], encoding='utf-8'))
+
+        class Thing:  # a Python feature: FreeCAD restores it by importing this module
+            pass
+
+        doc = App.openDocument(params['document'])
+        doc.addObject('App::FeaturePython', 'Extra').Proxy = Thing()
+        doc.saveAs(params['out'])
+        json.dump({}, open(params['report'], 'w'))
+    ''')
+    python_doc = tmp_path / 'python.FCStd'
+    run_freecad_script(tmp_path, script, {
+        'document': str(round_trip['corrected']),
+        'out': str(python_doc)
+    })
+    out = tmp_path / 'out'
+    assert labels_cli(python_doc, '--scan', round_trip['scan'], '--out', out) == 2
+    error = capsys.readouterr().err
+    assert 'python.FCStd: a Python object' in error and error.count('\n') == 1
+    assert not out.exists()
+    # a link into another document: FreeCAD would open that file too
+    linked = tmp_path / 'linked.FCStd'
+    with zipfile.ZipFile(round_trip['corrected']) as source, \
+            zipfile.ZipFile(linked, 'w') as target:
+        for item in source.infolist():
+            data = source.read(item)
+            if item.filename == 'Document.xml':
+                data = data.replace(b'</Document>',
+                                    b'<XLink file="other.FCStd" name="Box"/></Document>')
+            target.writestr(item, data)
+    assert labels_cli(linked, '--scan', round_trip['scan'], '--out', out) == 2
+    assert "a link to another file ('other.FCStd')" in capsys.readouterr().err
+
+
+def test_the_document_check_finds_elements_across_chunk_boundaries(monkeypatch):
+    monkeypatch.setattr(labels_module, 'XML_CHUNK', 7)
+    cases = {
+        b'<a><Python value="' + b'x' * 50000 + b'" module="os"/></a>': 'a Python object',
+        b'<a>' + b' ' * 5 + b'<XLink file="' + b'p' * 9000 + b'"/>': 'a link to another file',
+        b'<XLink file="" name="Box"/><XLinks count="0"><Link value="Box"/>': None,
+    }
+    for xml, expected in cases.items():
+        found = labels_module._first_unsafe_element(io.BytesIO(xml))
+        assert (found if found is None else found[:len(expected)]) == expected
 
 
 def test_overlapping_parts_are_refused_and_nothing_is_written(round_trip, tmp_path, capsys):
