@@ -48,7 +48,7 @@ EDIT_SCRIPT = textwrap.dedent('''\
     for label, change in params['edits'].items():
         part = parts[label]
         if change == 'delete':
-            for child in list(getattr(part, 'Group', [])):
+            for child in labels.part_children(part):
                 doc.removeObject(child.Name)
             doc.removeObject(part.Name)
         else:

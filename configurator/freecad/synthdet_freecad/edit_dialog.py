@@ -36,7 +36,7 @@ def add_in_gui(doc, class_name: str):
         where = editing.view_point(Gui.ActiveDocument.ActiveView, editing.floor_height(doc))
     part = editing.add_part(doc, class_name, *where)
     colour = tuple(value / 255.0 for value in appearance.class_colour(class_name))
-    for child in part.Group:
+    for child in labels.part_children(part):
         if hasattr(child, 'Shape') and hasattr(child.ViewObject, 'ShapeColor'):
             child.ViewObject.ShapeColor = colour
     Gui.Selection.clearSelection()

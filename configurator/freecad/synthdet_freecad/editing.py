@@ -27,7 +27,7 @@ ADDABLE_CLASSES = tuple(DEFAULT_SIZES)
 def _room_sheet(doc):
     for group in doc.Objects:
         if 'CornerCount' in group.PropertiesList:
-            for child in getattr(group, 'Group', []):
+            for child in labels.part_children(group):
                 if child.TypeId == 'Spreadsheet::Sheet' and child.getCellFromAlias('floor_z'):
                     return child
     return None

@@ -64,9 +64,18 @@ def counted_parts(parts: list) -> list:
     return counted
 
 
+def part_children(part) -> list:
+    """The objects a part holds, whatever its type: a group's ``Group``, a link group's
+    ``ElementList``."""
+    for prop in ('Group', 'ElementList'):
+        if prop in part.PropertiesList:
+            return list(getattr(part, prop))
+    return []
+
+
 def _parameter_sheet(doc, part):
     """The spreadsheet holding the part's size cells: among its children, else by name."""
-    candidates = list(getattr(part, 'Group', [])) + [doc.getObject(f'{part.Name}_Parameters')]
+    candidates = part_children(part) + [doc.getObject(f'{part.Name}_Parameters')]
     for obj in candidates:
         if obj is not None and obj.TypeId == 'Spreadsheet::Sheet' and \
                 obj.getCellFromAlias('length'):
@@ -86,7 +95,9 @@ def part_box(doc, part) -> dict:
     """The part's label box in metres and radians: class, centre, size, yaw (and its name)."""
     sheet = _parameter_sheet(doc, part)
     size = [_millimetres(sheet, alias, f'part {part.Label!r}') for alias in SIZE_ALIASES]
-    placement = part.getGlobalPlacement()
+    # a part in the tree's groups (no placement of their own) or in an App::Part
+    placement = part.getGlobalPlacement() if hasattr(part, 'getGlobalPlacement') \
+        else part.Placement
     up = placement.Rotation.multVec(App.Vector(0, 0, 1))
     if up.z < math.cos(math.radians(MAX_TILT_DEG)):
         raise NotSynthdet(f'part {part.Label!r} is tilted {math.degrees(math.acos(up.z)):.1f} '
@@ -108,7 +119,7 @@ def room_outline(doc) -> dict | None:
     groups = [obj for obj in doc.Objects if _synthdet_property(obj, 'CornerCount')]
     if not groups:
         return None
-    children = list(getattr(groups[0], 'Group', []))
+    children = part_children(groups[0])
     sheets = [
         c for c in children if c.TypeId == 'Spreadsheet::Sheet' and c.getCellFromAlias('floor_z')
     ]
