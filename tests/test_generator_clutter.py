@@ -1,4 +1,4 @@
-"""Factory clutter (generator/clutter.py and its placement in generator/layout.py).
+"""Factory clutter (generator/clutter.py and its placement in generator/furnish.py).
 
 Meshes: every kind builds closed solids exactly filling its size. Layouts: seeded rooms with the
 default mix and with the heavy-clutter profile, checked from their ``meta.json`` boxes with

@@ -62,6 +62,20 @@ class Scale:
         return np.clip((values - self.low) * (255.0 / (self.high - self.low)), 0.0, 255.0)
 
 
+def structured_chunk(part: np.ndarray, colors: np.ndarray | None, intensity: str | None,
+                     intensity_scale: Scale) -> np.ndarray:
+    """``(n, 6)`` rows of the structured array ``part``: its ``x y z`` fields, then ``colors``
+    (0-255) or, without them, its field ``intensity`` scaled as grey (zeros without either)."""
+    chunk = np.zeros((len(part), 6))
+    for i, name in enumerate('xyz'):
+        chunk[:, i] = part[name]
+    if colors is not None:
+        chunk[:, 3:] = colors
+    elif intensity is not None:
+        chunk[:, 3:] = grey(intensity_scale(part[intensity]))
+    return chunk
+
+
 def no_color_note(path: Path, has_intensity: bool) -> str:
     """The note for a scan without colors: what the model gets instead."""
     if has_intensity:

@@ -15,8 +15,8 @@ import numba
 import numpy as np
 
 from synthdet.scan_io import common
-from synthdet.scan_io.common import (ScanFormatError, Scale, bad_line, colors_0_255, grey,
-                                     no_color_note, one_line, text_blocks)
+from synthdet.scan_io.common import (Scale, ScanFormatError, bad_line, colors_0_255, no_color_note,
+                                     one_line, structured_chunk, text_blocks)
 
 _PCD_TYPES = {
     ('F', 4): '<f4',
@@ -123,13 +123,8 @@ def read_chunks(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
         total += len(block)
         for start in range(0, len(block), chunk_points):
             part = block[start:start + chunk_points]
-            chunk = np.zeros((len(part), 6))
-            for i, name in enumerate('xyz'):
-                chunk[:, i] = part[name]
-            if colour is not None:
-                chunk[:, 3:] = _pcd_colours(part[colour])
-            elif intensity is not None:
-                chunk[:, 3:] = grey(intensity_scale(part[intensity]))
+            colors = None if colour is None else _pcd_colours(part[colour])
+            chunk = structured_chunk(part, colors, intensity, intensity_scale)
             # An organised cloud (a depth camera's frame, HEIGHT > 1) keeps one record per
             # pixel and marks the pixels without a depth by NaN coordinates: they are no points.
             pixel_without_depth = np.isnan(chunk[:, :3]).all(axis=1)

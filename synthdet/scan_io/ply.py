@@ -9,7 +9,8 @@ import numpy as np
 
 from synthdet.ply import read_ply_vertices
 from synthdet.ply import write_ply as write_ply_file
-from synthdet.scan_io.common import ScanFormatError, Scale, colors_0_255, grey, no_color_note
+from synthdet.scan_io.common import (Scale, ScanFormatError, colors_0_255, no_color_note,
+                                     structured_chunk)
 
 PLY_COLOUR_NAMES = (
     ('red', 'green', 'blue'),
@@ -47,14 +48,9 @@ def _structured_chunks(path: Path, table: np.ndarray, colour_names: Sequence[Seq
     intensity_scale = Scale()
     for start in range(0, len(table), chunk_points):
         part = table[start:start + chunk_points]
-        chunk = np.zeros((len(part), 6))
-        for i, name in enumerate('xyz'):
-            chunk[:, i] = part[name]
-        if colour is not None:
-            chunk[:, 3:] = scale(np.column_stack([part[name] for name in colour]))
-        elif intensity is not None:
-            chunk[:, 3:] = grey(intensity_scale(part[intensity]))
-        yield chunk
+        colors = None if colour is None else scale(
+            np.column_stack([part[name] for name in colour]))
+        yield structured_chunk(part, colors, intensity, intensity_scale)
 
 
 def write(path: Path, points: np.ndarray) -> None:
