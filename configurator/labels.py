@@ -264,7 +264,7 @@ def labels_document(read: dict, scan: Path) -> dict:
 def make_labels(document: Path,
                 scan: Path,
                 out: Path,
-                area: int = 1,
+                area: int = 10,
                 room_name: str | None = None,
                 freecadcmd: str = 'freecadcmd',
                 timeout: float = 300.0) -> dict:

@@ -17,7 +17,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('document', help='the corrected FreeCAD document (.FCStd)')
     parser.add_argument('--scan', required=True, help='the scan the document was made from')
     parser.add_argument('--out', required=True, help='output folder')
-    parser.add_argument('--area', type=int, default=1, help='S3DIS area number (default 1)')
+    parser.add_argument('--area', type=int, default=10,
+                        help='S3DIS area number (default 10, the area teach_finetune.py trains)')
     parser.add_argument('--room', help='S3DIS room name <name>_<number> (default: <scan stem>_1)')
     add_program_options(parser, 'freecadcmd', 'FreeCAD command-line executable', timeout=300.0)
 

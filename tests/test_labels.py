@@ -330,7 +330,7 @@ def test_a_georeferenced_scan_keeps_its_coordinates_to_the_millimetre(round_trip
                                    sorted(truth, key=lambda box: (box['class'], box['center']))):
         assert_same_box(found_box, true_box)
     assert len(found) == len(truth)
-    room = tmp_path / 'out' / 'Area_1' / 'geo_1'
+    room = tmp_path / 'out' / 'Area_10' / 'geo_1'
     assert len(read_scan(room / 'geo_1.txt')) == len(points)
     assert read_scan(room / 'Annotations' / 'table_1.txt')[:, 0].min() > offset[0]
 
