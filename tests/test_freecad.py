@@ -19,11 +19,11 @@ import pytest
 
 from configurator import freecad_cli
 from configurator.freecad_cli import MACRO, FreecadFailed, build_document
-from configurator.freecad_screenshot import USER_CONFIG as GUI_USER_CONFIG
 from synthdet.contracts import SchemaError, load_json, validate_corners, validate_predictions
 from synthdet.scan_io import write_scan
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from freecad_gui import RUN_MACRO_ANSWERING, WRITE_REPORT, run_gui_driver  # noqa: E402
 from room_scans import make_room  # noqa: E402
 
 FREECADCMD = 'freecadcmd'
@@ -159,13 +159,7 @@ GUI_DRIVER = textwrap.dedent('''\
             seen['messages'].append(widget.text())
             widget.accept()
 
-    timer = QtCore.QTimer()
-    timer.timeout.connect(answer)
-    timer.start(100)
-    with open(params['macro'], encoding='utf-8') as stream:
-        code = compile(stream.read(), params['macro'], 'exec')
-    exec(code, {'__file__': params['macro'], '__name__': '__main__'})
-    timer.stop()
+''') + RUN_MACRO_ANSWERING + textwrap.dedent('''\
     doc = App.ActiveDocument
     seen['gui'] = App.GuiUp
     seen['classes'] = sorted(o.DetectedClass for o in doc.Objects if hasattr(o, 'DetectedClass'))
@@ -176,14 +170,13 @@ GUI_DRIVER = textwrap.dedent('''\
     seen['sofa_model'] = sofa.CadModel
     seen['sofa_colour'] = list(doc.getObject(sofa.Name + '_Model').ViewObject.ShapeMaterial
                                .DiffuseColor)[:3]
-    seen['hidden_solids'] = [o.Label for o in doc.Objects if o.isDerivedFrom('Part::Feature')
-                             and o.Name not in ('FloorSketch', 'WallOutline', 'WallProfile')
-                             and o.getParentGeoFeatureGroup() is not None
-                             and not o.ViewObject.Visibility]
-    with open(params['report'], 'w', encoding='utf-8') as stream:
-        json.dump(seen, stream)
-    os._exit(0)  # the offscreen platform has no OpenGL context to tear the 3D view down
-''')
+    parts = [o for o in doc.Objects if o.TypeId == 'App::LinkGroup']
+    # a part draws its solids at its placement: shown on their own they would be drawn twice
+    seen['solids_shown_on_their_own'] = [o.Label for part in parts for o in part.ElementList
+                                         if o.ViewObject.Visibility]
+    seen['hidden_parts'] = [o.Label for o in parts if not o.ViewObject.Visibility
+                            and 'Alternatives' not in [p.Name for p in o.InList]]
+''') + WRITE_REPORT
 
 
 def run_freecad(script: Path, env: dict | None = None) -> subprocess.CompletedProcess:
@@ -587,31 +580,9 @@ def test_freecad_failure_is_reported_not_hidden(workspace, tmp_path):
 
 
 def test_macro_in_the_gui_asks_for_the_files_and_imports(workspace, tmp_path):
-    driver, config = tmp_path / 'drive_gui.py', tmp_path / 'user.cfg'
-    driver.write_text(GUI_DRIVER, encoding='utf-8')
-    config.write_text(GUI_USER_CONFIG, encoding='utf-8')
-    report = tmp_path / 'gui.json'
-    params = write_json(
-        tmp_path / 'gui_params.json', {
-            'macro': str(MACRO),
-            'report': str(report),
-            'answers': [str(workspace['predictions']),
-                        str(workspace['corners'])]
-        })
-    process = subprocess.run(
-        ['freecad', '-u', str(config), str(driver)],
-        env=dict(os.environ,
-                 QT_QPA_PLATFORM='offscreen',
-                 SYNTHDET_TEST_PARAMS=str(params),
-                 SYNTHDET_LIBRARY=str(workspace['library'])),
-        cwd=tmp_path,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        errors='replace',
-        timeout=300)
-    assert report.is_file(), process.stdout[-3000:]
-    seen = json.loads(report.read_text(encoding='utf-8'))
+    answers = [str(workspace['predictions']), str(workspace['corners'])]
+    seen = run_gui_driver(tmp_path, GUI_DRIVER, {'answers': answers},
+                          SYNTHDET_LIBRARY=str(workspace['library']))
     assert seen['gui'] and len(seen['dialogs']) == 2
     assert 'predictions' in seen['dialogs'][0] and 'corners' in seen['dialogs'][1]
     assert "no CAD model for class 'forklift'" in seen['messages'][0]
@@ -619,6 +590,6 @@ def test_macro_in_the_gui_asks_for_the_files_and_imports(workspace, tmp_path):
     assert seen['classes'] == sorted(expected)
     assert seen['floor_area'] == pytest.approx(24e6)
     assert seen['table_colour'] == pytest.approx([31 / 255, 119 / 255, 180 / 255], abs=0.01)
-    assert seen['hidden_solids'] == []
+    assert seen['solids_shown_on_their_own'] == [] and seen['hidden_parts'] == []
     assert seen['sofa_model'] == 'step'  # a linked STEP model takes the class colour too
     assert seen['sofa_colour'] == pytest.approx([44 / 255, 160 / 255, 44 / 255], abs=0.01)

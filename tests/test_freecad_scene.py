@@ -69,11 +69,11 @@ INSPECT = textwrap.dedent('''\
             'bounds': [bound.XMin, bound.YMin, bound.ZMin, bound.XMax, bound.YMax, bound.ZMax],
             'in_walls': shape.common(walls).Volume,
             'alternatives': [other.Label for other in getattr(obj, 'Alternatives', [])],
-            'solid_labels': [child.Label for child in obj.Group
+            'solid_labels': [child.Label for child in obj.ElementList
                              if child.isDerivedFrom('Part::Feature')],
-            'sheet_label': [child.Label for child in obj.Group
+            'sheet_label': [child.Label for child in obj.ElementList
                             if child.TypeId == 'Spreadsheet::Sheet'][0],
-            'label_column': [child.getColumnWidth('A') for child in obj.Group
+            'label_column': [child.getColumnWidth('A') for child in obj.ElementList
                              if child.TypeId == 'Spreadsheet::Sheet'][0],
         }
     def part(label):
@@ -83,10 +83,10 @@ INSPECT = textwrap.dedent('''\
               'parts': parts, 'objects': len(doc.Objects),
               'invalid': [o.Name for o in doc.Objects if not o.isValid()]}
     chair = [o for o in doc.Objects if getattr(o, 'Label', '') == params['chair']][0]
-    sheet = [c for c in chair.Group if c.TypeId == 'Spreadsheet::Sheet'][0]
+    sheet = [c for c in chair.ElementList if c.TypeId == 'Spreadsheet::Sheet'][0]
     sheet.set(sheet.getCellFromAlias('height'), '=1500 mm')
     table = [o for o in doc.Objects if getattr(o, 'Label', '') == params['table']][0]
-    table_sheet = [c for c in table.Group if c.TypeId == 'Spreadsheet::Sheet'][0]
+    table_sheet = [c for c in table.ElementList if c.TypeId == 'Spreadsheet::Sheet'][0]
     table_sheet.set(table_sheet.getCellFromAlias('height'), '=1000 mm')
     doc.recompute()
     report['chair_after'] = Part.getShape(chair).optimalBoundingBox().ZMin

@@ -67,9 +67,16 @@ class Look:
         Every object gets its stored visibility (origin helpers hidden), painted solids their
         colour, and the camera an isometric view fitted to the visible shapes. FreeCAD reads
         the zip's files in the order it asks for them, so the new file goes after the
-        document's own files (the shapes), where a GUI-saved document has it.
+        document's own files (the shapes), where a GUI-saved document has it: appended, or, if
+        the file already holds one, by writing the archive anew.
         """
         xml = self._gui_xml(doc)
+        with zipfile.ZipFile(path) as source:
+            has_gui_document = 'GuiDocument.xml' in source.namelist()
+        if not has_gui_document:  # appending leaves the shapes as FreeCAD compressed them
+            with zipfile.ZipFile(path, 'a', zipfile.ZIP_DEFLATED) as target:
+                target.writestr('GuiDocument.xml', xml)
+            return
         temporary = f'{path}.gui'  # beside ``path``, named after it: cleaned up with it
         try:
             with zipfile.ZipFile(path) as source, \
@@ -125,16 +132,29 @@ def _property(name: str, type_name: str, value: str) -> str:
 
 
 def _visible_bounds(doc):
-    """World bounds of the visible solids (parents' placements applied)."""
+    """World bounds of the visible solids: those outside parts, and all solids of visible
+    ``App::LinkGroup`` parts (hidden themselves: the part draws them), moved by the part's
+    placement. The solids' bounding boxes are transformed, not their shapes: no shape is
+    copied."""
     bounds = App.BoundBox()
+    in_parts = set()
+    for part in doc.findObjects('App::LinkGroup'):
+        members = part.ElementList
+        in_parts.update(member.Name for member in members)
+        if part.Visibility:
+            for member in members:
+                _add_bounds(bounds, member, part.Placement)
     for obj in doc.Objects:
-        if obj.isDerivedFrom('Part::Feature') and obj.Visibility and not obj.Shape.isNull() \
-                and all(parent.Visibility for parent in obj.InListRecursive
-                        if parent.TypeId == 'App::Part'):
-            placed = obj.Shape.copy()
-            placed.Placement = obj.getGlobalPlacement()
-            bounds.add(placed.BoundBox)
+        if obj.Name not in in_parts and obj.Visibility and obj.isDerivedFrom('Part::Feature'):
+            _add_bounds(bounds, obj, obj.getGlobalPlacement().multiply(obj.Placement.inverse()))
     return bounds
+
+
+def _add_bounds(bounds, obj, parent) -> None:
+    """Add the bounds of ``obj``'s shape (own placement applied) moved by the placement
+    ``parent``, if it has a shape."""
+    if obj.isDerivedFrom('Part::Feature') and not obj.Shape.isNull():
+        bounds.add(obj.Shape.BoundBox.transformed(parent.toMatrix()))
 
 
 def isometric_camera(bounds) -> str:

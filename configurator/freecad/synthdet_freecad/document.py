@@ -160,15 +160,24 @@ def _stand(container, placed, containers: dict, room_sheet) -> None:
     support = placed.support
     if support is not None and support in containers:
         table = containers[support]
-        container.setExpression('.Placement.Base.z',
-                                f'{table.Name}.Placement.Base.z + {table.Name}_Parameters.height')
+        container.setExpression(
+            '.Placement.Base.z',
+            f'{table.Name}.Placement.Base.z + {library.parameter_sheet(table).Name}.height')
     elif support is None and room_sheet is not None:
         container.setExpression('.Placement.Base.z', f'{room_sheet.Name}.floor_z')
 
 
+def _add_members(group, objects: list) -> None:
+    """Add ``objects`` to ``group`` in one step: FreeCAD checks every member of a group each
+    time one is added (each object may be in one group only), so adding them one by one would
+    take time in the square of their number."""
+    if objects:
+        group.addObjects(objects)
+
+
 def _paint_model(look, container) -> None:
     colour = appearance.class_colour(container.DetectedClass)
-    for child in container.Group:
+    for child in library.children(container):
         if hasattr(child, 'Shape') or child.TypeId == 'App::Link':
             look.paint(child, colour)
 
@@ -210,6 +219,7 @@ def _build(doc, predictions: dict, corners: dict | None, library_dir: str | None
     step_objects = {}
     containers = {}
     warned = set()
+    next_numbers = {}
 
     def build(placed):
         class_name = placed.class_name
@@ -220,7 +230,7 @@ def _build(doc, predictions: dict, corners: dict | None, library_dir: str | None
                                                         _group(doc, 'Library'))
             library_object = step_objects[class_name]
         container, kind = library.add_detection(doc, placed, predictions['scan'],
-                                                predictions['model'], library_object)
+                                                predictions['model'], library_object, next_numbers)
         if kind == 'box' and class_name not in warned:
             warned.add(class_name)
             warnings.append(f'no CAD model for class {class_name!r}: placed labelled boxes')
@@ -232,16 +242,18 @@ def _build(doc, predictions: dict, corners: dict | None, library_dir: str | None
     objects = []
     tables_first = sorted(placed_items, key=lambda item: item.class_name != 'table')
     built = {placed: build(placed) for placed in tables_first}
+    members = {furniture: [], equipment: []}  # each group filled at once: see _add_members
+    hidden_alternatives = []
     for placed in placed_items:
         container, kind = built[placed]
         group = furniture if placed.class_name in FURNITURE_CLASSES else equipment
-        group.addObject(container)
+        members[group].append(container)
         alternatives = []
         for other in placed.alternatives:
             alternative, _ = build(other)
-            _group(doc, 'Alternatives').addObject(alternative)
             alternative.Visibility = False
             alternatives.append(alternative)
+        hidden_alternatives.extend(alternatives)
         if alternatives:
             container.addProperty(
                 'App::PropertyLinkList', 'Alternatives', 'Synthdet',
@@ -258,6 +270,10 @@ def _build(doc, predictions: dict, corners: dict | None, library_dir: str | None
             'orientation': placed.orientation,
             'alternatives': [alternative.Label for alternative in alternatives],
         })
+    for group, containers_of_group in members.items():
+        _add_members(group, containers_of_group)
+    if hidden_alternatives:
+        _add_members(_group(doc, 'Alternatives'), hidden_alternatives)
     if doc.getObject('Alternatives') is not None:
         doc.getObject('Alternatives').Visibility = False
     doc.recompute()

@@ -1,15 +1,19 @@
 """The CAD library: one natively parametric FreeCAD model per detection class.
 
-Runs inside FreeCAD. Every model is one ``App::Part`` whose origin is the centre of its base
-(the model stands on the part's z = 0 plane, so a height edit keeps its feet in place) and
-whose front is its local -y side. Its dimensions sit in a ``Spreadsheet::Sheet`` inside that
-part (aliases ``length``, ``width``, ``height`` in mm along the local x, y, z axes, plus model
-details such as the YuMi joint angles), and every solid is bound to those cells by FreeCAD
-expressions. The document therefore stays parametric in a plain FreeCAD: edit a cell,
+Runs inside FreeCAD. Every model is one ``App::LinkGroup`` (a group with a placement and,
+unlike an ``App::Part``, without an origin of six helper objects) whose origin is the centre
+of its base (the model stands on the part's z = 0 plane, so a height edit keeps its feet in
+place) and whose front is its local -y side. Its dimensions sit in a ``Spreadsheet::Sheet``
+inside that part (aliases ``length``, ``width``, ``height`` in mm along the local x, y, z axes,
+plus model details such as the YuMi joint angles), and every solid is bound to those cells by
+FreeCAD expressions. The document therefore stays parametric in a plain FreeCAD: edit a cell,
 recompute, and the geometry follows. No Python feature proxies are used.
 
-Expressions are assembled only from object names FreeCAD generated from fixed base names, cell
-aliases defined here, and numbers: nothing read from the input files is ever part of one.
+Object names are chosen here (``Chair001``, ``Chair001_Seat``, ``Chair001_Parameters``) and
+checked to be free, so FreeCAD never searches the whole document for a free name (it does that
+for every name already taken, which makes building n objects take time in n squared).
+Expressions are assembled only from those names, built from fixed base names, cell aliases
+defined here, and numbers: nothing read from the input files is ever part of one.
 """
 import math
 import re
@@ -64,14 +68,41 @@ def _readable(suffix: str) -> str:
     return ' '.join(word.lower() for word in re.findall(r'[A-Z][a-z]*|[0-9]+', suffix))
 
 
+CONTAINER_TYPE = 'App::LinkGroup'
+SHEET_SUFFIX = '_Parameters'
+
+
+def children(container) -> list:
+    """The objects a detection's part holds: its parameter sheet first, then its solids."""
+    return list(container.ElementList)
+
+
+def parameter_sheet(container):
+    """The ``Spreadsheet::Sheet`` holding a detection part's dimensions."""
+    return container.Document.getObject(container.Name + SHEET_SUFFIX)
+
+
+def free_name(doc, base_name: str, next_numbers: dict[str, int]) -> str:
+    """``<base_name><NNN>``, the first number from ``next_numbers[base_name]`` on (1 if absent)
+    whose part and parameter sheet names are both free in ``doc``; advances the counter, so that
+    n names cost n look-ups, not the n squared of FreeCAD's own search."""
+    number = next_numbers.get(base_name, 1)
+    while doc.getObject(f'{base_name}{number:03d}') is not None or \
+            doc.getObject(f'{base_name}{number:03d}{SHEET_SUFFIX}') is not None:
+        number += 1
+    next_numbers[base_name] = number + 1
+    return f'{base_name}{number:03d}'
+
+
 class ModelBuilder:
-    """Adds expression-bound solids to one detection's ``App::Part``."""
+    """Adds expression-bound solids to one detection's part (collected, then set at once)."""
 
     def __init__(self, doc, container, sheet):
         self.doc = doc
         self.container = container
         self.sheet = sheet
         self.row = 1
+        self.children = [sheet]
 
     def parameter(self, alias: str, value: str, description: str) -> None:
         """Add a sheet row: description in column A, the value (aliased) in column B."""
@@ -87,7 +118,7 @@ class ModelBuilder:
     def _add(self, type_name: str, suffix: str):
         obj = self.doc.addObject(type_name, f'{self.container.Name}_{suffix}')
         obj.Label = f'{self.container.Label} {_readable(suffix)}'
-        self.container.addObject(obj)
+        self.children.append(obj)
         return obj
 
     def _bind(self, obj, values: dict) -> None:
@@ -316,7 +347,7 @@ def build_step(model: ModelBuilder, library_object) -> None:
     link = model.doc.addObject('App::Link', f'{model.container.Name}_Model')
     link.Label = f'{model.container.Label} model'
     link.LinkedObject = library_object
-    model.container.addObject(link)
+    model.children.append(link)
     scale = ['{P}.%s / {P}.step_%s' % (name, name) for name in ('length', 'width', 'height')]
     link.setExpression('ScaleVector', model.expr(f'create(<<vector>>; {"; ".join(scale)})'))
     for axis, factor in zip('xyz', scale):
@@ -347,12 +378,18 @@ SYNTHDET_PROPERTIES = (
 )
 
 
-def add_detection(doc, placed, scan: str, model_name: str, library_object=None):
+def add_detection(doc,
+                  placed,
+                  scan: str,
+                  model_name: str,
+                  library_object=None,
+                  next_numbers: dict[str, int] | None = None):
     """Create one placed detection's parametric model; returns (container, model kind).
 
     ``placed`` is an ``arrangement.Placed``: label, pose and dimensions in metres.
     ``library_object`` is the imported user STEP shape for the class, if any; otherwise the
-    built-in model is used, or a plain box for classes without one.
+    built-in model is used, or a plain box for classes without one. ``next_numbers`` (base
+    name -> next number, see ``free_name``) is shared by the calls of one import.
     """
     class_name = placed.class_name
     base_name, builder = BUILTIN_MODELS.get(class_name, ('Detection', None))
@@ -360,7 +397,8 @@ def add_detection(doc, placed, scan: str, model_name: str, library_object=None):
         kind = 'step'
     else:
         kind = 'builtin' if builder else 'box'
-    container = doc.addObject('App::Part', base_name)
+    numbers = {} if next_numbers is None else next_numbers
+    container = doc.addObject(CONTAINER_TYPE, free_name(doc, base_name, numbers))
     container.Label = placed.label
     for prop, type_name, doc_text in SYNTHDET_PROPERTIES:
         container.addProperty(type_name, prop, 'Synthdet', doc_text)
@@ -375,10 +413,9 @@ def add_detection(doc, placed, scan: str, model_name: str, library_object=None):
     base = App.Vector(1000.0 * placed.x, 1000.0 * placed.y, 1000.0 * placed.base_z)
     container.Placement = App.Placement(
         base, App.Rotation(App.Vector(0, 0, 1), math.degrees(placed.yaw)))
-    sheet = doc.addObject('Spreadsheet::Sheet', f'{container.Name}_Parameters')
+    sheet = doc.addObject('Spreadsheet::Sheet', container.Name + SHEET_SUFFIX)
     sheet.Label = f'{placed.label} parameters'
     sheet.setColumnWidth('A', LABEL_COLUMN_WIDTH)
-    container.addObject(sheet)
     model = ModelBuilder(doc, container, sheet)
     for alias, value in zip(('length', 'width', 'height'),
                             (placed.length, placed.width, placed.height)):
@@ -389,4 +426,7 @@ def add_detection(doc, placed, scan: str, model_name: str, library_object=None):
         BUILDERS[builder](model)
     else:
         build_box(model)
+    for child in model.children:  # drawn by the part, at its placement, not on their own
+        child.Visibility = False
+    container.ElementList = model.children
     return container, kind

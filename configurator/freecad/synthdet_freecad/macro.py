@@ -121,7 +121,8 @@ def save_atomically(doc, out: str, look) -> None:
     partial = partial_path(out)
     try:
         doc.saveCopy(partial)
-        _check_complete(partial)  # FreeCAD reports some write errors only on its console
+        # FreeCAD reports some write errors only on its console
+        _check_complete(partial, read_members=False)
         look.write_gui_document(partial, doc)
         _check_complete(partial)
         os.replace(partial, out)
@@ -131,11 +132,13 @@ def save_atomically(doc, out: str, look) -> None:
                 os.remove(leftover)
 
 
-def _check_complete(path: str) -> None:
-    """Raise ``OSError`` unless ``path`` is a whole FCStd archive (its members read back)."""
+def _check_complete(path: str, read_members: bool = True) -> None:
+    """Raise ``OSError`` unless ``path`` is a whole FCStd archive: its directory lists
+    ``Document.xml`` and, with ``read_members``, every member reads back intact."""
     try:
         with zipfile.ZipFile(path) as archive:
-            complete = 'Document.xml' in archive.namelist() and archive.testzip() is None
+            complete = 'Document.xml' in archive.namelist() and \
+                (not read_members or archive.testzip() is None)
     except (OSError, zipfile.BadZipFile):
         complete = False
     if not complete:
