@@ -15,10 +15,13 @@ import signal
 import subprocess
 import sys
 from pathlib import Path
+from typing import Callable, TypeVar
 
 from configurator.freecad.synthdet_freecad.schema import JOB_FORMAT, RESULT_FORMAT
 from synthdet.contracts import load_json, read_corners, read_predictions, validate_corners
 from synthdet.processes import ends_with_parent, work_folder
+
+T = TypeVar('T')
 
 MACRO = Path(__file__).resolve().parent / 'freecad' / 'ImportSynthdet.FCMacro'
 
@@ -191,27 +194,40 @@ def build_document(scan: Path,
     return result
 
 
+def run_reporting_errors(step: Callable[[], T]) -> tuple[T | None, int]:
+    """Run ``step`` so that SIGINT/SIGTERM end FreeCAD; a failure prints one ``error:`` line.
+
+    Returns ``(result, 0)``, or ``(None, exit code)``: 2 for bad input (a ``ValueError``:
+    SchemaError, ScanFormatError, CornerDetectionError, LabelsInputError), 1 when FreeCAD fails
+    or a file cannot be used, 128 + the signal number when interrupted.
+    """
+    from synthdet.processes import Interrupted, stop_on_signals
+    try:
+        with stop_on_signals():
+            return step(), 0
+    except ValueError as error:
+        print(f'error: {error}', file=sys.stderr)
+        return None, 2
+    except (FreecadFailed, OSError) as error:
+        print(f'error: {error}', file=sys.stderr)
+        return None, 1
+    except Interrupted as stop:
+        print(f'error: stopped by {stop}; FreeCAD was ended', file=sys.stderr)
+        return None, stop.exit_code
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the sub-command; prints warnings and a summary, returns the exit code.
 
     2 for bad inputs (the message names the file), 1 when FreeCAD fails, 128 + the signal
     number when interrupted; the previous document at ``--out`` is kept in every case.
     """
-    from synthdet.processes import Interrupted, stop_on_signals
-    try:
-        with stop_on_signals():
-            result = build_document(args.scan, args.predictions, args.out, args.corners,
-                                    args.library, args.min_score, args.wall_thickness,
-                                    args.freecadcmd, args.timeout)
-    except ValueError as error:  # SchemaError, ScanFormatError, CornerDetectionError too
-        print(f'error: {error}', file=sys.stderr)
-        return 2
-    except (FreecadFailed, OSError) as error:
-        print(f'error: {error}', file=sys.stderr)
-        return 1
-    except Interrupted as stop:
-        print(f'error: stopped by {stop}; FreeCAD was ended', file=sys.stderr)
-        return stop.exit_code
+    result, code = run_reporting_errors(
+        lambda: build_document(args.scan, args.predictions, args.out, args.corners, args.library,
+                               args.min_score, args.wall_thickness, args.freecadcmd,
+                               args.timeout))
+    if code:
+        return code
     for warning in result['warnings']:
         print(f'warning: {warning}', file=sys.stderr)
     groups = {}

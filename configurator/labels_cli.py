@@ -7,9 +7,8 @@ Writes ``DIR/<scan stem>.labels.json`` (``synthdet.labels/1``, for ``tools/eval_
 ``configurator/labels.py`` for the rules and docs/teach.md for the workflow.
 """
 import argparse
-import sys
 
-from configurator.freecad_cli import FreecadFailed, add_program_options
+from configurator.freecad_cli import add_program_options, run_reporting_errors
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,19 +26,10 @@ def run(args: argparse.Namespace) -> int:
     """Run the sub-command; 2 for bad input (one line naming the file), 1 when FreeCAD fails,
     128 + the signal number when interrupted."""
     from configurator.labels import make_labels, summary_line
-    from synthdet.processes import Interrupted, stop_on_signals
-    try:
-        with stop_on_signals():
-            summary = make_labels(args.document, args.scan, args.out, args.area, args.room,
-                                  args.freecadcmd, args.timeout)
-    except ValueError as error:  # LabelsInputError, ScanFormatError, SchemaError
-        print(f'error: {error}', file=sys.stderr)
-        return 2
-    except (FreecadFailed, OSError) as error:
-        print(f'error: {error}', file=sys.stderr)
-        return 1
-    except Interrupted as stop:
-        print(f'error: stopped by {stop}; FreeCAD was ended', file=sys.stderr)
-        return stop.exit_code
+    summary, code = run_reporting_errors(
+        lambda: make_labels(args.document, args.scan, args.out, args.area, args.room,
+                            args.freecadcmd, args.timeout))
+    if code:
+        return code
     print(summary_line(summary))
     return 0

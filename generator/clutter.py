@@ -11,7 +11,7 @@ Some are built to look like the detection classes: a low cabinet with a worktop 
 table, a crate as big as a 3D printer (the layout puts such crates on tables), a shelf cart like
 a small table. ``box`` and ``cylinder`` are the plain primitives of the earlier light clutter.
 """
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -302,6 +302,28 @@ def _build_primitive(s: _Solids, size: Size, p: dict) -> None:
         s.cylinder((0, 0, 0), 2, sx / 2, sz, p['color'])
 
 
+def line_up_items(fill: np.random.Generator, rows: Iterable[tuple[float, float]],
+                  x_range: tuple[float, float], width_range: tuple[float, float],
+                  gap_range: tuple[float, float], share: float,
+                  place: Callable[[float, float, float, float], None]) -> None:
+    """Line up items from left to right within ``x_range`` on each (bottom, top) row of a shelf.
+
+    Each item draws its width from ``width_range`` (the row ends where it would pass the
+    range), stands with chance ``share`` where the row is more than 0.1 m high, drawn by
+    ``place(x, width, bottom, top)``, and leaves a gap drawn from ``gap_range``.
+    """
+    x_start, x_end = x_range
+    for z0, z1 in rows:
+        x = x_start
+        while True:
+            width = fill.uniform(*width_range)
+            if x + width > x_end:
+                break
+            if fill.random() < share and z1 - z0 > 0.1:
+                place(x, width, z0, z1)
+            x += width + fill.uniform(*gap_range)
+
+
 def _build_shelf(s: _Solids, size: Size, p: dict) -> None:
     w, d, h = size
     post, board = (0.07, 0.03) if p['style'] == 'rack' else (0.035, 0.02)
@@ -315,18 +337,16 @@ def _build_shelf(s: _Solids, size: Size, p: dict) -> None:
             for y in (-d / 2, d / 2 - 0.05):
                 s.box((-w / 2 + post, y, z - 0.09), (w / 2 - post, y + 0.05, z), p['color'])
     fill = np.random.default_rng(p['fill_seed'])  # goods on the shelves, fixed by the spec
-    for z0, z1 in zip(levels[:-1] + board, levels[1:] - (0.09 if p['style'] == 'rack' else 0)):
-        x = -w / 2 + post + 0.02
-        while True:
-            width = fill.uniform(0.15, 0.5)
-            if x + width > w / 2 - post - 0.02:
-                break
-            if fill.random() < p['fill'] and z1 - z0 > 0.1:
-                depth = fill.uniform(0.5, 0.95) * d
-                height = fill.uniform(0.3, 0.85) * (z1 - z0 - 0.02)
-                s.box((x, -d / 2 + 0.01, z0), (x + width, -d / 2 + 0.01 + depth, z0 + height),
-                      _colour(fill, palette.CARDBOARD + palette.PLASTIC))
-            x += width + fill.uniform(0.01, 0.1)
+
+    def goods(x: float, width: float, z0: float, z1: float) -> None:
+        depth = fill.uniform(0.5, 0.95) * d
+        height = fill.uniform(0.3, 0.85) * (z1 - z0 - 0.02)
+        s.box((x, -d / 2 + 0.01, z0), (x + width, -d / 2 + 0.01 + depth, z0 + height),
+              _colour(fill, palette.CARDBOARD + palette.PLASTIC))
+
+    rows = zip(levels[:-1] + board, levels[1:] - (0.09 if p['style'] == 'rack' else 0))
+    line_up_items(fill, rows, (-w / 2 + post + 0.02, w / 2 - post - 0.02), (0.15, 0.5),
+                  (0.01, 0.1), p['fill'], goods)
 
 
 def _build_cabinet(s: _Solids, size: Size, p: dict) -> None:

@@ -19,7 +19,7 @@ import numpy as np
 
 from generator.asset_spec import AssetSpec
 from generator.assets import palette
-from generator.clutter import _Solids, clutter_mesh
+from generator.clutter import _Solids, clutter_mesh, line_up_items
 
 CLUTTER_HOUSEHOLD_KINDS = ('monitor', 'pc_tower', 'keyboard', 'books', 'storage_box', 'bag',
                            'lamp', 'plant', 'wastebin', 'tv', 'tv_stand', 'bed', 'nightstand',
@@ -108,26 +108,30 @@ def _bag(rng, max_height):
     return size, {'style': style, 'color': _color(rng, palette.FABRIC + DARK)}
 
 
+def _floor_or_small(rng, max_height: float, chance: float, floor_needs: float,
+                    floor_ranges: tuple[float, float, float, float],
+                    small_ranges: tuple[float, float, float, float]) -> tuple[bool, float, float]:
+    """Whether a floor-standing version is drawn (with ``chance``, where ``max_height`` exceeds
+    ``floor_needs``), then its width and height, from the (width low, width high, height low,
+    height high) ranges of that version."""
+    floor = rng.random() < chance and max_height > floor_needs
+    width_low, width_high, height_low, height_high = floor_ranges if floor else small_ranges
+    return floor, _mm(rng.uniform(width_low, width_high)), _fit(rng, height_low, height_high,
+                                                                max_height)
+
+
 def _lamp(rng, max_height):
-    style = 'floor' if rng.random() < 0.4 and max_height > 1.2 else 'desk'
-    if style == 'floor':
-        shade = _mm(rng.uniform(0.3, 0.45))
-        height = _fit(rng, 1.3, 1.7, max_height)
-    else:
-        shade = _mm(rng.uniform(0.15, 0.28))
-        height = _fit(rng, 0.3, 0.55, max_height)
+    floor, shade, height = _floor_or_small(rng, max_height, 0.4, 1.2, (0.3, 0.45, 1.3, 1.7),
+                                           (0.15, 0.28, 0.3, 0.55))
+    style = 'floor' if floor else 'desk'
     return (shade, shade, height), {'style': style, 'color': _color(rng, palette.METAL + DARK),
                                     'shade_color': _color(rng, LIGHT + TEXTILE)}
 
 
 def _plant(rng, max_height):
-    style = 'floor' if rng.random() < 0.6 and max_height > 0.7 else 'table'
-    if style == 'floor':
-        width = _mm(rng.uniform(0.35, 0.7))
-        height = _fit(rng, 0.6, 1.5, max_height)
-    else:
-        width = _mm(rng.uniform(0.15, 0.3))
-        height = _fit(rng, 0.2, 0.45, max_height)
+    floor, width, height = _floor_or_small(rng, max_height, 0.6, 0.7, (0.35, 0.7, 0.6, 1.5),
+                                           (0.15, 0.3, 0.2, 0.45))
+    style = 'floor' if floor else 'table'
     return (width, width, height), {
         'style': style, 'pot_color': _color(rng, palette.PLASTIC + palette.CARDBOARD),
         'leaf_color': _color(rng, FOLIAGE), 'tiers': int(rng.integers(2, 5))}
@@ -432,17 +436,15 @@ def _build_bookshelf(s, size, p):
     for z in levels:
         s.box((-w / 2 + side, -d / 2, z), (w / 2 - side, d / 2 - 0.01, z + board), p['color'])
     fill = np.random.default_rng(p['fill_seed'])  # books on the boards, fixed by the spec
-    for z0, z1 in zip(levels[:-1] + board, levels[1:]):
-        x = -w / 2 + side + 0.01
-        while True:
-            thick = fill.uniform(0.015, 0.05)
-            if x + thick > w / 2 - side - 0.01:
-                break
-            if fill.random() < p['fill'] and z1 - z0 > 0.1:
-                top = z0 + fill.uniform(0.6, 0.95) * (z1 - z0 - 0.01)
-                s.box((x, -d / 2 + 0.02, z0), (x + thick, d / 2 - 0.02, top),
-                      _color(fill, TEXTILE + palette.PLASTIC))
-            x += thick + fill.uniform(0.0, 0.01)
+
+    def book(x, thick, z0, z1):
+        top = z0 + fill.uniform(0.6, 0.95) * (z1 - z0 - 0.01)
+        s.box((x, -d / 2 + 0.02, z0), (x + thick, d / 2 - 0.02, top),
+              _color(fill, TEXTILE + palette.PLASTIC))
+
+    line_up_items(fill, zip(levels[:-1] + board, levels[1:]),
+                  (-w / 2 + side + 0.01, w / 2 - side - 0.01), (0.015, 0.05), (0.0, 0.01),
+                  p['fill'], book)
 
 
 def _build_radiator(s, size, p):

@@ -184,6 +184,16 @@ def _name(value: object, source: str, where: str) -> str:
     return value
 
 
+def _bounded_list(data: dict, key: str, most: int, source: str) -> list:
+    """``data[key]`` as a list of at most ``most`` items (``more than N <key>`` otherwise)."""
+    items = data[key]
+    if not isinstance(items, list):
+        fail(source, key, f'expected a list, got {_describe(items)}')
+    if len(items) > most:
+        fail(source, key, f'more than {most} {key}')
+    return items
+
+
 def expect_format(data: dict, expected: str, source: str) -> None:
     """Reject any ``format`` but ``expected``, naming the version this reader knows."""
     found = data.get('format')
@@ -242,11 +252,7 @@ def validate_predictions(data: object, source: str = '<predictions>') -> dict:
     classes = data.get('classes', [])
     if not isinstance(classes, list):
         fail(source, 'classes', f'expected a list of names, got {_describe(classes)}')
-    detections = data['detections']
-    if not isinstance(detections, list):
-        fail(source, 'detections', f'expected a list, got {_describe(detections)}')
-    if len(detections) > MAX_DETECTIONS:
-        fail(source, 'detections', f'more than {MAX_DETECTIONS} detections')
+    detections = _bounded_list(data, 'detections', MAX_DETECTIONS, source)
     checked = []
     for index, detection in enumerate(detections):
         where = f'detections[{index}]'
@@ -343,11 +349,7 @@ def validate_labels(data: object, source: str = '<labels>') -> dict:
     for index, name in enumerate(names):
         if name in names[:index]:
             fail(source, f'classes[{index}]', f'class {name!r} is listed twice')
-    boxes = data['boxes']
-    if not isinstance(boxes, list):
-        fail(source, 'boxes', f'expected a list, got {_describe(boxes)}')
-    if len(boxes) > MAX_OBJECTS:
-        fail(source, 'boxes', f'more than {MAX_OBJECTS} boxes')
+    boxes = _bounded_list(data, 'boxes', MAX_OBJECTS, source)
     checked = []
     for index, box in enumerate(boxes):
         where = f'boxes[{index}]'

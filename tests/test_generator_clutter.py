@@ -20,6 +20,7 @@ from generator.clutter import (CLUTTER_KINDS, FACTORY_KINDS, WALL_KINDS, clutter
 from generator.config import ConfigError, load_config
 from generator.layout import generate_layout, layout_meta
 from synthdet.classes import GENERATED_CLASSES
+from tests.generator_runs import generate_rooms
 from tests.test_generator_layout import TOL, footprint, walls, z_range
 
 REPO = Path(__file__).resolve().parents[1]
@@ -264,17 +265,9 @@ def test_bad_clutter_kinds_are_rejected(tmp_path, kinds, message):
 def test_a_scanned_room_annotates_its_clutter(tmp_path):
     """The heavy profile end to end (real bpy and Embree): every clutter object that received
     points has its ``clutter_<k>`` annotation, inside its box, and is in meta.json."""
-    import bpy  # noqa: F401
-    from generator.__main__ import main
     from synthdet.point_text import read_point_file
     out = tmp_path / 'out'
-    assert main([
-        '--out',
-        str(out), '--areas', '7', '--rooms-per-area', '1', '--points', '30000', '--seed', '2',
-        '--config',
-        str(HEAVY), '--asset-cache',
-        str(tmp_path / 'assets'), '--quiet'
-    ]) == 0
+    generate_rooms(out, 7, 1, 30000, 2, '--config', HEAVY, '--asset-cache', tmp_path / 'assets')
     room = out / 'Area_7' / 'factory_1'
     meta = json.loads((room / 'meta.json').read_text())
     objects = {o['instance']: o for o in meta['objects']}

@@ -26,6 +26,7 @@ from generator.writer import TMP_PREFIX
 from synthdet.classes import GENERATED_CLASSES, GENERATED_STRUCTURE_CLASSES
 from synthdet.geometry import points_in_polygon
 from synthdet.point_text import read_point_file
+from tests.generator_runs import generate_rooms
 
 POINTS = 20000
 TOL = 2e-3  # text rounding (0.5 mm) + float32 ray casting
@@ -293,13 +294,7 @@ def test_every_wall_of_generated_u_rooms_is_scanned(asset_cache, tmp_path):
     config = tmp_path / 'u.yaml'
     config.write_text('room:\n  shapes: {U: 1.0}\nscanner:\n  sensors: {paper: 1.0}\n')
     out = tmp_path / 'u'
-    assert main([
-        '--out',
-        str(out), '--areas', '9', '--rooms-per-area', '3', '--points', '20000', '--seed', '2',
-        '--asset-cache',
-        str(asset_cache), '--config',
-        str(config), '--quiet'
-    ]) == 0
+    generate_rooms(out, 9, 3, 20000, 2, '--asset-cache', asset_cache, '--config', config)
     for room in _rooms(out):
         meta = json.loads((room / 'meta.json').read_text())
         polygon, height = np.asarray(meta['room']['polygon']), meta['room']['height']

@@ -28,7 +28,8 @@ from synthdet.classes import GENERATED_CLASSES, class_colour
 from synthdet.contracts import read_labels, write_corners, write_predictions
 from synthdet.geometry import box_corners_xy
 from synthdet.scan_io import read_scan, write_scan
-from tests.tool_process import run_tool
+from tests.freecad_gui import RUN_MACRO_ANSWERING, WRITE_REPORT, run_gui_driver
+from tests.tool_process import run_tool, train_tiny
 
 REPO = Path(__file__).resolve().parents[1]
 FREECAD_DIR = REPO / 'configurator' / 'freecad'
@@ -270,19 +271,7 @@ def test_create_data_converts_the_room_and_a_fine_tune_runs(round_trip, tmp_path
              '--areas', '1')
     assert (data / 's3dis_infos_Area_1.pkl').is_file()
     assert (data / 'points' / 'Area_1_factory_1.bin').is_file()
-    from mmengine.config import Config
-    cfg = Config.fromfile(REPO / 'configs' / 'tr3d' / 'tiny.py')
-    train_set = cfg.train_dataloader.dataset.dataset.datasets[0]
-    train_set.data_root = f'{data}/'
-    train_set.ann_file = 's3dis_infos_Area_1.pkl'
-    config = tmp_path / 'tiny_labels.py'
-    cfg.dump(config)
-    work = tmp_path / 'work'
-    run_tool('tools/train.py', config, '--work-dir', work, '--cfg-options',
-             'train_cfg.max_epochs=2', 'default_hooks.logger.interval=1', 'val_cfg=None',
-             'val_dataloader=None', 'val_evaluator=None', 'randomness.seed=0')
-    [scalars] = work.glob('*/vis_data/scalars.json')
-    records = [json.loads(line) for line in scalars.read_text().splitlines()]
+    records = train_tiny(data, 's3dis_infos_Area_1.pkl', tmp_path / 'work', epochs=2)
     assert [record['iter'] for record in records] == [1, 2]
     assert all(math.isfinite(record['loss']) for record in records)
 
@@ -569,13 +558,7 @@ GUI_DRIVER = textwrap.dedent('''\
             widget.findChild(QtGui.QCheckBox).setChecked(True)
             buttons['Close'].click()
 
-    timer = QtCore.QTimer()
-    timer.timeout.connect(answer)
-    timer.start(100)
-    with open(params['macro'], encoding='utf-8') as stream:
-        code = compile(stream.read(), params['macro'], 'exec')
-    exec(code, {'__file__': params['macro'], '__name__': '__main__'})
-    timer.stop()
+''') + RUN_MACRO_ANSWERING + textwrap.dedent('''\
     added = [o for o in doc.Objects if getattr(o, 'SourceModel', '') == 'added by hand'
              and o.DetectedClass == '3dprinter']
     part = added[0]
@@ -584,38 +567,14 @@ GUI_DRIVER = textwrap.dedent('''\
         reviewed=doc.Meta.get('SynthdetReviewed'),
         colour=list(doc.getObject(part.Name + '_Base').ViewObject.ShapeColor)[:3],
         z_bound=[e[0] for e in part.ExpressionEngine])
-    with open(params['report'], 'w', encoding='utf-8') as stream:
-        json.dump(seen, stream)
-    os._exit(0)  # the offscreen platform has no OpenGL context to tear the 3D view down
-''')
+''') + WRITE_REPORT
 
 
 def test_macro_in_the_gui_adds_a_part_at_the_picked_point_and_marks_reviewed(round_trip, tmp_path):
-    from configurator.freecad_cli import MACRO
-    from configurator.freecad_screenshot import USER_CONFIG
-    driver, config = tmp_path / 'drive_gui.py', tmp_path / 'user.cfg'
-    driver.write_text(GUI_DRIVER, encoding='utf-8')
-    config.write_text(USER_CONFIG, encoding='utf-8')
-    report = tmp_path / 'gui.json'
-    params = tmp_path / 'gui_params.json'
-    params.write_text(
-        json.dumps({
-            'macro': str(MACRO),
-            'report': str(report),
-            'document': str(round_trip['document']),
-            'picked': [6100.0, 2500.0, 0.0]
-        }))
-    process = subprocess.run(
-        ['freecad', '-u', str(config), str(driver)],
-        env=dict(os.environ, QT_QPA_PLATFORM='offscreen', SYNTHDET_TEST_PARAMS=str(params)),
-        cwd=tmp_path,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        errors='replace',
-        timeout=300)
-    assert report.is_file(), process.stdout[-3000:]
-    seen = json.loads(report.read_text(encoding='utf-8'))
+    seen = run_gui_driver(tmp_path, GUI_DRIVER, {
+        'document': str(round_trip['document']),
+        'picked': [6100.0, 2500.0, 0.0]
+    })
     assert seen['titles'] == ['synthdet: correct the document'] and seen['added'] == 1
     assert seen['base'] == pytest.approx([6100.0, 2500.0, 0.0])  # on the floor, z 0
     assert '.Placement.Base.z' in seen['z_bound']  # follows the room's floor_z

@@ -68,6 +68,21 @@ def data_options(data_root: Path) -> list[str]:
     ]
 
 
+def best_checkpoint(tiny: dict) -> Path:
+    """The tiny model's checkpoint of the best mAP@0.25."""
+    return next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
+
+
+def run_test_tool(tiny: dict, out_dir: Path, *options: str, data: Path | None = None) -> dict:
+    """``tools/test.py`` in this process on the tiny model's best checkpoint and the tiny data
+    (or ``data``) with ``options``; returns its table3 document."""
+    return load_tool('test').main([
+        str(TINY),
+        str(best_checkpoint(tiny)), '--work-dir',
+        str(out_dir), *options, '--cfg-options', *data_options(data or tiny['data'])
+    ])
+
+
 @pytest.fixture(scope='module')
 def tiny(tmp_path_factory: pytest.TempPathFactory) -> dict:
     """Two converted rooms and a work dir trained for one epoch by tools/train.py."""
@@ -231,12 +246,7 @@ def test_table3_layout_from_indoor_metric_results() -> None:
 def test_test_tool_prints_and_writes_table3(tiny: dict, capsys: pytest.CaptureFixture) -> None:
     # In this process (the tool's own code, without a second start-up of the stack).
     out_dir = tiny['root'] / 'test_out'
-    checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
-    document = load_tool('test').main([
-        str(TINY),
-        str(checkpoint), '--work-dir',
-        str(out_dir), '--cfg-options', *data_options(tiny['data'])
-    ])
+    document = run_test_tool(tiny, out_dir)
     stdout = capsys.readouterr().out
     table = json.loads((out_dir / 'table3.json').read_text())
     assert table['format'] == 'synthdet.table3/1' and table['classes'] == TINY_CLASSES
@@ -258,17 +268,13 @@ def test_test_tool_prints_and_writes_table3(tiny: dict, capsys: pytest.CaptureFi
 
 
 def test_test_tool_tta_tests_the_fused_passes(tiny: dict, tmp_path: Path) -> None:
-    checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
-    document = load_tool('test').main([
-        str(TINY),
-        str(checkpoint), '--work-dir',
-        str(tmp_path), '--tta', '--cfg-options', *data_options(tiny['data'])
-    ])
+    document = run_test_tool(tiny, tmp_path, '--tta')
     assert document == json.loads((tmp_path / 'table3.json').read_text())
     assert all(0.0 <= row[c] <= 1.0 for row in document['rows'].values() for c in TINY_CLASSES)
     without = tmp_path / 'without_tta.py'
     without.write_text(f"_base_ = ['{TINY}']\ntta_model = None\n")
-    proc = subprocess.run([sys.executable, 'tools/test.py', without, checkpoint, '--tta'],
+    proc = subprocess.run([sys.executable, 'tools/test.py', without,
+                           best_checkpoint(tiny), '--tta'],
                           cwd=REPO,
                           capture_output=True,
                           text=True,
@@ -307,12 +313,7 @@ def test_best_fit_is_the_closest_prediction_of_the_same_class() -> None:
 
 def test_test_tool_box_fit_bounds_the_recall(tiny: dict, capsys: pytest.CaptureFixture) -> None:
     out_dir = tiny['root'] / 'test_box_fit'
-    checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
-    document = load_tool('test').main([
-        str(TINY),
-        str(checkpoint), '--work-dir',
-        str(out_dir), '--box-fit', '--cfg-options', *data_options(tiny['data'])
-    ])
+    document = run_test_tool(tiny, out_dir, '--box-fit')
     fit = json.loads((out_dir / 'box_fit.json').read_text())
     assert fit['format'] == 'synthdet.box_fit/1' and list(fit['rows']) == TINY_CLASSES
     truth = [
@@ -339,12 +340,7 @@ def test_test_tool_names_what_the_false_positives_hit(tiny: dict, tmp_path: Path
     data = tmp_path / 'data'
     shutil.copytree(tiny['data'], data)
     shutil.copytree(tiny['raw'], data / S3DIS_DIR / 'Area_1')  # create_data's layout
-    checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
-    document = load_tool('test').main([
-        str(TINY),
-        str(checkpoint), '--work-dir',
-        str(tmp_path / 'out'), '--false-positives', '--cfg-options', *data_options(data)
-    ])
+    document = run_test_tool(tiny, tmp_path / 'out', '--false-positives', data=data)
     fps = json.loads((tmp_path / 'out' / 'false_positives.json').read_text())
     assert fps['format'] == 'synthdet.false_positives/1' and list(fps['rows']) == TINY_CLASSES
     annotated = {'floor', 'ceiling', 'wall', 'clutter', *TINY_CLASSES}
@@ -376,7 +372,7 @@ def test_predict_writes_detections_in_each_scan_frame(tiny: dict) -> None:
     write_scan(shifted_bin, np.column_stack([points[:, :3] - shift, points[:, 3:]]))
     write_scan(room_ply, points)
     out = tiny['root'] / 'pred'
-    checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
+    checkpoint = best_checkpoint(tiny)
     written = load_tool('predict').main(
         [str(p) for p in (TINY, checkpoint, room_txt, shifted_bin, room_ply, converted_bin)] +
         ['--out',
@@ -422,7 +418,7 @@ def test_predict_tta_boxes_come_back_into_each_scan_frame(tiny: dict, tmp_path: 
     shift = np.floor(room_min)
     shifted_bin = tmp_path / 'office_1_shifted.bin'
     write_scan(shifted_bin, np.column_stack([points[:, :3] - shift, points[:, 3:]]))
-    checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
+    checkpoint = best_checkpoint(tiny)
     load_tool('predict').main([
         str(TINY), str(checkpoint), str(room_txt), str(shifted_bin), '--out', str(tmp_path),
         '--tta', '--score-thr', '0', '--cfg-options', 'model.test_cfg.score_thr=0.0'
@@ -587,7 +583,7 @@ def test_test_tool_tests_the_rooms_of_one_sensor(tiny: dict, tmp_path: Path) -> 
         for info in load_info_pickle(data / 's3dis_infos_Area_1.pkl')['data_list']
     ]
     assert len(rooms) == 2
-    checkpoint = next(tiny['work'].glob('best_mAP_0.25_epoch_*.pth'))
+    checkpoint = best_checkpoint(tiny)
     test = load_tool('test')
 
     def run(name: str, sensor: str | None = None, *options: str) -> dict:

@@ -2,7 +2,6 @@
 of real DepthPoints and DepthInstance3DBoxes, ``with_robustness`` on the base config's train
 pipeline, that pipeline through the registered dataset on a room of the real generator, and one
 training iteration of the tiny config with it through tools/train.py."""
-import json
 import math
 from pathlib import Path
 
@@ -24,7 +23,7 @@ from projects.synthdet.datasets.transforms import (RandomColourJitter, RandomDen
                                                    RandomPointDropout, RandomQuarterTurn,
                                                    ThinRoomStructure, VoxelGridSample)
 from tests.s3dis_fixtures import S3DIS_DIR
-from tests.tool_process import run_tool
+from tests.tool_process import train_tiny
 
 CONFIGS = Path(__file__).resolve().parents[1] / 'configs' / 'tr3d'
 # gravity centre and sizes (S3DIS ground truth: axis-aligned, built with box_dim=6)
@@ -411,19 +410,10 @@ def test_robust_pipeline_runs_on_a_generated_room(generated_room):
 
 @pytest.mark.slow
 def test_one_training_iteration_of_the_tiny_config_with_robustness(generated_room, tmp_path):
-    cfg = Config.fromfile(CONFIGS / 'tiny.py')
-    train_set = cfg.train_dataloader.dataset.dataset.datasets[0]
-    train_set.pipeline = with_robustness(cfg.train_pipeline, cfg.robust_augmentations)
-    train_set.data_root = f'{generated_room}/'
-    train_set.ann_file = 's3dis_infos_Area_7.pkl'
-    config = tmp_path / 'tiny_robust.py'
-    cfg.dump(config)
     work = tmp_path / 'work'
-    run_tool('tools/train.py', config, '--work-dir', work, '--cfg-options',
-             'train_cfg.max_epochs=1', 'default_hooks.logger.interval=1', 'val_cfg=None',
-             'val_dataloader=None', 'val_evaluator=None', 'randomness.seed=0')
-    [scalars] = work.glob('*/vis_data/scalars.json')
-    [record] = [json.loads(line) for line in scalars.read_text().splitlines()]
+    [record] = train_tiny(generated_room, 's3dis_infos_Area_7.pkl', work, epochs=1,
+                          pipeline=lambda cfg: with_robustness(cfg.train_pipeline,
+                                                               cfg.robust_augmentations))
     assert record['iter'] == 1 and math.isfinite(record['loss']) and record['loss'] > 0
     assert (work / 'epoch_1.pth').is_file()
 

@@ -1,8 +1,10 @@
 """Run the project's tools in a subprocess, as a user would (shared by the tool tests)."""
+import json
 import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Callable
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -22,3 +24,24 @@ def run_tool(*args, timeout: float = 900) -> subprocess.CompletedProcess:
                           env=env)
     assert proc.returncode == 0, f'{args[0]} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}'
     return proc
+
+
+def train_tiny(data_root: Path, ann_file: str, work: Path, epochs: int,
+               pipeline: Callable | None = None) -> list[dict]:
+    """Train ``configs/tr3d/tiny.py`` on ``ann_file`` of ``data_root`` for ``epochs`` with
+    ``tools/train.py`` (seed 0, a log line per iteration, no validation) and return the logged
+    scalar records; ``pipeline(cfg)``, if given, makes the training pipeline."""
+    from mmengine.config import Config
+    cfg = Config.fromfile(REPO / 'configs' / 'tr3d' / 'tiny.py')
+    train_set = cfg.train_dataloader.dataset.dataset.datasets[0]
+    if pipeline is not None:
+        train_set.pipeline = pipeline(cfg)
+    train_set.data_root = f'{data_root}/'
+    train_set.ann_file = ann_file
+    config = work.parent / f'{work.name}_tiny.py'
+    cfg.dump(config)
+    run_tool('tools/train.py', config, '--work-dir', work, '--cfg-options',
+             f'train_cfg.max_epochs={epochs}', 'default_hooks.logger.interval=1', 'val_cfg=None',
+             'val_dataloader=None', 'val_evaluator=None', 'randomness.seed=0')
+    [scalars] = work.glob('*/vis_data/scalars.json')
+    return [json.loads(line) for line in scalars.read_text().splitlines()]

@@ -7,7 +7,7 @@ Placement uses 4x4 ``mathutils.Matrix`` frames, so kinematic chains compose by m
 from __future__ import annotations
 
 import math
-from typing import Iterable, Sequence
+from typing import Collection, Iterable, Sequence
 
 # isort: off
 import bpy  # first: importing bpy makes bmesh and mathutils importable
@@ -111,6 +111,11 @@ class MeshBuilder:
         self._materials[name] = len(self._colours)
         self._colours.append(tuple(int(c) for c in rgb))
         return self._materials[name]
+
+    def materials(self, params: dict, **color_keys: str) -> tuple[int, ...]:
+        """Register one material per keyword, in order: the keyword names it and its value is the
+        key of its colour in ``params``; returns their indices."""
+        return tuple(self.material(name, params[key]) for name, key in color_keys.items())
 
     @property
     def material_names(self) -> list[str]:
@@ -264,3 +269,9 @@ def uniform(rng, low: float, high: float, digits: int = 3) -> float:
 def pick(rng, options: Sequence):
     """One element of `options`, drawn with `rng`."""
     return options[int(rng.integers(len(options)))]
+
+
+def check_variant(kind: str, variant: str, known: Collection[str]) -> None:
+    """Refuse a ``variant`` of asset class ``kind`` that is not in ``known``."""
+    if variant not in known:
+        raise ValueError(f'unknown {kind} variant {variant!r}')

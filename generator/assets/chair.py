@@ -79,8 +79,7 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
 def build(variant: str, params: dict) -> MeshBuilder:
     """Build the chair's mesh from its parameters."""
     mb = MeshBuilder()
-    frame = mb.material('frame', params['frame_colour'])
-    seat = mb.material('seat', params['seat_colour'])
+    frame, seat = mb.materials(params, frame='frame_colour', seat='seat_colour')
     width, depth = params['seat_width'], params['seat_depth']
     seat_top, thickness = params['seat_height'], params['seat_thickness']
     seat_bottom = seat_top - thickness

@@ -10,12 +10,24 @@ import math
 import numpy as np
 
 from generator.assets import palette
-from generator.assets.builder import (MeshBuilder, pick, rot_x, rot_y, rot_z, translate, uniform)
+from generator.assets.builder import (MeshBuilder, check_variant, pick, rot_x, rot_y, rot_z,
+                                      translate, uniform)
 
 VARIANTS = ('enclosed', 'bedslinger', 'delta', 'largeformat', 'corexy', 'resin', 'cantilever',
             'boxframe')
 # translucent UV-blocking lids of resin printers: orange, yellow, red, green, smoke
 RESIN_LIDS = ((245, 120, 20), (240, 200, 30), (200, 40, 40), (60, 160, 70), (90, 80, 70))
+
+
+def _outer_size(rng: np.random.Generator, width: tuple[float, float],
+                depth: tuple[float, float], height: tuple[float, float]) -> dict:
+    """The printer's outer width, depth and height in metres, drawn in that order from their
+    (low, high) ranges."""
+    return {
+        'width': uniform(rng, *width),
+        'depth': uniform(rng, *depth),
+        'height': uniform(rng, *height)
+    }
 
 
 def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
@@ -30,16 +42,12 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
     }
     if variant == 'enclosed':
         params.update(
-            width=uniform(rng, 0.38, 0.55),
-            depth=uniform(rng, 0.40, 0.60),
-            height=uniform(rng, 0.45, 0.80),
+            _outer_size(rng, (0.38, 0.55), (0.40, 0.60), (0.45, 0.80)),
             door=pick(rng, ('glass', 'open', 'swung')),
             bed_level=uniform(rng, 0.2, 0.8))
     elif variant == 'bedslinger':
         params.update(
-            width=uniform(rng, 0.40, 0.52),
-            depth=uniform(rng, 0.36, 0.46),
-            height=uniform(rng, 0.42, 0.58),
+            _outer_size(rng, (0.40, 0.52), (0.36, 0.46), (0.42, 0.58)),
             bed_size=uniform(rng, 0.22, 0.26),
             bed_travel=uniform(rng, -1.0, 1.0),
             gantry_level=uniform(rng, 0.1, 0.9),
@@ -53,41 +61,31 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
                       uniform(rng, 0.05, 0.5)])
     elif variant == 'largeformat':
         params.update(
-            width=uniform(rng, 0.60, 0.80),
-            depth=uniform(rng, 0.60, 0.80),
-            height=uniform(rng, 0.60, 0.90),
+            _outer_size(rng, (0.60, 0.80), (0.60, 0.80), (0.60, 0.90)),
             frame=pick(rng, ('open', 'cabinet')),
             bed_level=uniform(rng, 0.1, 0.8),
             head_travel=uniform(rng, -1.0, 1.0))
     elif variant == 'corexy':  # open-frame CoreXY cube (Voron 2.4 / RatRig V-Core without panels)
         params.update(
-            width=uniform(rng, 0.42, 0.58),
-            depth=uniform(rng, 0.42, 0.58),
-            height=uniform(rng, 0.48, 0.68),
+            _outer_size(rng, (0.42, 0.58), (0.42, 0.58), (0.48, 0.68)),
             bed_level=uniform(rng, 0.1, 0.9),
             head=[uniform(rng, -1.0, 1.0), uniform(rng, -1.0, 1.0)])
     elif variant == 'resin':  # MSLA 0.23 x 0.23 x 0.40 (Elegoo Mars) to SLA 0.41 x 0.38 x 0.53
         params.update(
-            width=uniform(rng, 0.22, 0.42),
-            depth=uniform(rng, 0.22, 0.40),
-            height=uniform(rng, 0.38, 0.55),
+            _outer_size(rng, (0.22, 0.42), (0.22, 0.40), (0.38, 0.55)),
             base_fraction=uniform(rng, 0.25, 0.40),
             lid_style=pick(rng, ('box', 'hinged')),
             lid_colour=list(pick(rng, RESIN_LIDS)))
     elif variant == 'cantilever':  # Prusa MINI+ 0.33 x 0.34 x 0.38, Bambu Lab A1 mini
         params.update(
-            width=uniform(rng, 0.30, 0.36),
-            depth=uniform(rng, 0.30, 0.36),
-            height=uniform(rng, 0.34, 0.40),
+            _outer_size(rng, (0.30, 0.36), (0.30, 0.36), (0.34, 0.40)),
             bed_travel=uniform(rng, -1.0, 1.0),
             gantry_level=uniform(rng, 0.1, 0.9),
             head_travel=uniform(rng, -1.0, 1.0),
             column_side=pick(rng, (-1, 1)))
     elif variant == 'boxframe':  # Ultimaker 2+ 0.34 x 0.36 x 0.39 to S5 0.50 x 0.59 x 0.78
         params.update(
-            width=uniform(rng, 0.34, 0.50),
-            depth=uniform(rng, 0.36, 0.59),
-            height=uniform(rng, 0.39, 0.78),
+            _outer_size(rng, (0.34, 0.50), (0.36, 0.59), (0.39, 0.78)),
             door=pick(rng, ('none', 'glass')),
             bed_level=uniform(rng, 0.1, 0.9),
             head=[uniform(rng, -1.0, 1.0), uniform(rng, -1.0, 1.0)])
@@ -107,17 +105,14 @@ def build(variant: str, params: dict) -> MeshBuilder:
         'cantilever': _cantilever,
         'boxframe': _boxframe
     }
-    if variant not in builders:
-        raise ValueError(f'unknown 3dprinter variant {variant!r}')
+    check_variant('3dprinter', variant, builders)
     builders[variant](mb, params)
     return mb
 
 
 def _materials(mb: MeshBuilder, params: dict) -> tuple[int, int, int, int]:
-    return (mb.material('body', params['body_colour']), mb.material('frame',
-                                                                    params['frame_colour']),
-            mb.material('bed',
-                        params['bed_colour']), mb.material('filament', params['filament_colour']))
+    return mb.materials(params, body='body_colour', frame='frame_colour', bed='bed_colour',
+                        filament='filament_colour')
 
 
 def _spool(mb: MeshBuilder, centre, filament: int, frame: int, axis: str = 'x') -> None:

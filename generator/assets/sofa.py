@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from generator.assets import palette
-from generator.assets.builder import MeshBuilder, pick, rot_x, rounded_rect, translate, uniform
+from generator.assets.builder import (MeshBuilder, check_variant, pick, rot_x, rounded_rect,
+                                      translate, uniform)
 
 VARIANTS = ('1seat', '2seat', '3seat', 'chaise', 'modular', 'bench')
 # Seats per variant (inclusive range). Chaise and modular sofas stay within the 3-seat sofa's
@@ -58,12 +59,10 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
 
 def build(variant: str, params: dict) -> MeshBuilder:
     """Build the sofa's mesh from its parameters."""
-    if variant not in VARIANTS:
-        raise ValueError(f'unknown sofa variant {variant!r}')
+    check_variant('sofa', variant, VARIANTS)
     mb = MeshBuilder()
-    body = mb.material('body', params['fabric_colour'])
-    cushion = mb.material('cushion', params['cushion_colour'])
-    feet = mb.material('feet', params['feet_colour'])
+    body, cushion, feet = mb.materials(params, body='fabric_colour', cushion='cushion_colour',
+                                       feet='feet_colour')
     if variant == 'bench':
         _bench(mb, params, cushion, feet)
         return mb

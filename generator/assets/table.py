@@ -10,7 +10,8 @@ import math
 import numpy as np
 
 from generator.assets import palette
-from generator.assets.builder import (MeshBuilder, circle, pick, rounded_rect, translate, uniform)
+from generator.assets.builder import (MeshBuilder, check_variant, circle, pick, rounded_rect,
+                                      translate, uniform)
 
 VARIANTS = ('legs', 'round', 'pedestal', 'trestle', 'workbench', 'standing', 'folding',
             'steelbench', 'panel', 'cleg')
@@ -96,8 +97,7 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
 def build(variant: str, params: dict) -> MeshBuilder:
     """Build the table's mesh from its parameters."""
     mb = MeshBuilder()
-    top = mb.material('top', params['top_colour'])
-    frame = mb.material('frame', params['frame_colour'])
+    top, frame = mb.materials(params, top='top_colour', frame='frame_colour')
     height, thick = params['height'], params['top_thickness']
     under = height - thick
     if variant == 'round':
@@ -117,8 +117,7 @@ def build(variant: str, params: dict) -> MeshBuilder:
         'panel': _panel_ends,
         'cleg': _c_legs
     }
-    if variant not in bases:
-        raise ValueError(f'unknown table variant {variant!r}')
+    check_variant('table', variant, bases)
     bases[variant](mb, params, frame, under)
     return mb
 

@@ -13,8 +13,8 @@ import math
 import numpy as np
 
 from generator.assets import palette
-from generator.assets.builder import (MeshBuilder, matrix_from_array, pick, rot_z, rounded_rect,
-                                      translate, uniform)
+from generator.assets.builder import (MeshBuilder, check_variant, matrix_from_array, pick, rot_z,
+                                      rounded_rect, translate, uniform)
 
 VARIANTS = ('irb14000', 'irb14000_plate')  # on the table itself, or on an aluminium mounting plate
 POSES = ('rest', 'work', 'free', 'onearm')
@@ -224,11 +224,9 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
 
 def build(variant: str, params: dict) -> MeshBuilder:
     """Build the robot's mesh from its joint angles."""
-    if variant not in VARIANTS:
-        raise ValueError(f'unknown yumi variant {variant!r}')
+    check_variant('yumi', variant, VARIANTS)
     mb = MeshBuilder()
-    body = mb.material('body', params['body_colour'])
-    joint = mb.material('joint', params['joint_colour'])
+    body, joint = mb.materials(params, body='body_colour', joint='joint_colour')
     gripper = mb.material('gripper', (45, 45, 48))
     face = rot_z(-math.pi / 2)  # robot x (forward) -> -y
     if variant == 'irb14000_plate':
