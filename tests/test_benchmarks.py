@@ -110,6 +110,13 @@ SMOKE: dict[str, Smoke | str] = {
               r' phantom yumi/3d printer \(' + figure('rooms') + r' rooms\)',
               with_model=True,
               slow=True),
+    'bench_freecad.py':
+        Smoke(['--sizes', '12', '24'],
+              r'freecad documents: ' + figure('count') + r' detections ' + figure('seconds') +
+              r' s \(build ' + figure('build') + r' s, save ' + figure('save') + r' s\), ' +
+              figure('each') + r' ms each; per-detection time at \S+ / at \S+: ' +
+              figure('ratio') + r'x \(build ' + figure('build_ratio') + r'x, save ' +
+              figure('save_ratio') + r'x; CPU time ' + figure('cpu_ratio') + r'x\)'),
     # its whole run at a tiny scale, headline included, is tests/test_bench_domain_shift.py's
     'bench_domain_shift.py': 'tests/test_bench_domain_shift.py',
 }
