@@ -230,16 +230,18 @@ def _windowed_ranges(t_hit: np.ndarray, min_range: float, max_range: float) -> n
 
 @numba.njit(cache=True, nogil=True)
 def _depth_edges(ranges: np.ndarray, triangle: np.ndarray, columns: int, on_object: np.ndarray,
-                 part: np.ndarray, jump: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per beam of a grid (flattened, ``columns`` azimuths per row): the largest range step to a
-    neighbour across an object edge (0: none), that neighbour's range and triangle (undefined
-    where the step is 0). The neighbours in this order: azimuth - 1 and + 1 (wrapping around),
-    elevation - 1 and + 1; a later one replaces an earlier one only with a larger step."""
+                 part: np.ndarray,
+                 jump: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The beams (ascending) of a grid (flattened, ``columns`` azimuths per row) at an object
+    edge, with the range and triangle of the neighbour across the largest range step. The
+    neighbours in this order: azimuth - 1 and + 1 (wrapping around), elevation - 1 and + 1; a
+    later one replaces an earlier one only with a larger step."""
     size = len(ranges)
     rows = size // columns
-    largest = np.zeros(size)
+    edges = np.empty(size, dtype=np.int64)
     other = np.empty(size)
     other_tri = np.empty(size, dtype=triangle.dtype)
+    count = 0
     for beam in range(size):
         mine = ranges[beam]
         if not np.isfinite(mine):  # a step from a lost beam is no edge
@@ -247,6 +249,7 @@ def _depth_edges(ranges: np.ndarray, triangle: np.ndarray, columns: int, on_obje
         row = beam // columns
         column = beam - row * columns
         mine_on_object = on_object[triangle[beam]]
+        largest = 0.0
         for side in range(4):
             if side == 0:
                 neighbour = beam - 1 if column > 0 else beam + columns - 1
@@ -262,15 +265,18 @@ def _depth_edges(ranges: np.ndarray, triangle: np.ndarray, columns: int, on_obje
                 neighbour = beam + columns
             theirs = ranges[neighbour]
             gap = abs(theirs - mine)
-            if not (gap > jump and gap > largest[beam] and gap < np.inf):
+            if not (gap > jump and gap > largest and gap < np.inf):
                 continue
             their_tri = triangle[neighbour]
             if not (mine_on_object or on_object[their_tri]):
                 continue
             if part[their_tri] == part[triangle[beam]]:
                 continue
-            largest[beam], other[beam], other_tri[beam] = gap, theirs, their_tri
-    return largest, other, other_tri
+            largest, other[count], other_tri[count] = gap, theirs, their_tri
+        if largest > 0:
+            edges[count] = beam
+            count += 1
+    return edges[:count].copy(), other[:count].copy(), other_tri[:count].copy()
 
 
 def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.ndarray,
@@ -289,12 +295,13 @@ def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.nda
     """
     columns = ranges.shape[1]
     ranges, triangle = ranges.reshape(-1), triangle.reshape(-1)
-    largest, other, other_tri = _depth_edges(ranges, triangle, columns, on_object, part, jump)
-    mixed = np.flatnonzero((largest > 0) & (rng.random(ranges.size) < share))
+    edges, other, other_tri = _depth_edges(ranges, triangle, columns, on_object, part, jump)
+    chosen = rng.random(ranges.size)[edges] < share
+    mixed, other, other_tri = edges[chosen], other[chosen], other_tri[chosen]
     fraction = rng.random(len(mixed))
-    ranges[mixed] += fraction * (other[mixed] - ranges[mixed])
-    far = mixed[fraction > 0.5]
-    triangle[far] = other_tri[far]
+    ranges[mixed] += fraction * (other - ranges[mixed])
+    far = fraction > 0.5
+    triangle[mixed[far]] = other_tri[far]
     stray = np.zeros(ranges.size, dtype=bool)
     stray[mixed] = True
     return ranges, triangle, stray
