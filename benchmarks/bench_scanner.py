@@ -37,7 +37,8 @@ noise models (range-error draws and mixed pixels), the laser scanner's spacing f
 rest (ray generation, labelling); writing the room's files (``generator.writer.write_room``)
 is timed after the scan. The physical bound is the bare Embree cast of exactly the ray batches
 the scan cast, first hits and glass passes (recorded in one more scan): "our scan / bare cast"
-is what is left to win.
+is what is left to win. The scans' process CPU seconds (medians, summed over the models) are
+printed too: on a busy machine they leave out the waits for a core, which wall times include.
 
 The last line gives, one thread each: the rays per second of the default sensors' scans against
 the same scans on the ``BVHTree`` loop (over the three models, and per model), the bare ray
@@ -78,6 +79,7 @@ from generator.writer import write_room  # noqa: E402
 from synthdet.contracts import ROOM_FORMAT, SENSOR_MODELS  # noqa: E402
 
 Caster = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+ENGINES = ('embree', 'loop')  # the scans' two ray engines: Embree, the BVHTree loop
 
 
 def bvhtree_caster(vertices: np.ndarray, triangles: np.ndarray) -> Caster:
@@ -286,14 +288,16 @@ def timed_sensor_parts(seconds: Counter) -> Iterator[None]:
 
 def scan_once(scanner: Scanner, room: RoomGeometry, model: str, points: int, config: dict,
               seconds: Counter) -> tuple[float, ScanResult]:
-    """One scan of ``model`` (rng seed 1, garbage collector off): its seconds and result."""
+    """One scan of ``model`` (rng seed 1, garbage collector off): its seconds and result; its
+    process CPU seconds are added to ``seconds['cpu']``."""
     rng = TimedRandom(np.random.default_rng(1), seconds)
     gc.collect()
     gc.disable()
     try:
         with timed_sensor_parts(seconds):
-            start = time.perf_counter()
+            start, cpu = time.perf_counter(), time.process_time()
             scan, _ = scan_room(scanner, room, model, points, 0.5, rng, config, METAL)
+            seconds['cpu'] += time.process_time() - cpu
             return time.perf_counter() - start, scan
     finally:
         gc.enable()
@@ -317,13 +321,15 @@ def time_sensor_scans(scene: TriangleScene, room: RoomGeometry, names: list[str]
     for model in SENSOR_MODELS:
         for scanner in (embree, loop):  # warm-up
             scan_once(scanner, room, model, min(points, 10_000), config, Counter())
-        runs = {'embree': [], 'loop': [], 'parts': []}
+        runs = {'embree': [], 'loop': [], 'parts': [], 'loop cpu': []}
         for _ in range(repeats):
             embree.seconds = Counter()
             seconds, scan = scan_once(embree, room, model, points, config, embree.seconds)
             runs['embree'].append(seconds)
             runs['parts'].append(embree.seconds)
-            runs['loop'].append(scan_once(loop, room, model, points, config, Counter())[0])
+            loop_seconds = Counter()
+            runs['loop'].append(scan_once(loop, room, model, points, config, loop_seconds)[0])
+            runs['loop cpu'].append(loop_seconds['cpu'])
         embree.seconds, embree.batches = Counter(), []
         scan_once(embree, room, model, points, config, embree.seconds)
         batches, embree.batches = embree.batches, None
@@ -342,6 +348,8 @@ def time_sensor_scans(scene: TriangleScene, room: RoomGeometry, names: list[str]
             'cast rays': sum(len(b[1]) for b in batches),
             'embree': statistics.median(runs['embree']),
             'loop': statistics.median(runs['loop']),
+            'embree cpu': statistics.median(p['cpu'] for p in runs['parts']),
+            'loop cpu': statistics.median(runs['loop cpu']),
             'parts': parts,
             'bare': bare,
             'writing': writing,
@@ -371,6 +379,10 @@ def print_sensor_scans(results: dict[str, dict], points: int, repeats: int) -> f
         print(f'{model:<8}' + ''.join(f'{v:>8.3f} {v / r["embree"]:>5.0%}' for v in cells[:3]) +
               f'{cells[3]:>9.3f} {cells[3] / r["embree"]:>5.0%}{rest:>8.3f} '
               f'{rest / r["embree"]:>5.0%}{r["writing"]:>9.3f}')
+    cpu = {engine: sum(r[f'{engine} cpu'] for r in results.values()) for engine in ENGINES}
+    print(f'process CPU seconds of the scans, without the waits for a core on a busy machine '
+          f'(median per model, summed): Embree {cpu["embree"]:.2f} s, BVHTree loop '
+          f'{cpu["loop"]:.2f} s: {cpu["loop"] / cpu["embree"]:.1f}x rays per CPU second')
     rays = sum(r['rays'] for r in results.values())
     return (rays / sum(r['embree'] for r in results.values())) / (
         rays / sum(r['loop'] for r in results.values()))
