@@ -30,6 +30,16 @@ USER_CONFIG = '''<?xml version="1.0" encoding="UTF-8" standalone="yes"?>
 '''
 
 
+def write_gui_inputs(folder: Path, options: dict, options_name: str) -> tuple[Path, Path]:
+    """Write FreeCAD's user config (``user.cfg``) and the ``options`` of the script FreeCAD runs
+    (JSON, ``options_name``) into ``folder``; returns both paths."""
+    config = folder / 'user.cfg'
+    config.write_text(USER_CONFIG, encoding='utf-8')
+    options_path = folder / options_name
+    options_path.write_text(json.dumps(options), encoding='utf-8')
+    return config, options_path
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Register the ``screenshot`` sub-command's options."""
     parser.add_argument('document', help='FreeCAD document (.FCStd)')
@@ -100,19 +110,15 @@ def screenshot(document: Path,
     check_timeout(timeout)
     out.parent.mkdir(parents=True, exist_ok=True)
     with work_folder('synthdet-screenshot') as work_dir:
-        config = work_dir / 'user.cfg'
-        config.write_text(USER_CONFIG, encoding='utf-8')
         result_path = work_dir / 'result.json'
-        options = work_dir / 'options.json'
-        options.write_text(
-            json.dumps({
+        config, options = write_gui_inputs(
+            work_dir, {
                 'document': str(document),
                 'out': str(out),
                 'width': width,
                 'height': height,
                 'result': str(result_path)
-            }),
-            encoding='utf-8')
+            }, 'options.json')
         command = [freecad, '-u', str(config), str(GUI_SCRIPT)]
         with virtual_display(width + 200, height + 200) as display:
             # Qt settings of this process are not FreeCAD's: importing OpenCV (as mmcv does)

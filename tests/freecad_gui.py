@@ -5,7 +5,7 @@ import subprocess
 from pathlib import Path
 
 from configurator.freecad_cli import MACRO
-from configurator.freecad_screenshot import USER_CONFIG
+from configurator.freecad_screenshot import write_gui_inputs
 
 # Lines of a driver: run the macro while its ``answer()`` answers the dialogs every 100 ms.
 RUN_MACRO_ANSWERING = """\
@@ -34,17 +34,14 @@ def run_gui_driver(folder: Path, driver_source: str, params: dict, **env: str) -
     ``params`` plus ``macro`` (the synthdet macro) and ``report`` (where to write the report).
     ``env`` adds environment variables. Fails with FreeCAD's output when no report is written.
     """
-    driver, config = folder / 'drive_gui.py', folder / 'user.cfg'
+    driver = folder / 'drive_gui.py'
     driver.write_text(driver_source, encoding='utf-8')
-    config.write_text(USER_CONFIG, encoding='utf-8')
     report = folder / 'gui.json'
-    params_path = folder / 'gui_params.json'
-    params_path.write_text(
-        json.dumps({
-            'macro': str(MACRO),
-            'report': str(report),
-            **params
-        }), encoding='utf-8')
+    config, params_path = write_gui_inputs(folder, {
+        'macro': str(MACRO),
+        'report': str(report),
+        **params
+    }, 'gui_params.json')
     process = subprocess.run(
         ['freecad', '-u', str(config), str(driver)],
         env=dict(

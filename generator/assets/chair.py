@@ -189,17 +189,27 @@ def _stool(mb: MeshBuilder, params: dict, frame: int, seat: int) -> None:
             translate(0, post_y + 0.05, seat_top + params['back_height'] - 0.12))
 
 
+def _side_tubes(mb: MeshBuilder, x_side: float, tubes: list[tuple[float, ...]], radius: float,
+                frame: int) -> None:
+    """The same tubes at x = -x_side and x = x_side; a tube runs from (y, z) to (y, z), given
+    as (y start, z start, y end, z end)."""
+    for sx in (-1, 1):
+        x = sx * x_side
+        for y_start, z_start, y_end, z_end in tubes:
+            mb.rod((x, y_start, z_start), (x, y_end, z_end), radius, frame)
+
+
 def _cantilever(mb: MeshBuilder, params: dict, frame: int) -> None:
     """One bent tube per side: floor runner, front upright and seat rail, no back legs."""
     width, depth = params['seat_width'], params['seat_depth']
     top = params['seat_height'] - params['seat_thickness']
     radius = 0.0125
-    for sx in (-1, 1):
-        x = sx * (width / 2 - 0.01)
-        front, back = -depth / 2, depth / 2 + 0.04
-        mb.rod((x, back, radius), (x, front - 0.04, radius), radius, frame)
-        mb.rod((x, front - 0.04, radius), (x, front, top - radius), radius, frame)
-        mb.rod((x, front, top - radius), (x, depth / 2 - 0.02, top - radius), radius, frame)
+    front, back = -depth / 2, depth / 2 + 0.04
+    _side_tubes(mb, width / 2 - 0.01, [
+        (back, radius, front - 0.04, radius),
+        (front - 0.04, radius, front, top - radius),
+        (front, top - radius, depth / 2 - 0.02, top - radius),
+    ], radius, frame)
     mb.rod((-width / 2 + 0.01, depth / 2 + 0.04, radius),
            (width / 2 - 0.01, depth / 2 + 0.04, radius), radius, frame)
 
@@ -215,12 +225,12 @@ def _sled(mb: MeshBuilder, params: dict, frame: int) -> None:
     width, depth = params['seat_width'], params['seat_depth']
     top = params['seat_height'] - params['seat_thickness']
     radius = 0.011
-    for sx in (-1, 1):
-        x = sx * (width / 2 - 0.02)
-        front, back = -depth / 2 - 0.02, depth / 2 + 0.01
-        mb.rod((x, front, radius), (x, back, radius), radius, frame)
-        mb.rod((x, front + 0.04, radius), (x, -depth / 2 + 0.04, top), radius, frame)
-        mb.rod((x, back, radius), (x, depth / 2 - 0.04, top), radius, frame)
+    front, back = -depth / 2 - 0.02, depth / 2 + 0.01
+    _side_tubes(mb, width / 2 - 0.02, [
+        (front, radius, back, radius),  # runner on the floor
+        (front + 0.04, radius, -depth / 2 + 0.04, top),
+        (back, radius, depth / 2 - 0.04, top),
+    ], radius, frame)
     for y in (-depth / 2 + 0.04, depth / 2 - 0.04):  # cross tubes carrying the seat
         mb.rod((-width / 2 + 0.02, y, top - radius), (width / 2 - 0.02, y, top - radius), radius,
                frame)

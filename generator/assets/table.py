@@ -173,16 +173,24 @@ def _pedestal(mb: MeshBuilder, params: dict, frame: int, under: float) -> None:
                            (sx * half_w + 0.04, half_d, under), frame)
 
 
+def _end_frames(mb: MeshBuilder, x_end: float, bars: list[tuple[float, ...]],
+                frame: int) -> None:
+    """The same frame of bars at x = -x_end and x = x_end; a bar is (half its thickness in x,
+    y low, z low, y high, z high)."""
+    for sx in (-1, 1):
+        x = sx * x_end
+        for half, y_low, z_low, y_high, z_high in bars:
+            mb.box_between((x - half, y_low, z_low), (x + half, y_high, z_high), frame)
+
+
 def _trestle(mb: MeshBuilder, params: dict, frame: int, under: float) -> None:
     width, depth = params['width'], params['depth']
     x_end = width / 2 - 0.12
-    for sx in (-1, 1):
-        x = sx * x_end
-        mb.box_between((x - 0.035, -depth / 2 + 0.04, 0.0), (x + 0.035, depth / 2 - 0.04, 0.06),
-                       frame)
-        mb.box_between((x - 0.03, -0.06, 0.06), (x + 0.03, 0.06, under - 0.05), frame)
-        mb.box_between((x - 0.035, -depth / 2 + 0.06, under - 0.05),
-                       (x + 0.035, depth / 2 - 0.06, under), frame)
+    _end_frames(mb, x_end, [
+        (0.035, -depth / 2 + 0.04, 0.0, depth / 2 - 0.04, 0.06),  # foot
+        (0.03, -0.06, 0.06, 0.06, under - 0.05),  # upright
+        (0.035, -depth / 2 + 0.06, under - 0.05, depth / 2 - 0.06, under),  # top bearer
+    ], frame)
     mb.box_between((-x_end, -0.03, 0.25), (x_end, 0.03, 0.35), frame)
 
 
@@ -294,13 +302,10 @@ def _c_legs(mb: MeshBuilder, params: dict, frame: int, under: float) -> None:
     """Two C-shaped legs: a foot bar, an upright at the back and an arm under the top."""
     width, depth = params['width'], params['depth']
     x_leg = width / 2 - 0.1
-    for sx in (-1, 1):
-        x = sx * x_leg
-        mb.box_between((x - 0.03, -depth / 2 + 0.08, 0.0), (x + 0.03, depth / 2 - 0.03, 0.04),
-                       frame)
-        mb.box_between((x - 0.03, depth / 2 - 0.11, 0.04), (x + 0.03, depth / 2 - 0.03, under),
-                       frame)
-        mb.box_between((x - 0.025, -depth / 2 + 0.06, under - 0.04),
-                       (x + 0.025, depth / 2 - 0.11, under), frame)
+    _end_frames(mb, x_leg, [
+        (0.03, -depth / 2 + 0.08, 0.0, depth / 2 - 0.03, 0.04),  # foot bar
+        (0.03, depth / 2 - 0.11, 0.04, depth / 2 - 0.03, under),  # upright
+        (0.025, -depth / 2 + 0.06, under - 0.04, depth / 2 - 0.11, under),  # arm
+    ], frame)
     mb.box_between((-x_leg, depth / 2 - 0.10, under - 0.09),
                    (x_leg, depth / 2 - 0.04, under - 0.01), frame)

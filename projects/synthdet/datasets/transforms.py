@@ -28,6 +28,11 @@ def _check_probability(name: str, value: float) -> None:
         raise ValueError(f'{name} must be in [0, 1], got {value}')
 
 
+def _check_at_least(name: str, value: float, low: float) -> None:
+    if value < low:
+        raise ValueError(f'{name} must be >= {low}, got {value}')
+
+
 def _keep_smallest(results: dict, keys: np.ndarray, count: int) -> dict:
     """Keep the ``count`` points with the smallest ``keys`` in their original order, with their
     rows of ``pts_instance_mask`` and ``pts_semantic_mask`` when present."""
@@ -118,8 +123,7 @@ class RandomColourJitter(BaseTransform):
         _check_probability('prob', prob)
         strengths = dict(brightness=brightness, contrast=contrast, channel_gain=channel_gain)
         for name, value in strengths.items():
-            if value < 0:
-                raise ValueError(f'{name} must be >= 0, got {value}')
+            _check_at_least(name, value, 0)
         self.prob = prob
         self.brightness = brightness
         self.contrast = contrast
@@ -165,8 +169,7 @@ class RandomPointDropout(BaseTransform):
         low, high = ratio_range
         if not 0.0 <= low <= high < 1.0:
             raise ValueError(f'ratio_range must satisfy 0 <= lo <= hi < 1, got {ratio_range}')
-        if min_points < 1:
-            raise ValueError(f'min_points must be >= 1, got {min_points}')
+        _check_at_least('min_points', min_points, 1)
         self.prob = prob
         self.ratio_range = (low, high)
         self.min_points = min_points
@@ -220,8 +223,7 @@ class RandomDensityFalloff(BaseTransform):
         if not 0 <= sensor_height[0] <= sensor_height[1]:
             raise ValueError(f'sensor_height must be a range (lo, hi) with 0 <= lo <= hi, got '
                              f'{sensor_height}')
-        if min_points < 1:
-            raise ValueError(f'min_points must be >= 1, got {min_points}')
+        _check_at_least('min_points', min_points, 1)
         self.prob = prob
         self.full_density_range = full_density_range
         self.power = power
