@@ -15,7 +15,7 @@ so a stopped run continues where it stopped (a training resumes from its newest 
     (``--seed`` x 100 + area) per set, into ``WORK/data``; then check every room's object
     annotations against the objects' boxes (``synthdet/annotation_check.py``) and refuse rooms
     that give objects points off them (kept rooms of an older generator);
- 2. convert every area (``tools/create_data.py``);
+ 2. convert every area (``tools/create_data.py``, one run over all the areas, ``--jobs`` workers);
  3. train one model per training profile (``tools/train.py``; configs/tr3d/domain_shift_cpu.py
     and domain_shift_mixed_cpu.py, written to ``WORK/models/<model>/domain_shift_<model>.py``
     with this run's data root, iterations and points);
@@ -272,14 +272,18 @@ class DomainShift:
         return jobs
 
     def convert_jobs(self) -> list[Job]:
+        """One converter run for every area without its info file (``--jobs`` workers over the
+        rooms): one tool start-up instead of one per set."""
+        areas = [str(area) for _, _, area, _ in self.sets() if not self.info_file(area).is_file()]
+        if not areas:
+            return []
         return [
-            Job(f'convert {name} (area {area})', [
+            Job(f'convert areas {" ".join(areas)}', [
                 'tools/create_data.py', 's3dis', '--root-path',
                 str(self.data), '--out-dir',
-                str(self.data), '--areas',
-                str(area), '--workers', '1'
-            ], self.logs / f'convert_{name}.log') for name, _, area, _ in self.sets()
-            if not self.info_file(area).is_file()
+                str(self.data), '--areas', *areas, '--workers',
+                str(self.jobs)
+            ], self.logs / 'convert.log')
         ]
 
     def model_config_text(self, model: str) -> str:
