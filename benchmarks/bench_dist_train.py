@@ -4,15 +4,17 @@ threads (``tools/train.py``, ``make exp2-cpu``) vs 2 processes with 1 thread eac
 
     .venv/bin/python benchmarks/bench_dist_train.py [--rooms-per-area 4] [--points 1000000]
                                                     [--iters 16] [--warmup 4] [--seed 0]
+                                                    [--workers 2]
 
 The generator writes ``--rooms-per-area`` rooms of ``--points`` points into areas 7, 8 and 9 of
-a temporary folder and ``tools/create_data.py`` converts them. Each setup then trains the
-exp2_cpu config (2 cm voxels, 40,000 sampled points, the mixed-sensor data of ``make exp2-cpu``)
-from the same seed for ``--iters`` iterations of 4 rooms, without validation, logging every
-iteration: one process takes the 4 rooms with ``OMP_NUM_THREADS=2``; two processes take 2 rooms
-each with ``OMP_NUM_THREADS=1`` and average their gradients. The time per iteration is the
-Runner's own (``time`` in ``vis_data/scalars.json``: loading, forward, backward, gradient
-exchange and optimiser step), its median over the iterations after the first ``--warmup``.
+a temporary folder and ``tools/create_data.py`` converts them (``--workers`` processes each).
+Each setup then trains the exp2_cpu config (2 cm voxels, 40,000 sampled points, the mixed-sensor
+data of ``make exp2-cpu``) from the same seed for ``--iters`` iterations of 4 rooms, without
+validation, logging every iteration: one process takes the 4 rooms with ``OMP_NUM_THREADS=2``;
+two processes take 2 rooms each with ``OMP_NUM_THREADS=1`` and average their gradients. The time
+per iteration is the Runner's own (``time`` in ``vis_data/scalars.json``: loading, forward,
+backward, gradient exchange and optimiser step), its median over the iterations after the first
+``--warmup``.
 The last line is the speed-up of the two processes. It needs an idle machine: another job on
 the cores slows the two setups differently.
 """
@@ -41,17 +43,18 @@ def free_port() -> int:
         return sock.getsockname()[1]
 
 
-def make_data(root: Path, rooms_per_area: int, points: int, seed: int) -> None:
-    """Generate areas 7-9 into ``root`` and convert them to info pickles, as ``make exp2-cpu``."""
+def make_data(root: Path, rooms_per_area: int, points: int, seed: int, workers: int) -> None:
+    """Generate areas 7-9 into ``root`` and convert them to info pickles, as ``make exp2-cpu``
+    (``workers`` processes each)."""
     raw = root / 'Stanford3dDataset_v1.2_Aligned_Version'
     for command in (
         [
             '-m', 'generator', '--out', raw, '--areas', 7, 8, 9, '--rooms-per-area',
-            rooms_per_area, '--points', points, '--seed', seed, '--workers', 2
+            rooms_per_area, '--points', points, '--seed', seed, '--workers', workers
         ],
         [
             'tools/create_data.py', 's3dis', '--root-path', root, '--out-dir', root, '--areas', 7,
-            8, 9, '--workers', 2
+            8, 9, '--workers', workers
         ],
     ):
         subprocess.run([sys.executable, *map(str, command)],
@@ -94,6 +97,8 @@ def main() -> None:
     parser.add_argument('--iters', type=int, default=16, help='training iterations per setup')
     parser.add_argument('--warmup', type=int, default=4, help='first iterations not counted')
     parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument(
+        '--workers', type=int, default=2, help='generator and converter processes for the data')
     args = parser.parse_args()
     train_rooms = args.rooms_per_area * len(TRAIN_ROOMS_AREAS)
     if (args.iters * BATCH) % train_rooms:
@@ -105,7 +110,7 @@ def main() -> None:
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp) / 'data'
-        make_data(data, args.rooms_per_area, args.points, args.seed)
+        make_data(data, args.rooms_per_area, args.points, args.seed, args.workers)
         for name, processes, threads in SETUPS:
             times = train(data,
                           Path(tmp) / f'work_{processes}', processes, threads, repeats, args.seed)

@@ -92,8 +92,8 @@ SMOKE: dict[str, Smoke | str] = {
               figure('paper') + 'x, tls ' + figure('tls') + 'x, tablet ' +
               figure('tablet') + 'x'),
     'bench_dist_train.py':
-        Smoke(['--rooms-per-area', '1', '--points', '5000', '--iters', '1', '--warmup',
-               '0'],
+        Smoke(['--rooms-per-area', '1', '--points', '5000', '--iters', '1', '--warmup', '0',
+               '--workers', '1'],
               r'2 processes x 1 thread vs 1 process x 2 threads: x' + figure('ratio') +
               r' faster per iteration of 4 rooms \(' + figure('two') + ' s vs ' +
               figure('one') + r' s\)',
