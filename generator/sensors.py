@@ -36,6 +36,8 @@ from synthdet.contracts import SENSOR_MODELS
 from synthdet.geometry import grid_cells, points_in_polygon
 from synthdet.voxels import VoxelFilter
 
+# an empty index array
+_NONE = np.zeros(0, dtype=np.int64)
 # the room's structure; every other part is an object (kept clear of, edges for mixed pixels)
 ROOM_STRUCTURE = ('floor', 'ceiling', 'wall', 'door', 'window')
 
@@ -310,17 +312,22 @@ def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.nda
 @numba.njit(cache=True, nogil=True)
 def _grid_points(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: np.ndarray,
                  cos_azimuth: np.ndarray, sin_azimuth: np.ndarray, ranges: np.ndarray,
-                 beams: np.ndarray, noise: np.ndarray, a: float, b: float) -> np.ndarray:
-    """Points (N, 3) of ``beams`` (grid indices) at their ranges; with ``noise`` (N,) standard
-    normal draws (empty: none), each range first moves by draw x (a + b x range)."""
+                 beams: np.ndarray, ordered: bool, order: np.ndarray, noise: np.ndarray,
+                 a: float, b: float) -> np.ndarray:
+    """Points (N, 3) of ``beams`` (grid indices), ``ordered``: those of ``order`` (indices into
+    ``beams``) in its order, else all in theirs, at their ranges; with ``noise`` (standard
+    normal draws, one per beam; empty: none), each range first moves by draw x (a + b x
+    range)."""
     columns = len(cos_azimuth)
-    xyz = np.empty((len(beams), 3))
+    count = len(order) if ordered else len(beams)
+    xyz = np.empty((count, 3))
     noisy = len(noise) > 0
-    for k in range(len(beams)):
-        beam = beams[k]
+    for k in range(count):
+        index = order[k] if ordered else k
+        beam = beams[index]
         measured = ranges[beam]
         if noisy:
-            measured = measured + noise[k] * (a + b * measured)
+            measured = measured + noise[index] * (a + b * measured)
         row = beam // columns
         column = beam - row * columns
         xyz[k, 0] = station[0] + cos_elevation[row] * cos_azimuth[column] * measured
@@ -359,16 +366,18 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
                 cfg['mixed_pixels'], cfg['edge_jump'])
         rows = np.flatnonzero(np.isfinite(ranges))
         noise = rng.standard_normal(len(rows)) if a > 0 or b > 0 else np.zeros(0)
+        kept = _NONE
         if cubes is not None:
             # the returns in a random order; the first in a cube is kept
             shuffled = rng.permutation(len(rows))
-            xyz = _grid_points(station, *angles, ranges, rows[shuffled],
-                               noise[shuffled] if len(noise) else noise, a, b)
+            first = cubes.new_points(
+                _grid_points(station, *angles, ranges, rows, True, shuffled, noise, a, b))
             kept = np.zeros(len(rows), dtype=bool)
-            kept[shuffled[cubes.new_points(xyz)]] = True
+            kept[shuffled[first]] = True
             kept = np.flatnonzero(kept)
-            rows, noise = rows[kept], noise[kept] if len(noise) else noise
-        xyz = _grid_points(station, *angles, ranges, rows, noise, a, b)
+        xyz = _grid_points(station, *angles, ranges, rows, cubes is not None, kept, noise, a, b)
+        if cubes is not None:
+            rows = rows[kept]
         points.append(xyz)
         triangles.append(triangle[rows])
         owner.append(np.full(len(rows), index))
