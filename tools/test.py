@@ -42,8 +42,8 @@ from mmengine.model import BaseTTAModel, is_model_wrapper  # noqa: E402
 from mmengine.runner import Runner  # noqa: E402
 
 from projects.synthdet.bootstrap import (  # noqa: E402
-    ConfigFileError, OutputPathError, TTAConfigError, add_runner_arguments, check_output_dir,
-    check_output_file, parse_runner_args, run_tool, runner_config, tta_settings)
+    ConfigFileError, OutputPathError, TTAConfigError, check_output_dir, check_output_file,
+    parse_runner_args, run_tool, runner_config, tta_settings)
 from projects.synthdet.checkpoint import (  # noqa: E402
     CheckpointError, load_checkpoint_file, load_state_into)
 from projects.synthdet.evaluation.box_fit import (  # noqa: E402
@@ -87,8 +87,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         '--false-positives',
         action='store_true',
         help='also tabulate what the false positives hit, per class (false_positives.json)')
-    add_runner_arguments(parser, 'logs and table3.json (default work_dirs/<config>)')
-    return parse_runner_args(parser, argv)
+    return parse_runner_args(parser, 'logs and table3.json (default work_dirs/<config>)', argv)
 
 
 def add_show_hook(cfg: Config, show_dir: str | None, score_thr: float) -> None:

@@ -28,7 +28,7 @@ from mmengine.dist import is_main_process  # noqa: E402
 from mmengine.runner import Runner, find_latest_checkpoint  # noqa: E402
 
 from projects.synthdet.bootstrap import (  # noqa: E402
-    add_runner_arguments, parse_runner_args, runner_config)
+    parse_runner_args, runner_config)
 from projects.synthdet.checkpoint import (  # noqa: E402
     TRAINING_CHECKPOINT_TYPES, CheckpointError, check_resumable, load_checkpoint_file, refused,
     save_inference_checkpoint, trusted_resume_path)
@@ -57,8 +57,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         '--auto-scale-lr',
         action='store_true',
         help='scale the learning rate by the total batch size / auto_scale_lr.base_batch_size')
-    add_runner_arguments(parser, 'logs and checkpoints (default work_dirs/<config>)')
-    return parse_runner_args(parser, argv)
+    return parse_runner_args(parser, 'logs and checkpoints (default work_dirs/<config>)', argv)
 
 
 def apply_precision_and_lr_options(cfg: Config, amp: bool, auto_scale_lr: bool) -> None:

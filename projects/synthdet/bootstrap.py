@@ -188,8 +188,11 @@ def tta_settings(cfg: Config) -> tuple[dict, list]:
     return dict(cfg.tta_model), list(cfg.tta_pipeline)
 
 
-def add_runner_arguments(parser: argparse.ArgumentParser, work_dir_help: str) -> None:
-    """Add ``--work-dir``, ``--cfg-options``, ``--launcher`` and ``--local-rank``."""
+def parse_runner_args(parser: argparse.ArgumentParser, work_dir_help: str,
+                      argv: list[str] | None = None) -> argparse.Namespace:
+    """Add the options every runner tool has (``--work-dir``, described by ``work_dir_help``,
+    ``--cfg-options``, ``--launcher`` and ``--local-rank``) to ``parser`` and parse the command
+    line; sets ``LOCAL_RANK``."""
     parser.add_argument('--work-dir', help=work_dir_help)
     add_cfg_options(parser)
     parser.add_argument(
@@ -198,11 +201,6 @@ def add_runner_arguments(parser: argparse.ArgumentParser, work_dir_help: str) ->
         default='none',
         help='job launcher for distributed runs (tools/dist_train.sh uses pytorch)')
     parser.add_argument('--local-rank', '--local_rank', type=int, default=0)
-
-
-def parse_runner_args(parser: argparse.ArgumentParser,
-                      argv: list[str] | None = None) -> argparse.Namespace:
-    """Parse the command line of a tool with ``add_runner_arguments``; sets ``LOCAL_RANK``."""
     args = parser.parse_args(argv)
     os.environ.setdefault('LOCAL_RANK', str(args.local_rank))
     return args
