@@ -206,28 +206,32 @@ def _grid_directions(cos_elevation: np.ndarray, sin_elevation: np.ndarray,
     return directions
 
 
-def _cast_all(scanner: Scanner, origins: np.ndarray, directions: np.ndarray, batch: int,
-              rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """First hits of many rays in batches: distance (inf for a miss) and triangle index (0 for a
-    miss, so that per-triangle lookups of a whole grid stay in bounds; the distance tells)."""
-    t_hit = np.empty(len(origins), np.float32)
+def _cast_grid(scanner: Scanner, origins: np.ndarray, directions: np.ndarray, batch: int,
+               rng: np.random.Generator, min_range: float,
+               max_range: float) -> tuple[np.ndarray, np.ndarray]:
+    """First hits of many rays in batches: ranges (float64; inf for a miss and outside
+    [min_range, max_range]) and triangle index (0 for a miss, so that per-triangle lookups of a
+    whole grid stay in bounds; the range tells)."""
+    ranges = np.empty(len(origins))
     triangle = np.empty(len(origins), np.int64)
     for start in range(0, len(origins), batch):
         stop = start + batch
-        t, prim = scanner.cast(scanner.full_scene, origins[start:stop], directions[start:stop],
-                               rng)
-        t_hit[start:stop], triangle[start:stop] = t, np.where(np.isfinite(t), prim, 0)
-    return t_hit, triangle
+        t_hit, primitive = scanner.cast(scanner.full_scene, origins[start:stop],
+                                        directions[start:stop], rng)
+        _store_hits(t_hit, primitive, min_range, max_range, ranges[start:stop],
+                    triangle[start:stop])
+    return ranges, triangle
 
 
 @numba.njit(cache=True, nogil=True)
-def _windowed_ranges(t_hit: np.ndarray, min_range: float, max_range: float) -> np.ndarray:
-    """The hit distances (float32) as float64 ranges, inf outside [min_range, max_range]."""
-    ranges = np.empty(len(t_hit))
-    for beam in range(len(t_hit)):
-        value = np.float64(t_hit[beam])
-        ranges[beam] = np.inf if value < min_range or value > max_range else value
-    return ranges
+def _store_hits(t_hit: np.ndarray, primitive: np.ndarray, min_range: float, max_range: float,
+                ranges: np.ndarray, triangle: np.ndarray) -> None:
+    """Write a batch's hit distances (float32) into ``ranges`` as float64, inf outside
+    [min_range, max_range], and its triangles into ``triangle`` (0 for a miss)."""
+    for ray in range(len(t_hit)):
+        value = np.float64(t_hit[ray])
+        ranges[ray] = np.inf if value < min_range or value > max_range else value
+        triangle[ray] = primitive[ray] if np.isfinite(t_hit[ray]) else 0
 
 
 @numba.njit(cache=True, nogil=True)
@@ -357,8 +361,8 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
     points, triangles, owner, strays = [], [], [], []
     for index, station in enumerate(stations):
         origins = np.broadcast_to(station, directions.shape)
-        t_hit, triangle = _cast_all(scanner, origins, directions, batch, rng)
-        ranges = _windowed_ranges(t_hit, cfg['min_range'], cfg['max_range'])
+        ranges, triangle = _cast_grid(scanner, origins, directions, batch, rng,
+                                      cfg['min_range'], cfg['max_range'])
         stray = np.zeros(ranges.size, dtype=bool)
         if cfg['mixed_pixels'] > 0:
             ranges, triangle, stray = _mixed_pixels(
