@@ -1,17 +1,19 @@
 """The CAD library: one natively parametric FreeCAD model per detection class.
 
-Runs inside FreeCAD. Every model is one ``App::LinkGroup`` (a group with a placement and,
-unlike an ``App::Part``, without an origin of six helper objects) whose origin is the centre
-of its base (the model stands on the part's z = 0 plane, so a height edit keeps its feet in
-place) and whose front is its local -y side. Its dimensions sit in a ``Spreadsheet::Sheet``
-inside that part (aliases ``length``, ``width``, ``height`` in mm along the local x, y, z axes,
-plus model details such as the YuMi joint angles), and every solid is bound to those cells by
-FreeCAD expressions. The document therefore stays parametric in a plain FreeCAD: edit a cell,
-recompute, and the geometry follows. No Python feature proxies are used.
+Runs inside FreeCAD. Every model is one ``App::LinkGroup`` (a group with a placement, without
+the origin and its six axes and planes every ``App::Part`` creates), which draws its solids at
+its placement (they are hidden themselves), whose origin is the centre of its base (the model
+stands on the part's z = 0 plane, so a height edit keeps its feet in place) and whose front is
+its local -y side. Its dimensions sit in a ``Spreadsheet::Sheet`` inside that part (aliases
+``length``, ``width``, ``height`` in mm along the local x, y, z axes, plus model details such
+as the YuMi joint angles), and every solid is bound to those cells by FreeCAD expressions. The
+document therefore stays parametric in a plain FreeCAD: edit a cell, recompute, and the
+geometry follows. No Python feature proxies are used.
 
-Object names are chosen here (``Chair001``, ``Chair001_Seat``, ``Chair001_Parameters``) and
-checked to be free, so FreeCAD never searches the whole document for a free name (it does that
-for every name already taken, which makes building n objects take time in n squared).
+Object names are chosen here (``Chair001``, ``Chair001_Seat``, ``Chair001_Parameters``): the
+part's and its sheet's are checked to be free, its solids' start with the part's. FreeCAD
+therefore does not search the whole document for a free name (it does that for every name
+already taken, which makes building n objects take time in n squared).
 Expressions are assembled only from those names, built from fixed base names, cell aliases
 defined here, and numbers: nothing read from the input files is ever part of one.
 """
