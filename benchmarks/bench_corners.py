@@ -166,33 +166,13 @@ def generated_rooms(folder: Path):
 
 
 # the paper's sensor (the other models' rooms: --generated, labelled by their sensor)
+_PAPER_SHAPES = {'room': {'shapes': {'box': 0.34, 'L': 0.33, 'U': 0.33}}}
 GENERATOR_CONFIGS = {
-    'clean': {
-        'room': {
-            'shapes': {
-                'box': 0.34,
-                'L': 0.33,
-                'U': 0.33
-            }
-        },
-        'scanner': {
-            'sensors': {
-                'paper': 1.0
-            }
-        }
-    },
+    'clean': {**_PAPER_SHAPES, 'scanner': {'sensors': {'paper': 1.0}}},
     'noisy': {
-        'room': {
-            'shapes': {
-                'box': 0.34,
-                'L': 0.33,
-                'U': 0.33
-            }
-        },
+        **_PAPER_SHAPES,
         'scanner': {
-            'sensors': {
-                'paper': 1.0
-            },
+            'sensors': {'paper': 1.0},
             'range_noise': 0.01,
             'angular_jitter': 0.001,
             'dropout': 0.1
