@@ -111,13 +111,31 @@ def test_count_params_tool(tmp_path, monkeypatch, capsys):
     config.write_text("custom_imports = dict(imports=['projects.synthdet.models'])\n"
                       f'model = {tr3d_config()!r}\n')
     monkeypatch.setattr(sys, 'argv', ['count_params.py', str(config)])
-    runpy.run_path(str(REPO / 'tools' / 'count_params.py'), run_name='__main__')
+    with pytest.raises(SystemExit) as exit_info:
+        runpy.run_path(str(REPO / 'tools' / 'count_params.py'), run_name='__main__')
+    assert exit_info.value.code == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[-1].split() == ['total', str(PUBLISHED_S3DIS_PARAMS)]
     counts = {line.split()[0]: int(line.split()[1]) for line in lines}
     assert counts['backbone'] == 12_002_624 and counts['backbone.layer3'] == 5_328_128
     assert counts['neck'] == 2_655_744 and counts['bbox_head'] == 1_419
     assert counts['bbox_head.conv_cls'] == 128 * 5 + 5
+
+
+@pytest.mark.parametrize('name, text, message', [
+    ('model.txt', 'model = 1\n', 'not a config file'),
+    ('broken.py', 'model = dict(\n', 'broken.py:1: not a config file (invalid Python'),
+])
+def test_count_params_tool_refuses_a_config_in_one_line(tmp_path, monkeypatch, capsys, name,
+                                                        text, message):
+    config = tmp_path / name
+    config.write_text(text)
+    monkeypatch.setattr(sys, 'argv', ['count_params.py', str(config)])
+    with pytest.raises(SystemExit) as exit_info:
+        runpy.run_path(str(REPO / 'tools' / 'count_params.py'), run_name='__main__')
+    assert exit_info.value.code == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith(f'count_params.py: error: {config}') and message in line
 
 
 def test_forward_backward_reaches_backbone(scenes):

@@ -1,13 +1,20 @@
 """Print the parameter count of the model in an mmdet3d config, total and per module.
 
 Usage: python tools/count_params.py CONFIG [--depth N] [--cfg-options key=value ...]
+Exit codes: 0, or 2 with one line naming the file for a CONFIG that cannot be loaded.
 """
 import argparse
+import sys
+from pathlib import Path
 
 from mmdet3d.registry import MODELS
 from mmdet3d.utils import register_all_modules
-from mmengine.config import Config, DictAction
+from mmengine.config import DictAction
 from torch import nn
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
+
+from projects.synthdet.bootstrap import ConfigFileError, load_config, run_tool  # noqa: E402
 
 
 def count_parameters(module: nn.Module) -> int:
@@ -44,9 +51,7 @@ def main() -> None:
         help='override config entries, e.g. model.voxel_size=0.02')
     args = parser.parse_args()
     register_all_modules(init_default_scope=True)
-    cfg = Config.fromfile(args.config)
-    if args.cfg_options:
-        cfg.merge_from_dict(args.cfg_options)
+    cfg = load_config(args.config, args.cfg_options)
     model = MODELS.build(cfg.model)
     for name, count in parameter_table(model, args.depth):
         indent = '  ' * name.count('.') if name != 'total' else ''
@@ -54,4 +59,4 @@ def main() -> None:
 
 
 if __name__ == '__main__':
-    main()
+    run_tool(main, 'count_params.py', bad_input=(ConfigFileError, ))
