@@ -102,7 +102,7 @@ class RoomScene:
         bpy.context.view_layer.update()
 
     def save(self, path: str | Path) -> None:
-        """Save the current scene as a .blend file (a copy; the session keeps working)."""
+        """Save the current scene as a .blend file (a copy; the open scene stays in memory)."""
         bpy.ops.wm.save_as_mainfile(filepath=str(Path(path).resolve()), copy=True)
 
 

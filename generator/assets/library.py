@@ -117,14 +117,14 @@ def build_library(out_dir: Path,
             x = 0.0
             try:
                 if collection.name != cls:
-                    raise RuntimeError(f'cannot build {cls}.blend: this Blender session already '
+                    raise RuntimeError(f'cannot build {cls}.blend: the open Blender file already '
                                        f'holds a collection named {cls!r}')
                 for index in range(instances_per_class):
                     variant, params = procedural_params(cls, index, seed)
                     name = f'{cls}_{variant}_{index:02d}'
                     obj = GENERATORS[cls].build(variant, params).to_object(name, collection)
                     if obj.name != name:
-                        raise RuntimeError(f'cannot build {name!r}: this Blender session already '
+                        raise RuntimeError(f'cannot build {name!r}: the open Blender file already '
                                            f'holds an object of that name')
                     obj[ASSET_PROP] = f'{cls}/{variant}'
                     obj[PARAMS_PROP] = json.dumps(params, sort_keys=True)
