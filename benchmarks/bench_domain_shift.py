@@ -58,7 +58,7 @@ TEST_AREAS = {
     'tablet': 23,
     'noisy': 24,
     'shaded': 25,
-    'colourless': 26,
+    'colorless': 26,
     'clutter': 27,
     MIXED: 28,
 }

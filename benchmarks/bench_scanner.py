@@ -71,7 +71,7 @@ from generator.layout import catalog_from_library, generate_layout, layout_meta 
 from generator.pipeline import RunOptions, open_library  # noqa: E402
 from generator.scanner import (  # noqa: E402
     ScanResult, Scanner, TriangleScene, _cast_slice, random_directions, sensor_path,
-    triangles_of_colours)
+    triangles_of_colors)
 from generator.scene import COLLECTION, RoomScene, export_triangles  # noqa: E402
 from generator.sensors import (  # noqa: E402
     RoomGeometry, label_stray_returns, room_geometry, scan_room)
@@ -433,7 +433,7 @@ def main() -> None:
     objects = sorted(
         bpy.data.collections[COLLECTION].objects, key=lambda o: o['synthdet_instance'])
     offsets = np.cumsum([0] + [len(o.data.polygons) for o in objects])[:-1]
-    glass = triangles_of_colours(triangles, SEE_THROUGH)
+    glass = triangles_of_colors(triangles, SEE_THROUGH)
     glass_classes = sorted({classes[p] for p in triangles.part[glass]})
     print(f'scene: {layout.shape} room {np.ptp(layout.polygon, axis=0).round(2).tolist()} m, '
           f'{len(objects)} objects, {len(triangles.triangles)} triangles ({int(glass.sum())} of '

@@ -4,7 +4,7 @@
 
 The real ``freecad`` GUI opens the document on a virtual X display (``Xvfb``), with a
 fresh user configuration (no Start page), and saves its 3D view: what a user sees when they
-open the file, with the view, colours and visibility the document stores.
+open the file, with the view, colors and visibility the document stores.
 """
 import argparse
 import contextlib

@@ -15,7 +15,7 @@ own coordinates:
   within ``SURFACE_BAND`` of the wall from corner i to corner i + 1 (1-based, the outline in
   the document's order), the rest ``clutter_1``;
 - writes them as ``Area_<N>/<room>/<room>.txt`` and ``Annotations/<class>_<k>.txt``
-  (``x y z r g b``, millimetres, colours 0-255) for ``tools/create_data.py``.
+  (``x y z r g b``, millimetres, colors 0-255) for ``tools/create_data.py``.
 
 Boxes overlapping each other, a point inside two boxes, a box without points and a document
 that is not synthdet's are ``LabelsInputError`` with one line naming the document.

@@ -124,7 +124,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         '--preview',
         action='store_true',
-        help='also write a top-down <room>.png coloured by class')
+        help='also write a top-down <room>.png colored by class')
     parser.add_argument(
         '--save-blend', action='store_true', help='also save the Blender scene as <room>.blend')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')

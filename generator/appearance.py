@@ -1,16 +1,16 @@
-"""Appearance of a scan: colours shaded by a light, per-instance colour variation, no colour.
+"""Appearance of a scan: colors shaded by a light, per-instance color variation, no color.
 
-Pure numpy. The scanner returns the plain material colour of the triangle each ray hit; this
-module turns those colours into what a real scanner's camera might deliver, per room:
+Pure numpy. The scanner returns the plain material color of the triangle each ray hit; this
+module turns those colors into what a real scanner's camera might deliver, per room:
 
 - shading (probability ``shading``): a directional light from above, tilted by a random angle in
-  ``light_tilt`` (degrees) towards a random azimuth; a point's colour is scaled by
+  ``light_tilt`` (degrees) towards a random azimuth; a point's color is scaled by
   ``ambient + (1 - ambient) * max(0, n . l)``, with ``n`` the normal of its hit triangle turned
   towards the sensor position the point was seen from and ``l`` the unit vector to the light;
-- instance variation (std ``instance_variation``): every annotated part gets its own colour
+- instance variation (std ``instance_variation``): every annotated part gets its own color
   factor, a brightness factor shared by the channels times a smaller per-channel tint, so two
   chairs of one asset differ;
-- colourless (probability ``colourless``): every colour is 0, as scanners without a camera write.
+- colorless (probability ``colorless``): every color is 0, as scanners without a camera write.
 
 The draws come from a room's own appearance stream and always take the same numbers of values,
 so switching one effect changes neither the others nor the layout and the scan.
@@ -29,17 +29,17 @@ class RoomAppearance:
 
     shading: bool
     light: np.ndarray  # (3,) unit vector towards the light (drawn even when shading is off)
-    ambient: float  # colour factor of a face turned away from the light
-    colourless: bool
+    ambient: float  # color factor of a face turned away from the light
+    colorless: bool
     instance_variation: float
-    part_factor: np.ndarray  # (P, 3) colour factor per part
+    part_factor: np.ndarray  # (P, 3) color factor per part
 
     def meta(self) -> dict[str, Any]:
         """The ``generator.appearance`` block of meta.json."""
         return {
             'shading': self.shading,
             'light': np.round(self.light, 6).tolist() if self.shading else None,
-            'colourless': self.colourless,
+            'colorless': self.colorless,
             'instance_variation': self.instance_variation,
         }
 
@@ -48,8 +48,8 @@ def draw_appearance(rng: np.random.Generator, config: Mapping[str, Any],
                     parts: int) -> RoomAppearance:
     """Draw a room's appearance for ``parts`` annotated parts from the ``appearance`` config."""
     shading_drawn = bool(rng.random() < config['shading'])
-    colourless = bool(rng.random() < config['colourless'])
-    shading = shading_drawn and not colourless  # nothing to shade in a colourless room
+    colorless = bool(rng.random() < config['colorless'])
+    shading = shading_drawn and not colorless  # nothing to shade in a colorless room
     tilt = np.radians(rng.uniform(*config['light_tilt']))
     azimuth = rng.uniform(0.0, 2 * np.pi)
     light = np.array(
@@ -60,7 +60,7 @@ def draw_appearance(rng: np.random.Generator, config: Mapping[str, Any],
     brightness = rng.standard_normal((parts, 1))
     tint = rng.standard_normal((parts, 3))
     part_factor = np.clip(1.0 + variation * (brightness + 0.5 * tint), 0.0, None)
-    return RoomAppearance(shading, light, float(config['ambient']), colourless, variation,
+    return RoomAppearance(shading, light, float(config['ambient']), colorless, variation,
                           part_factor)
 
 
@@ -78,8 +78,8 @@ def facing_normals(scene: TriangleScene, triangle: np.ndarray, xyz: np.ndarray,
 
 def apply_appearance(appearance: RoomAppearance, scan: ScanResult,
                      scene: TriangleScene) -> np.ndarray:
-    """The colours (N, 3) uint8 of ``scan`` under ``appearance`` (its own colours when all off)."""
-    if appearance.colourless:
+    """The colors (N, 3) uint8 of ``scan`` under ``appearance`` (its own colors when all off)."""
+    if appearance.colorless:
         return np.zeros_like(scan.rgb)
     if not appearance.shading and appearance.instance_variation == 0:
         return scan.rgb

@@ -2,7 +2,7 @@
 
 Pure numpy. :func:`sample_clutter` and :func:`sample_pipe_run` draw one clutter object as an
 :class:`~generator.asset_spec.AssetSpec` of class ``clutter``: its kind, size and parameters (style,
-colours, counts), all listed in ``meta.json``. :func:`clutter_mesh` builds its triangles from the
+colors, counts), all listed in ``meta.json``. :func:`clutter_mesh` builds its triangles from the
 spec alone: closed solids (boxes and axis-aligned cylinders) in the asset's local frame (xy
 centred, z = 0 at the bottom, front towards -y, back towards +y) whose bounds are exactly the
 spec's size.
@@ -33,18 +33,18 @@ _BOX_TRIANGLES = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5]
 
 
 class _Solids:
-    """Collects closed, outward-wound solids with one colour each."""
+    """Collects closed, outward-wound solids with one color each."""
 
     def __init__(self) -> None:
         self.vertices: list[np.ndarray] = []
         self.triangles: list[np.ndarray] = []
-        self.colours: list[np.ndarray] = []
+        self.colors: list[np.ndarray] = []
         self.count = 0
 
     def _add(self, vertices: np.ndarray, triangles: np.ndarray, rgb: Sequence[int]) -> None:
         self.vertices.append(vertices)
         self.triangles.append(triangles + self.count)
-        self.colours.append(np.tile(np.asarray(rgb, dtype=np.uint8), (len(triangles), 1)))
+        self.colors.append(np.tile(np.asarray(rgb, dtype=np.uint8), (len(triangles), 1)))
         self.count += len(vertices)
 
     def box(self, lo: Sequence[float], hi: Sequence[float], rgb: Sequence[int]) -> None:
@@ -88,7 +88,7 @@ class _Solids:
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return (np.concatenate(self.vertices), np.concatenate(self.triangles),
-                np.concatenate(self.colours))
+                np.concatenate(self.colors))
 
 
 # ----------------------------------------------------------------------------- sampling
@@ -98,7 +98,7 @@ def _mm(value: float) -> float:
     return round(float(value), 3)
 
 
-def _colour(rng: np.random.Generator, options: Sequence[Sequence[int]]) -> list[int]:
+def _color(rng: np.random.Generator, options: Sequence[Sequence[int]]) -> list[int]:
     return [int(c) for c in options[int(rng.integers(len(options)))]]
 
 
@@ -116,13 +116,13 @@ def _size(rng, width: Sequence[float], depth: Sequence[float], height: Sequence[
 
 def _shelf(rng, max_height: float) -> tuple[Size, dict]:
     style = 'rack' if rng.random() < 0.5 else 'shelving'
-    if style == 'rack':  # pallet rack: coloured uprights and beams
+    if style == 'rack':  # pallet rack: colored uprights and beams
         size = _size(rng, (1.8, 2.7), (0.8, 1.1), (1.8, 2.6), max_height)
-        frame, board = _colour(rng, palette.INDUSTRIAL[1:5]), _colour(rng, palette.WOOD)
+        frame, board = _color(rng, palette.INDUSTRIAL[1:5]), _color(rng, palette.WOOD)
     else:  # boltless shelving: grey posts, steel or chipboard boards
         size = _size(rng, (0.8, 1.5), (0.35, 0.6), (1.5, 2.2), max_height)
-        frame = _colour(rng, palette.METAL)
-        board = _colour(rng, palette.METAL + palette.WOOD)
+        frame = _color(rng, palette.METAL)
+        board = _color(rng, palette.METAL + palette.WOOD)
     levels = int(rng.integers(2, 4)) if size[2] < 1.2 else int(rng.integers(3, 6))
     return size, {
         'style': style,
@@ -144,9 +144,9 @@ def _cabinet(rng, max_height: float) -> tuple[Size, dict]:
         size = _size(rng, (0.6, 1.2), (0.45, 0.7), (0.8, 1.1), max_height)
     return size, {
         'style': style,
-        'color': _colour(rng, palette.INDUSTRIAL + palette.METAL),
-        'front_color': _colour(rng, palette.INDUSTRIAL),
-        'top_color': _colour(rng, palette.LAMINATE + palette.WOOD),
+        'color': _color(rng, palette.INDUSTRIAL + palette.METAL),
+        'front_color': _color(rng, palette.INDUSTRIAL),
+        'top_color': _color(rng, palette.LAMINATE + palette.WOOD),
         'rows': int(rng.integers(3, 7)) if style == 'drawers' else int(rng.integers(1, 3))
     }
 
@@ -155,9 +155,9 @@ def _machine(rng, max_height: float) -> tuple[Size, dict]:
     size = _size(rng, (1.2, 3.0), (1.0, 2.0), (1.5, 2.3), max_height)
     return size, {
         'style': 'cnc',
-        'color': _colour(rng, palette.INDUSTRIAL),
-        'accent_color': _colour(rng, palette.INDUSTRIAL),
-        'glass_color': _colour(rng, palette.GLASS),
+        'color': _color(rng, palette.INDUSTRIAL),
+        'accent_color': _color(rng, palette.INDUSTRIAL),
+        'glass_color': _color(rng, palette.GLASS),
         'panel_side': 1 if rng.random() < 0.5 else -1,
         'tower': bool(rng.random() < 0.6 and size[2] > 1.2)
     }
@@ -170,9 +170,9 @@ def _pallet(rng, max_height: float) -> tuple[Size, dict]:
     style = 'wood' if rng.random() < 0.75 else 'plastic'
     return (footprint[0], footprint[1], _mm(PALLET_HEIGHT + load)), {
         'style': style,
-        'color': _colour(rng, palette.WOOD[:3] if style == 'wood' else palette.PLASTIC),
+        'color': _color(rng, palette.WOOD[:3] if style == 'wood' else palette.PLASTIC),
         'load': load,
-        'load_color': _colour(rng, palette.CARDBOARD + ((225, 228, 230), ))
+        'load_color': _color(rng, palette.CARDBOARD + ((225, 228, 230), ))
     }
 
 
@@ -193,8 +193,8 @@ def _crate(rng, max_height: float, small: bool = False) -> tuple[Size, dict]:
     else:
         layers = 1
         size = _size(rng, (0.6, 1.2), (0.5, 1.0), (0.4, 1.0), max_height)
-    colours = {'cardboard': palette.CARDBOARD, 'plastic': palette.PLASTIC, 'wooden': palette.WOOD}
-    return size, {'style': style, 'layers': layers, 'color': _colour(rng, colours[style])}
+    colors = {'cardboard': palette.CARDBOARD, 'plastic': palette.PLASTIC, 'wooden': palette.WOOD}
+    return size, {'style': style, 'layers': layers, 'color': _color(rng, colors[style])}
 
 
 def _cart(rng, max_height: float) -> tuple[Size, dict]:
@@ -207,8 +207,8 @@ def _cart(rng, max_height: float) -> tuple[Size, dict]:
         'style': style,
         'shelves': int(rng.integers(2, 4)) if style == 'shelf' else 1,
         'wheel_radius': _mm(rng.uniform(0.05, 0.08)),
-        'color': _colour(rng, palette.METAL + palette.INDUSTRIAL[1:5]),
-        'deck_color': _colour(rng, palette.PLASTIC + palette.WOOD[:2])
+        'color': _color(rng, palette.METAL + palette.INDUSTRIAL[1:5]),
+        'deck_color': _color(rng, palette.PLASTIC + palette.WOOD[:2])
     }
 
 
@@ -217,14 +217,14 @@ def _bin(rng, max_height: float) -> tuple[Size, dict]:
     if style == 'drum':
         diameter = _mm(rng.uniform(0.4, 0.6))
         size = (diameter, diameter, _height(rng, 0.5, 0.9, max_height))
-        colour = _colour(rng, palette.INDUSTRIAL + palette.PLASTIC)
+        color = _color(rng, palette.INDUSTRIAL + palette.PLASTIC)
     elif style == 'wheelie':
         size = _size(rng, (0.48, 0.6), (0.55, 0.75), (0.95, 1.07), max_height)
-        colour = _colour(rng, palette.PLASTIC)
+        color = _color(rng, palette.PLASTIC)
     else:  # mesh pallet cage
         size = _size(rng, (0.8, 1.24), (0.6, 0.84), (0.7, 0.97), max_height)
-        colour = _colour(rng, palette.METAL[1:4])
-    return size, {'style': style, 'color': colour}
+        color = _color(rng, palette.METAL[1:4])
+    return size, {'style': style, 'color': color}
 
 
 _SAMPLERS: dict[str, Callable[..., tuple[Size, dict]]] = {
@@ -277,8 +277,8 @@ def sample_pipe_run(rng: np.random.Generator, length: float, mount: str, max_hei
             'pipes': pipes,
             'diameter': diameter,
             'gap': gap,
-            'color': _colour(rng, palette.PIPE),
-            'bracket_color': _colour(rng, palette.METAL)
+            'color': _color(rng, palette.PIPE),
+            'bracket_color': _color(rng, palette.METAL)
         })
 
 
@@ -287,8 +287,8 @@ def sample_primitive(rng: np.random.Generator, kind: str, size_range: Sequence[f
     sx = _mm(rng.uniform(*size_range))
     sy = sx if kind == 'cylinder' else _mm(rng.uniform(*size_range))
     sz = _mm(rng.uniform(0.2, 1.2))
-    colour = [int(v) for v in rng.integers(40, 220, size=3)]
-    return _spec(kind, (sx, sy, sz), {'color': colour})
+    color = [int(v) for v in rng.integers(40, 220, size=3)]
+    return _spec(kind, (sx, sy, sz), {'color': color})
 
 
 # ----------------------------------------------------------------------------- meshes
@@ -342,7 +342,7 @@ def _build_shelf(s: _Solids, size: Size, p: dict) -> None:
         depth = fill.uniform(0.5, 0.95) * d
         height = fill.uniform(0.3, 0.85) * (z1 - z0 - 0.02)
         s.box((x, -d / 2 + 0.01, z0), (x + width, -d / 2 + 0.01 + depth, z0 + height),
-              _colour(fill, palette.CARDBOARD + palette.PLASTIC))
+              _color(fill, palette.CARDBOARD + palette.PLASTIC))
 
     rows = zip(levels[:-1] + board, levels[1:] - (0.09 if p['style'] == 'rack' else 0))
     line_up_items(fill, rows, (-w / 2 + post + 0.02, w / 2 - post - 0.02), (0.15, 0.5),
@@ -545,7 +545,7 @@ _BUILDERS: dict[str, Callable[[_Solids, Size, dict], None]] = {
 
 
 def clutter_mesh(spec: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Vertices (V, 3), triangles (T, 3) and colours (T, 3) uint8 of a clutter spec, in its
+    """Vertices (V, 3), triangles (T, 3) and colors (T, 3) uint8 of a clutter spec, in its
     local frame; closed solids whose bounds are exactly ``spec.size``."""
     solids = _Solids()
     _BUILDERS[spec.params['kind']](solids, tuple(spec.size), spec.params)

@@ -124,16 +124,16 @@ DEFAULTS: dict[str, Any] = {
             'max_range': 5.0,
             'range_noise': 0.01,  # std of the range error, metres
             'far_keep': 0.3,  # share of the returns kept at max_range (1 at min_range)
-            'dark_luminance': 40.0,  # a triangle colour darker than this (0-255) is dark
+            'dark_luminance': 40.0,  # a triangle color darker than this (0-255) is dark
             'dark_dropout': 0.7,  # probability that a return on a dark triangle is lost
             'shiny_dropout': 0.5,  # the same on shiny (metal palette) triangles
         },
     },
-    'appearance': {  # drawn per room (generator/appearance.py); all 0 = the paper's flat colours
-        'shading': 0.5,  # probability that colours are shaded by the angle to a light
-        'instance_variation': 0.1,  # std of the per-instance colour factor
-        'colourless': 0.1,  # probability that every colour is 0 (a scanner without camera)
-        'ambient': 0.5,  # colour factor of faces turned away from the light
+    'appearance': {  # drawn per room (generator/appearance.py); all 0 = the paper's flat colors
+        'shading': 0.5,  # probability that colors are shaded by the angle to a light
+        'instance_variation': 0.1,  # std of the per-instance color factor
+        'colorless': 0.1,  # probability that every color is 0 (a scanner without camera)
+        'ambient': 0.5,  # color factor of faces turned away from the light
         'light_tilt': [0.0, 60.0],  # angle of the light from the vertical, degrees [min, max]
     },
 }
@@ -374,7 +374,7 @@ def validate_config(config: dict[str, Any], source: str = '<config>') -> None:
 
 
 def _validate_appearance(config: dict[str, Any], source: str) -> None:
-    for key in ('shading', 'colourless', 'ambient'):
+    for key in ('shading', 'colorless', 'ambient'):
         value = _number(config, 'appearance', key, source)
         if not 0.0 <= value <= 1.0:
             raise ConfigError(f'{source}: "appearance.{key}" = {value} is outside [0, 1]')

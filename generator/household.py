@@ -558,7 +558,7 @@ _BUILDERS: dict[str, Callable[[_Solids, Size, dict], None]] = {
 
 
 def household_mesh(spec: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Vertices (V, 3), triangles (T, 3) and colours (T, 3) uint8 of a household spec, in its
+    """Vertices (V, 3), triangles (T, 3) and colors (T, 3) uint8 of a household spec, in its
     local frame."""
     solids = _Solids()
     _BUILDERS[spec.params['kind']](solids, tuple(spec.size), spec.params)

@@ -1,7 +1,7 @@
 """Simulated LiDAR: the paper's sensor path and ray scheme, cast in batches on Embree (embreex).
 
 Knows nothing of Blender: it takes triangle arrays (world frame) where every triangle carries a
-colour and the index of the part (annotated element) it belongs to.
+color and the index of the part (annotated element) it belongs to.
 
 Paper, Sec. 3.1: the sensor moves along two crossing segments covering 80 % of the room, in a
 random direction, at 2/3 of the room height (L-, U- and T-shaped rooms get such a cross in each
@@ -16,7 +16,7 @@ sphere directions hit objects with only 1-2 % of rays. ``aim_at_objects: false``
 directions for both phases.
 Noise models (off by default): range noise, angular jitter and per-point dropout.
 
-Glass (triangles of ``glass_colours``) lets a ray through with probability
+Glass (triangles of ``glass_colors``) lets a ray through with probability
 ``glass_transmission``, drawn once per ray: a ray that passes goes on through every glass face
 on its way (both faces of a pane) to the first opaque surface behind, as a time-of-flight beam
 crosses clear glass; one that does not returns from the first glass face.
@@ -35,7 +35,7 @@ from synthdet.geometry import grid_cells
 
 @dataclass
 class TriangleScene:
-    """Triangles of a room: world vertices, per-triangle colour and part index."""
+    """Triangles of a room: world vertices, per-triangle color and part index."""
 
     vertices: np.ndarray  # (V, 3) float64
     triangles: np.ndarray  # (T, 3) int32
@@ -126,11 +126,11 @@ def row_norms(v: np.ndarray) -> np.ndarray:
     return np.sqrt((x * x + y * y) + z * z)[:, None]
 
 
-def triangles_of_colours(scene: TriangleScene, colours: Sequence[Sequence[int]]) -> np.ndarray:
-    """Per triangle (T,): is its colour one of ``colours`` (RGB triples; none: all False)."""
-    if not len(colours):
+def triangles_of_colors(scene: TriangleScene, colors: Sequence[Sequence[int]]) -> np.ndarray:
+    """Per triangle (T,): is its color one of ``colors`` (RGB triples; none: all False)."""
+    if not len(colors):
         return np.zeros(len(scene.triangles), dtype=bool)
-    wanted = np.asarray(colours, np.uint8)
+    wanted = np.asarray(colors, np.uint8)
     return (scene.colors[:, None, :] == wanted[None]).all(axis=2).any(axis=1)
 
 
@@ -248,13 +248,13 @@ class Scanner:
     def __init__(self,
                  scene: TriangleScene,
                  threads: int = 0,
-                 glass_colours: Sequence[Sequence[int]] = (),
+                 glass_colors: Sequence[Sequence[int]] = (),
                  glass_transmission: float = 0.0):
         self.scene = scene
         self.threads = threads
         self.glass_transmission = float(glass_transmission)
         # per triangle: glass, which a ray passes with probability glass_transmission
-        self.glass_tri = triangles_of_colours(scene, glass_colours)
+        self.glass_tri = triangles_of_colors(scene, glass_colors)
         # per triangle: does it belong to a movable part (one lookup when labelling hits)
         self.movable_tri = scene.movable[scene.part]
         self.object_tri = np.flatnonzero(self.movable_tri)

@@ -2,8 +2,8 @@
 
 Every annotated element (an asset instance, a clutter object, the floor, a wall, ...) becomes one
 bpy mesh object in the collection ``synthdet_room``, placed by its transform and tagged with the
-custom properties ``synthdet_instance`` and ``synthdet_class``; face colours live in the integer
-face attribute ``synthdet_rgb`` (0xRRGGBB; exact) and in the colour attribute ``Col`` for display.
+custom properties ``synthdet_instance`` and ``synthdet_class``; face colors live in the integer
+face attribute ``synthdet_rgb`` (0xRRGGBB; exact) and in the color attribute ``Col`` for display.
 Meshes of assets are shared between objects and rooms (linked duplicates). :func:`export_triangles`
 reads the scene back - world vertices from each object's ``matrix_world`` - so what is scanned is
 what the saved ``.blend`` shows.
@@ -25,7 +25,7 @@ MeshSource = Callable[[str, str], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
 def mesh_from_arrays(name: str, vertices: np.ndarray, triangles: np.ndarray,
                      colors: np.ndarray) -> bpy.types.Mesh:
-    """A bpy mesh from triangle arrays, with exact per-face colours."""
+    """A bpy mesh from triangle arrays, with exact per-face colors."""
     mesh = bpy.data.meshes.new(name)
     mesh.vertices.add(len(vertices))
     mesh.vertices.foreach_set('co', np.asarray(vertices, dtype=np.float32).ravel())
@@ -48,7 +48,7 @@ class RoomScene:
     """Builds rooms in the current bpy file; asset meshes are created once and reused."""
 
     def __init__(self, mesh_source: MeshSource):
-        """``mesh_source(cls, name)`` returns an asset's local (vertices, triangles, colours)."""
+        """``mesh_source(cls, name)`` returns an asset's local (vertices, triangles, colors)."""
         self.mesh_source = mesh_source
         self._asset_meshes: dict[str, bpy.types.Mesh] = {}
         self.collection = bpy.data.collections.get(COLLECTION)

@@ -20,7 +20,7 @@ is what the geometry gives.
   facing the walls for most of the walk and the room's inside or the way ahead for the rest
   (swaying left and right, tilting up and down), returns only between ``min_range`` and
   ``max_range``, range noise, fewer returns far away and dropouts on dark triangles (luminance of
-  the colour below ``dark_luminance``) and shiny ones (colours of the metal palette).
+  the color below ``dark_luminance``) and shiny ones (colors of the metal palette).
 """
 import math
 import warnings
@@ -31,7 +31,7 @@ import numba
 import numpy as np
 
 from generator.scanner import (ScanResult, Scanner, TriangleScene, part_bounds, row_norms,
-                               sensor_path, triangles_of_colours)
+                               sensor_path, triangles_of_colors)
 from synthdet.contracts import SENSOR_MODELS
 from synthdet.geometry import grid_cells, points_in_polygon
 from synthdet.voxels import VoxelFilter
@@ -82,11 +82,11 @@ def scan_room(
     object_ratio: float,
     rng: np.random.Generator,
     scanner_config: Mapping[str, Any],
-    shiny_colours: Sequence[Sequence[int]] = ()
+    shiny_colors: Sequence[Sequence[int]] = ()
 ) -> tuple[ScanResult, dict[str, Any]]:
     """Scan ``room`` with sensor ``model``; return the points and the sensor's meta.json record.
 
-    ``object_ratio`` applies to the paper model only; ``shiny_colours`` (RGB triples) mark the
+    ``object_ratio`` applies to the paper model only; ``shiny_colors`` (RGB triples) mark the
     triangles the tablet loses returns on as shiny.
     """
     if model == 'paper':
@@ -124,7 +124,7 @@ def scan_room(
         cfg = scanner_config['tablet']
         positions, look = tablet_trajectory(room, rng, cfg)
         scan, _ = cast_tablet(scanner, positions, look, n_points, rng, cfg,
-                              scanner_config['batch_rays'], shiny_colours)
+                              scanner_config['batch_rays'], shiny_colors)
         return scan, {
             'model': 'tablet',
             'trajectory': np.round(positions, 3).tolist(),
@@ -585,7 +585,7 @@ def cast_tablet(
     rng: np.random.Generator,
     cfg: Mapping[str, Any],
     batch: int,
-    shiny_colours: Sequence[Sequence[int]] = ()) -> tuple[ScanResult, np.ndarray]:
+    shiny_colors: Sequence[Sequence[int]] = ()) -> tuple[ScanResult, np.ndarray]:
     """Up to ``n_points`` tablet returns and the pose index (N,) of each.
 
     Each ray takes a random pose and a uniform random pixel of the image plane (``fov_deg``
@@ -594,10 +594,10 @@ def cast_tablet(
     falling linearly from 1 at ``min_range`` to ``far_keep`` at ``max_range``, and lost with
     ``dark_dropout`` on dark and ``shiny_dropout`` on shiny triangles.
     """
-    colours = scanner.scene.colors.astype(np.float64)
-    luminance = colours @ np.array([0.2126, 0.7152, 0.0722])
+    colors = scanner.scene.colors.astype(np.float64)
+    luminance = colors @ np.array([0.2126, 0.7152, 0.0722])
     loss = np.where(luminance < cfg['dark_luminance'], cfg['dark_dropout'], 0.0)
-    shiny = triangles_of_colours(scanner.scene, shiny_colours)
+    shiny = triangles_of_colors(scanner.scene, shiny_colors)
     loss = np.where(shiny, np.maximum(loss, cfg['shiny_dropout']), loss)
     right = np.stack([look[:, 1], -look[:, 0], np.zeros(len(look))], axis=1)
     right /= row_norms(right) + 1e-12

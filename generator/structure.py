@@ -67,7 +67,7 @@ def opening_names(layout: RoomLayout) -> list[str]:
 
 
 def structure_parts(layout: RoomLayout, rng: np.random.Generator) -> list[PartMesh]:
-    """Floor, ceiling, one part per wall, and one panel per door/window, with plain colours."""
+    """Floor, ceiling, one part per wall, and one panel per door/window, with plain colors."""
     polygon, height = layout.polygon, layout.height
     grey = int(rng.integers(90, 150))
     floor_rgb = np.array([grey, grey - int(rng.integers(0, 10)), grey - int(rng.integers(0, 20))])
@@ -76,8 +76,8 @@ def structure_parts(layout: RoomLayout, rng: np.random.Generator) -> list[PartMe
     parts = []
     for name, z, rgb in (('floor_1', 0.0, floor_rgb), ('ceiling_1', height, ceiling_rgb)):
         vertices, triangles = _horizontal(polygon, z)
-        colours = np.tile(rgb.astype(np.uint8), (len(triangles), 1))
-        parts.append(PartMesh(name, name.split('_')[0], vertices, triangles, colours))
+        colors = np.tile(rgb.astype(np.uint8), (len(triangles), 1))
+        parts.append(PartMesh(name, name.split('_')[0], vertices, triangles, colors))
     names = opening_names(layout)
     for wall in range(len(polygon)):
         p0, p1 = polygon[wall], polygon[(wall + 1) % len(polygon)]

@@ -7,7 +7,7 @@ Layout of one room (exactly as the Stanford S3DIS release)::
     Area_N/<room>/meta.json                   synthdet ground truth ("synthdet.room/1")
 
 The room file is the concatenation of the annotation files. Coordinates carry a fixed number of
-decimals (3, like S3DIS), colours are integers. Lines are formatted by the core's vectorised
+decimals (3, like S3DIS), colors are integers. Lines are formatted by the core's vectorised
 ``synthdet.point_text.format_lines`` (no per-line Python formatting). A room is built in a
 temporary folder next to its final place and renamed at the end, so a room folder either exists
 complete or not at all.
@@ -102,7 +102,7 @@ def write_room(area_dir: Path,
 
 def _write_preview(path: Path, room: str, xyz: np.ndarray, rgb: np.ndarray, labels: np.ndarray,
                    meta: dict[str, Any]) -> None:
-    """Top view of the room: points coloured by class, object boxes, the floor polygon."""
+    """Top view of the room: points colored by class, object boxes, the floor polygon."""
     from synthdet.room_data import Scan, boxes_from_room
     from synthdet.topview import draw_top_view
     draw_top_view(

@@ -33,8 +33,8 @@ FALLBACK_CLASS = 'clutter'
 REAL_AREAS = (1, 2, 3, 4, 5, 6)
 SYNTHETIC_AREAS = (7, 8, 9)
 
-# Colours (0-255) of every class in every drawing: structure in greys, detections in strong hues.
-CLASS_COLOURS = {
+# Colors (0-255) of every class in every drawing: structure in greys, detections in strong hues.
+CLASS_COLORS = {
     'ceiling': (222, 222, 222),
     'floor': (196, 196, 196),
     'wall': (158, 158, 158),
@@ -51,9 +51,9 @@ CLASS_COLOURS = {
     'yumi': (214, 39, 40),
     '3dprinter': (148, 103, 189),
 }
-UNKNOWN_COLOUR = (60, 60, 60)
+UNKNOWN_COLOR = (60, 60, 60)
 
 
-def class_colour(name: str) -> tuple[int, int, int]:
-    """The palette colour (0-255) of a class, ``UNKNOWN_COLOUR`` for classes outside it."""
-    return CLASS_COLOURS.get(name, UNKNOWN_COLOUR)
+def class_color(name: str) -> tuple[int, int, int]:
+    """The palette color (0-255) of a class, ``UNKNOWN_COLOR`` for classes outside it."""
+    return CLASS_COLORS.get(name, UNKNOWN_COLOR)

@@ -2,10 +2,10 @@
 its fast writer.
 
 A compiled fast path parses well-formed files. Whenever it meets anything it does not
-handle (a bad line, an exotic number, a colour out of range), the file is read again by a
+handle (a bad line, an exotic number, a color out of range), the file is read again by a
 line-by-line reference parser that decides what is valid and names the offending line.
 Both parsers round decimal text to the nearest float64, so their results are identical.
-Files of ``x y z`` lines (no colours) are read with ``columns=3``.
+Files of ``x y z`` lines (no colors) are read with ``columns=3``.
 """
 import re
 from dataclasses import dataclass
@@ -44,7 +44,7 @@ class BadLine:
 
 @numba.njit(cache=True, nogil=True)
 def _parse_fast(buf: np.ndarray, out: np.ndarray, pow10: np.ndarray) -> tuple[int, int]:
-    """Parse rows of ``out.shape[1]`` decimal numbers (columns 3-5, the colours, within 0-255)
+    """Parse rows of ``out.shape[1]`` decimal numbers (columns 3-5, the colors, within 0-255)
     into ``out``.
 
     Returns (rows, 0) on success or (-1, line) at the first line it cannot handle.
@@ -142,7 +142,7 @@ def _check_row(values: list[float], tokens: list[bytes]) -> str | None:
             return f'non-finite value {token.decode(errors="replace")!r}'
     for value in values[3:]:
         if not 0.0 <= value <= 255.0:
-            return f'colour value {value:g} outside 0-255'
+            return f'color value {value:g} outside 0-255'
     return None
 
 
@@ -195,7 +195,7 @@ def read_point_file(path: str | Path,
     """Read an ``x y z r g b`` text file into a float64 (N, 6) array (``columns=3``: ``x y z``
     lines into (N, 3)).
 
-    Bad lines (wrong column count, unparsable or non-finite numbers, colours outside 0-255)
+    Bad lines (wrong column count, unparsable or non-finite numbers, colors outside 0-255)
     raise :class:`PointFileError` naming file and line, or are skipped and returned as
     :class:`BadLine` records when ``skip_bad_lines`` is set. Blank lines are ignored. A file
     without any point is an error in both modes, reported as line 1.
@@ -239,7 +239,7 @@ def _digit_table(count: int, width: int) -> np.ndarray:
     return table
 
 
-_COLOUR_DIGITS = _digit_table(256, 3)
+_COLOR_DIGITS = _digit_table(256, 3)
 
 
 def format_lines(xyz: np.ndarray, rgb: np.ndarray, decimals: int = 3) -> tuple[bytes, np.ndarray]:
@@ -257,16 +257,16 @@ def format_lines(xyz: np.ndarray, rgb: np.ndarray, decimals: int = 3) -> tuple[b
     if whole_max >= 10**7:
         raise ValueError(f'coordinates up to {whole_max} m are out of range for the text writer')
     whole_digits = _digit_table(whole_max + 1, len(str(whole_max)))
-    colours = np.asarray(rgb, dtype=np.int64)
-    if n and (colours.min() < 0 or colours.max() > 255):
-        raise ValueError('colours must be integers in 0..255')
+    colors = np.asarray(rgb, dtype=np.int64)
+    if n and (colors.min() < 0 or colors.max() > 255):
+        raise ValueError('colors must be integers in 0..255')
     w = whole_digits.shape[1]
     field_width = 1 + w + 1 + decimals + 1
     whole_rows = np.ascontiguousarray(whole_digits.T)
     fraction_rows = np.ascontiguousarray(fraction_digits.T)
-    colour_rows = np.ascontiguousarray(_COLOUR_DIGITS.T)
+    color_rows = np.ascontiguousarray(_COLOR_DIGITS.T)
     whole_len = (whole_digits != 0).sum(axis=1)
-    colour_len = (_COLOUR_DIGITS != 0).sum(axis=1)
+    color_len = (_COLOR_DIGITS != 0).sum(axis=1)
     lengths = np.full(n, 3 * (2 + decimals) + 3 * 1, dtype=np.int64)  # '.', fraction, separators
     # built with one contiguous row per character position, transposed once at the end
     table = np.zeros((3 * field_width + 12, n), dtype=np.uint8)
@@ -285,12 +285,12 @@ def format_lines(xyz: np.ndarray, rgb: np.ndarray, decimals: int = 3) -> tuple[b
         table[col + 2 + w + decimals] = 32
         lengths += negative + whole_len[whole]
     for channel in range(3):
-        c = np.ascontiguousarray(colours[:, channel])
+        c = np.ascontiguousarray(colors[:, channel])
         col = 3 * field_width + 4 * channel
         for r in range(3):
-            table[col + r] = colour_rows[r][c]
+            table[col + r] = color_rows[r][c]
         table[col + 3] = 32 if channel < 2 else 10
-        lengths += colour_len[c]
+        lengths += color_len[c]
     table = np.ascontiguousarray(table.T)
     offsets = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(lengths, out=offsets[1:])

@@ -1,6 +1,6 @@
 """Scans with per-point classes and labelled boxes, loaded from the project's files.
 
-A ``Scan`` is an ``(N, 6)`` array ``x y z r g b`` (metres, colours 0-255) plus, when known, the
+A ``Scan`` is an ``(N, 6)`` array ``x y z r g b`` (metres, colors 0-255) plus, when known, the
 class name of every point. ``Box`` records (centre, size, yaw in radians, class, score) come
 from a generator ``meta.json`` (oriented), an info pickle (axis-aligned) or a
 ``synthdet.predictions/1`` file; the JSON files are read through :mod:`synthdet.contracts`.
@@ -156,7 +156,7 @@ def corner_polygon(path: str | os.PathLike) -> np.ndarray:
 
 def write_labelled_ply(out: str | os.PathLike, scan: Scan) -> None:
     """Write the scan as a binary PLY for CloudCompare: ``x y z`` (float32), ``red green blue``
-    (the scan's colours) and, with annotations, a ``class`` index into ``SEMANTIC_CLASSES``
+    (the scan's colors) and, with annotations, a ``class`` index into ``SEMANTIC_CLASSES``
     (-1 for classes outside it), also listed in the header's comment."""
     vertex = ply_vertex(scan.points)
     comments = []

@@ -1,9 +1,9 @@
 """Top views of scans: the project's one renderer (PNG, matplotlib with the Agg backend).
 
-Points are coloured by class, RGB or height; ground-truth boxes are drawn solid, predictions
+Points are colored by class, RGB or height; ground-truth boxes are drawn solid, predictions
 dashed with their scores, and a room outline with its numbered corners. ``generator
 --preview``, ``python -m configurator corners --preview`` and ``tools/visualize.py`` all draw
-with :func:`draw_top_view`, in the class colours of :data:`synthdet.classes.CLASS_COLOURS`.
+with :func:`draw_top_view`, in the class colors of :data:`synthdet.classes.CLASS_COLORS`.
 """
 from __future__ import annotations
 
@@ -12,35 +12,35 @@ from pathlib import Path
 
 import numpy as np
 
-from synthdet.classes import CLASS_COLOURS, class_colour
+from synthdet.classes import CLASS_COLORS, class_color
 from synthdet.room_data import Box, Scan
 
 
-def class_colours(labels: np.ndarray) -> np.ndarray:
-    """(N, 3) colours in 0-1 for an array of class names."""
+def class_colors(labels: np.ndarray) -> np.ndarray:
+    """(N, 3) colors in 0-1 for an array of class names."""
     unique, inverse = np.unique(labels.astype(str), return_inverse=True)
-    palette = np.array([class_colour(name) for name in unique], dtype=float) / 255.0
+    palette = np.array([class_color(name) for name in unique], dtype=float) / 255.0
     return palette[inverse.reshape(-1)]
 
 
-def point_colours(scan: Scan, colour_by: str) -> np.ndarray:
-    """Colours (0-1) of the points: ``class`` (needs labels), ``rgb`` or ``height``."""
+def point_colors(scan: Scan, color_by: str) -> np.ndarray:
+    """Colors (0-1) of the points: ``class`` (needs labels), ``rgb`` or ``height``."""
     import matplotlib
 
-    if colour_by == 'class':
+    if color_by == 'class':
         if scan.labels is None:
-            raise ValueError(f'{scan.source}: no annotations found, cannot colour by class')
-        return class_colours(scan.labels)
-    if colour_by == 'rgb':
+            raise ValueError(f'{scan.source}: no annotations found, cannot color by class')
+        return class_colors(scan.labels)
+    if color_by == 'rgb':
         return np.clip(scan.points[:, 3:6] / 255.0, 0, 1)
-    if colour_by == 'height':
+    if color_by == 'height':
         z = scan.points[:, 2]
         return matplotlib.colormaps['viridis']((z - z.min()) / max(np.ptp(z), 1e-9))[:, :3]
-    raise ValueError(f'unknown colouring {colour_by!r}, expected class, rgb or height')
+    raise ValueError(f'unknown coloring {color_by!r}, expected class, rgb or height')
 
 
-def default_colouring(scan: Scan) -> str:
-    """By class when annotations exist, else by RGB when the scan has colours, else height."""
+def default_coloring(scan: Scan) -> str:
+    """By class when annotations exist, else by RGB when the scan has colors, else height."""
     if scan.labels is not None:
         return 'class'
     return 'rgb' if np.ptp(scan.points[:, 3:6]) > 0 else 'height'
@@ -51,7 +51,7 @@ def draw_top_view(out: str | os.PathLike,
                   gt: list[Box] = (),
                   pred: list[Box] = (),
                   corners: np.ndarray | None = None,
-                  colour_by: str | None = None,
+                  color_by: str | None = None,
                   title: str = '',
                   max_points: int = 400_000,
                   seed: int = 0,
@@ -65,20 +65,20 @@ def draw_top_view(out: str | os.PathLike,
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch, Polygon
 
-    colour_by = colour_by or default_colouring(scan)
+    color_by = color_by or default_coloring(scan)
     points, labels = scan.points, scan.labels
     if labels is not None:
         keep = labels != 'ceiling'  # the ceiling would hide the room
     else:
         z = points[:, 2]
         keep = z < z.min() + 0.85 * np.ptp(z)  # no labels: cut the top (ceiling) off
-    colours = point_colours(scan, colour_by)[keep]
+    colors = point_colors(scan, color_by)[keep]
     points = points[keep]
     labels = labels[keep] if labels is not None else None
     if len(points) > max_points:
         chosen = np.sort(
             np.random.default_rng(seed).choice(len(points), max_points, replace=False))
-        points, colours = points[chosen], colours[chosen]
+        points, colors = points[chosen], colors[chosen]
         labels = labels[chosen] if labels is not None else None
     order = np.argsort(points[:, 2], kind='stable')  # higher points on top, as seen from above
 
@@ -93,16 +93,16 @@ def draw_top_view(out: str | os.PathLike,
     axes.scatter(
         points[order, 0],
         points[order, 1],
-        c=colours[order],
+        c=colors[order],
         s=marker,
         linewidths=0,
         rasterized=True)
     for box in gt:
-        colour = np.array(class_colour(box.label)) / 255.0
+        color = np.array(class_color(box.label)) / 255.0
         axes.add_patch(
-            Polygon(box.footprint(), closed=True, fill=False, edgecolor=colour, linewidth=2.2))
+            Polygon(box.footprint(), closed=True, fill=False, edgecolor=color, linewidth=2.2))
     for box in pred:
-        colour = np.array(class_colour(box.label)) / 255.0
+        color = np.array(class_color(box.label)) / 255.0
         axes.add_patch(
             Polygon(
                 box.footprint(),
@@ -116,7 +116,7 @@ def draw_top_view(out: str | os.PathLike,
                 box.footprint(),
                 closed=True,
                 fill=False,
-                edgecolor=colour,
+                edgecolor=color,
                 linewidth=1.0,
                 linestyle=(3, (3, 2))))
         corner = box.footprint().max(axis=0)
@@ -127,7 +127,7 @@ def draw_top_view(out: str | os.PathLike,
             va='bottom',
             fontsize=6.5,
             color='black',
-            bbox=dict(boxstyle='round,pad=0.15', fc='white', ec=colour, lw=0.8, alpha=0.85))
+            bbox=dict(boxstyle='round,pad=0.15', fc='white', ec=color, lw=0.8, alpha=0.85))
     if corners is not None:
         ring = np.vstack([corners, corners[:1]])
         axes.plot(ring[:, 0], ring[:, 1], '-', color='black', linewidth=1.6)
@@ -139,9 +139,9 @@ def draw_top_view(out: str | os.PathLike,
     handles = []
     shown = set(labels.astype(str)) if labels is not None else set()
     shown |= {box.label for box in (*gt, *pred)}
-    if colour_by == 'class':
+    if color_by == 'class':
         handles += [
-            Patch(color=np.array(class_colour(name)) / 255, label=name) for name in CLASS_COLOURS
+            Patch(color=np.array(class_color(name)) / 255, label=name) for name in CLASS_COLORS
             if name in shown
         ]
     if gt:

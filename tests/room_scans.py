@@ -129,17 +129,17 @@ def _area(polygon: np.ndarray) -> float:
     return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y)))
 
 
-def _coloured(xyz: np.ndarray, colour: tuple[int, int, int], rng: np.random.Generator):
-    rgb = np.clip(np.array(colour) + rng.normal(0, 6, size=(len(xyz), 3)), 0, 255)
+def _colored(xyz: np.ndarray, color: tuple[int, int, int], rng: np.random.Generator):
+    rgb = np.clip(np.array(color) + rng.normal(0, 6, size=(len(xyz), 3)), 0, 255)
     return np.hstack([xyz, np.rint(rgb)])
 
 
-def _sample_flat(polygon, z, count, rng, colour):
+def _sample_flat(polygon, z, count, rng, color):
     low, high = polygon.min(axis=0), polygon.max(axis=0)
     ratio = np.prod(high - low) / _area(polygon)
     xy = rng.uniform(low, high, size=(int(count * ratio * 1.05) + 10, 2))
     xy = xy[inside_polygon(xy, polygon)][:count]
-    return _coloured(np.column_stack([xy, np.full(len(xy), z)]), colour, rng)
+    return _colored(np.column_stack([xy, np.full(len(xy), z)]), color, rng)
 
 
 def _sample_walls(polygon, height, density, rng, openings):
@@ -161,7 +161,7 @@ def _sample_walls(polygon, height, density, rng, openings):
             keep &= ~((t > start) & (t < start + 1.2) & (z > 0.9) & (z < 2.1))
         direction = (b - a) / length
         xy = a + t[keep, None] * direction
-        chunks.append(_coloured(np.column_stack([xy, z[keep]]), (210, 205, 195), rng))
+        chunks.append(_colored(np.column_stack([xy, z[keep]]), (210, 205, 195), rng))
     return np.concatenate(chunks)
 
 
@@ -224,8 +224,8 @@ def _sample_box(box, density, rng):
         c, s = math.cos(yaw), math.sin(yaw)
         xy = u[:, :2] @ np.array([[c, s], [-s, c]]) + centre
         chunks.append(np.column_stack([xy, u[:, 2] + size[2] / 2]))
-    colour = tuple(int(v) for v in rng.integers(40, 200, 3))
-    return _coloured(np.concatenate(chunks), colour, rng)
+    color = tuple(int(v) for v in rng.integers(40, 200, 3))
+    return _colored(np.concatenate(chunks), color, rng)
 
 
 def _outside_box(points, box, margin):
@@ -259,7 +259,7 @@ def _apply_noise(points, polygon, height, noise, rng):
     count = int(noise.outliers * len(moved))
     low = np.append(polygon.min(axis=0) - 0.5, -0.2)
     high = np.append(polygon.max(axis=0) + 0.5, height + 0.2)
-    outliers = _coloured(rng.uniform(low, high, size=(count, 3)), (128, 128, 128), rng)
+    outliers = _colored(rng.uniform(low, high, size=(count, 3)), (128, 128, 128), rng)
     return np.concatenate([moved, outliers])
 
 

@@ -2,7 +2,7 @@
 
 Each room is a box-shaped space with floor, ceiling and four walls, some clutter and
 non-overlapping box-shaped objects. Every object class has a typical size, shape and
-colour so that a detector can tell the classes apart. Files follow the S3DIS layout:
+color so that a detector can tell the classes apart. Files follow the S3DIS layout:
 ``Stanford3dDataset_v1.2_Aligned_Version/Area_<n>/<roomtype>_<k>/Annotations/<class>_<i>.txt``
 with one ``x y z r g b`` line per point, and ``<room>.txt`` holds all the room's points.
 """
@@ -38,7 +38,7 @@ OBJECT_PARTS = {
 GENERIC_PARTS = [(0.7, 0.7, 0.4, 0.0)]  # any other class name, e.g. 'stairs'
 
 # the RGB of each class's points in the synthetic test rooms (not the drawing palette)
-SURFACE_COLOURS = {
+SURFACE_COLORS = {
     'ceiling': (225, 225, 215),
     'floor': (95, 90, 85),
     'wall': (180, 175, 160),
@@ -53,9 +53,9 @@ SURFACE_COLOURS = {
 }
 
 
-def _colour(class_name: str) -> np.ndarray:
-    if class_name in SURFACE_COLOURS:
-        return np.array(SURFACE_COLOURS[class_name], dtype=np.float64)
+def _color(class_name: str) -> np.ndarray:
+    if class_name in SURFACE_COLORS:
+        return np.array(SURFACE_COLORS[class_name], dtype=np.float64)
     name_bytes = np.frombuffer(class_name.encode().ljust(3, b'_')[:3], dtype=np.uint8)
     return (name_bytes.astype(np.float64) * 37) % 256
 
@@ -170,7 +170,7 @@ def write_synthetic_area(
         for instance, xyz in annotations:
             class_name = instance.split('_')[0]
             xyz = xyz + origin
-            rgb = np.clip(_colour(class_name) + rng.normal(0.0, 6.0, (len(xyz), 3)), 0, 255)
+            rgb = np.clip(_color(class_name) + rng.normal(0.0, 6.0, (len(xyz), 3)), 0, 255)
             points = np.column_stack([xyz, rgb])
             _write_points(ann_dir / f'{instance}.txt', points)
             room_chunks.append(points)

@@ -82,17 +82,17 @@ def test_sizes_are_realistic(library):
 
 def test_local_frame_size_and_arrays(library):
     for inst in all_instances(library):
-        vertices, triangles, colours = inst.mesh_arrays()
+        vertices, triangles, colors = inst.mesh_arrays()
         assert vertices.dtype == np.float64 and vertices.shape[1] == 3
         assert triangles.dtype == np.int32 and triangles.shape[1] == 3
-        assert colours.dtype == np.uint8 and colours.shape == triangles.shape
+        assert colors.dtype == np.uint8 and colors.shape == triangles.shape
         assert triangles.min() == 0 and triangles.max() == len(vertices) - 1
         corners = vertices[triangles].reshape(-1, 3)
         low, high = corners.min(0), corners.max(0)
         assert tuple(high - low) == inst.size
         assert low[2] == 0.0
         assert np.allclose(low[:2], -high[:2], atol=1e-9)
-        assert len(np.unique(colours, axis=0)) >= 2, inst.name
+        assert len(np.unique(colors, axis=0)) >= 2, inst.name
         assert inst.mesh_arrays()[0] is vertices  # stored once, not rebuilt per call
         assert not vertices.flags.writeable
 
@@ -107,10 +107,10 @@ def test_meshes_are_closed_solids(library):
         assert np.all(counts == 2), inst.name
 
 
-def test_face_colours_come_from_the_parameters(library):
+def test_face_colors_come_from_the_parameters(library):
     for inst in library.instances('chair'):
         found = {tuple(c) for c in inst.mesh_arrays()[2]}
-        assert found == {tuple(inst.params['frame_colour']), tuple(inst.params['seat_colour'])}
+        assert found == {tuple(inst.params['frame_color']), tuple(inst.params['seat_color'])}
 
 
 def test_table_tops_are_flat_usable_and_highest(library):
@@ -244,8 +244,8 @@ def test_every_variant_and_option_builds_as_a_closed_solid_of_real_size():
     assert yumi_kinds == set(itertools.product(yumi.VARIANTS, yumi.POSES))
 
 
-def test_only_glass_doors_have_the_colours_the_scanner_sees_through():
-    """Printer doors of glass (closed or swung open) carry a see-through colour
+def test_only_glass_doors_have_the_colors_the_scanner_sees_through():
+    """Printer doors of glass (closed or swung open) carry a see-through color
     (``scanner.glass_transmission``); displays and every other asset part do not."""
     see_through = np.array(palette.SEE_THROUGH, np.uint8)
     doors = set()
@@ -253,12 +253,12 @@ def test_only_glass_doors_have_the_colours_the_scanner_sees_through():
         for cls in ASSET_CLASSES:
             for index in range(DEFAULT_INSTANCES):
                 variant, params = procedural_params(cls, index, seed)
-                colours = instance_from_params(cls, variant, params).mesh_arrays()[2]
-                glass = (colours[:, None] == see_through[None]).all(axis=2).any(axis=1)
+                colors = instance_from_params(cls, variant, params).mesh_arrays()[2]
+                glass = (colors[:, None] == see_through[None]).all(axis=2).any(axis=1)
                 door = params.get('door') if cls == '3dprinter' else None
                 assert glass.any() == (door in ('glass', 'swung')), (cls, variant, door)
                 if variant in ('enclosed', 'boxframe'):
-                    assert (colours == palette.DISPLAY).all(axis=1).any(), variant
+                    assert (colors == palette.DISPLAY).all(axis=1).any(), variant
                     doors.add(door)
     assert doors >= {'glass', 'swung', 'open', 'none'}
 
@@ -269,19 +269,19 @@ def test_yumi_poses_span_the_joint_ranges_and_mountings(library):
         values = [inst.params['joints'][side][joint] for inst in instances for side in yumi.SIDES]
         assert max(values) - min(values) >= 0.75 * (high - low), joint
     for inst in instances:
-        vertices, triangles, colours = inst.mesh_arrays()
+        vertices, triangles, colors = inst.mesh_arrays()
         heights = vertices[triangles][:, :, 2]
-        floor = {tuple(c) for c in colours[np.all(heights < 1e-6, axis=1)]}
-        body = np.all(colours == inst.params['body_colour'], axis=1)
+        floor = {tuple(c) for c in colors[np.all(heights < 1e-6, axis=1)]}
+        body = np.all(colors == inst.params['body_color'], axis=1)
         if inst.asset == 'yumi/irb14000_plate':
             plate_depth, plate_width, thickness = inst.params['plate']
             assert inst.size[0] >= plate_width - 1e-5 and inst.size[1] >= plate_depth - 1e-5
             assert inst.size[2] >= yumi.HEIGHT + thickness - 1e-5
-            assert floor == {yumi.PLATE_COLOUR}  # the robot stands on its plate
+            assert floor == {yumi.PLATE_COLOR}  # the robot stands on its plate
             assert heights[body].min() == pytest.approx(thickness, abs=1e-5)
         else:
             assert inst.asset == 'yumi/irb14000' and 'plate' not in inst.params
-            assert floor == {tuple(inst.params['body_colour'])}
+            assert floor == {tuple(inst.params['body_color'])}
         if inst.params['pose'] == 'onearm':  # one arm folded at rest, the other working
             rest_like = []
             for side in yumi.SIDES:
@@ -348,10 +348,10 @@ def _save_user_file(path, cls, build):
 
 
 def test_user_made_blend_without_custom_properties_loads(tmp_path):
-    grey = bpy.data.materials.new('user_grey')  # Principled base colour: linear 0.214 = sRGB 128
+    grey = bpy.data.materials.new('user_grey')  # Principled base color: linear 0.214 = sRGB 128
     grey.node_tree.nodes['Principled BSDF'].inputs['Base Color'].default_value = (0.21404114, 1.0,
                                                                                   0.0, 1.0)
-    plain = bpy.data.materials.new('user_plain')  # no BSDF node: the viewport colour counts
+    plain = bpy.data.materials.new('user_plain')  # no BSDF node: the viewport color counts
     plain.node_tree.nodes.remove(plain.node_tree.nodes['Principled BSDF'])
     plain.diffuse_color = (0.0, 0.0, 1.0, 1.0)
 
@@ -378,9 +378,9 @@ def test_user_made_blend_without_custom_properties_loads(tmp_path):
     [user_chair] = library.instances('chair')
     assert user_chair.asset == 'chair/MyChair' and user_chair.params == {}
     assert np.allclose(user_chair.size, (0.6, 0.4, 0.9))  # rotated by 90 degrees, then scaled
-    vertices, triangles, colours = user_chair.mesh_arrays()
+    vertices, triangles, colors = user_chair.mesh_arrays()
     assert len(triangles) == 12 and vertices[:, 2].min() == 0.0
-    assert {tuple(c) for c in colours} == {(128, 255, 0), (0, 0, 255)}
+    assert {tuple(c) for c in colors} == {(128, 255, 0), (0, 0, 255)}
     [desk] = library.instances('table')
     assert desk.top_z == pytest.approx(0.76)
     assert desk.top_size == pytest.approx((1.2, 0.6))

@@ -135,7 +135,7 @@ def test_report_names_held_out_profiles_drops_and_the_worst_of_each_model():
     for profile in profiles:
         assert f'Table 3 on {profile} (area {TEST_AREAS[profile]}, 2 rooms):' in text
     assert 'paper model: in-domain (paper test rooms) mAP@0.25 0.900, mAP@0.5 0.500; held out: ' \
-        'tls, tablet, noisy, shaded, colourless, clutter, mixed' in text
+        'tls, tablet, noisy, shaded, colorless, clutter, mixed' in text
     assert any(
         re.fullmatch(r'\s*tls\s+0\.800\s+\+0\.100\s+0\.500\s+\+0\.000', line) for line in text)
     first = text.index('Table 3 on tls (area 22, 2 rooms):')

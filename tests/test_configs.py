@@ -36,7 +36,7 @@ def with_robustness_steps(steps: list[str]) -> list[str]:
 
 ROBUSTNESS = [
     'RandomQuarterTurn', 'RandomDensityFalloff', 'RandomPointDropout', 'RandomJitterPoints',
-    'RandomColourJitter', 'RandomDropPointsColor'
+    'RandomColorJitter', 'RandomDropPointsColor'
 ]
 THINNING = ('ThinRoomStructure', )
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from synthdet import contracts, scan_io
-from synthdet.classes import (CLASS_COLOURS, DETECTION_CLASSES, DETECTION_SEMANTIC_IDS,
+from synthdet.classes import (CLASS_COLORS, DETECTION_CLASSES, DETECTION_SEMANTIC_IDS,
                               GENERATED_CLASSES, SEMANTIC_CLASSES, STRUCTURE_CLASSES)
 from synthdet.contracts import SchemaError
 from synthdet.geometry import (box_corners_xy, clockwise, distance_to_polygon, edges_cross,
@@ -70,8 +70,8 @@ def test_class_lists_have_one_meaning_each():
     assert set(GENERATED_CLASSES) < set(DETECTION_CLASSES)
     assert not set(DETECTION_CLASSES) & set(STRUCTURE_CLASSES)
     assert set(SEMANTIC_CLASSES) == set(DETECTION_CLASSES) | set(STRUCTURE_CLASSES)
-    assert set(CLASS_COLOURS) == set(SEMANTIC_CLASSES)
-    assert len(set(CLASS_COLOURS.values())) == len(CLASS_COLOURS)  # every class distinguishable
+    assert set(CLASS_COLORS) == set(SEMANTIC_CLASSES)
+    assert len(set(CLASS_COLORS.values())) == len(CLASS_COLORS)  # every class distinguishable
 
 
 # ----------------------------------------------------------------------------- contracts
@@ -279,7 +279,7 @@ def test_scan_round_trip(tmp_path, suffix, tolerance):
     assert [p.name for p in tmp_path.iterdir()] == [path.name]  # no temporary file left
 
 
-def test_read_ply_without_colours_and_with_float_colours(tmp_path):
+def test_read_ply_without_colors_and_with_float_colors(tmp_path):
     write_ply(tmp_path / 'bare.ply', {
         'x': np.array([0.0, 3.0]),
         'y': np.array([1.0, 4.0]),
@@ -314,7 +314,7 @@ def test_read_text_with_xyz_only(tmp_path):
     ('1 2 3 4 5 6\n1 2 x 4 5 6\n', r"bad.txt:2: cannot parse 'x' as a number"),
     ('\n1 2 3 4\n', r'bad.txt:2: expected 6 numbers per line \(x y z r g b\) or 3'),
     ('1 2 3 4 5 6\n1 2 3 4 5 6\nnan 2 3 4 5 6\n', r"bad.txt:3: non-finite value 'nan'"),
-    ('1 2 3 4 5 256\n', r'bad.txt:1: colour value 256 outside 0-255'),
+    ('1 2 3 4 5 256\n', r'bad.txt:1: color value 256 outside 0-255'),
 ])
 def test_bad_text_scans_name_file_and_line(tmp_path, text, message):
     path = tmp_path / 'bad.txt'

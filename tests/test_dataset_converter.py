@@ -77,7 +77,7 @@ def test_round_trip_boxes_masks_and_info_format(converted):
             for k, path in enumerate(ann_files, start=1):
                 assert set(
                     semantic[instance == k]) == {SEMANTIC_CLASSES.index(path.stem.split('_')[0])}
-            # the shift: room minimum at 0, colours kept
+            # the shift: room minimum at 0, colors kept
             raw = np.loadtxt(room_dir / f'{room}.txt')
             assert np.allclose(points[:, :3].min(axis=0), 0.0)
             assert np.allclose(np.sort(points[:, 3]), np.sort(raw[:, 3]))
@@ -176,7 +176,7 @@ def test_reader_falls_back_for_long_mantissas(tmp_path):
     ('1.0 2.0\x103.0 10 20 30', "cannot parse '2.0\\x103.0' as a number"),
     ('1.0 nan 3.0 10 20 30', "non-finite value 'nan'"),
     ('1.0 2.0 1e999 10 20 30', "non-finite value '1e999'"),
-    ('1.0 2.0 3.0 10 20 300', 'colour value 300 outside 0-255'),
+    ('1.0 2.0 3.0 10 20 300', 'color value 300 outside 0-255'),
 ])
 def test_bad_line_raises_naming_file_and_line(tmp_path, line, message):
     path = tmp_path / 'chair_1.txt'

@@ -19,7 +19,7 @@ from plyfile import PlyData
 from synthdet.room_data import (Box, Scan, boxes_from_info, boxes_from_meta,
                                 boxes_from_predictions, load_scan)
 from synthdet.room_data import write_labelled_ply as write_ply
-from synthdet.topview import class_colours, draw_top_view
+from synthdet.topview import class_colors, draw_top_view
 from tests.tool_process import run_tool
 from tools.demo import SIZES
 
@@ -365,7 +365,7 @@ def test_boxes_from_meta_info_and_predictions(tmp_path):
         boxes_from_predictions(predictions)
 
 
-def test_top_view_draws_class_colours_and_boxes(tmp_path):
+def test_top_view_draws_class_colors_and_boxes(tmp_path):
     room = write_room(tmp_path)
     scan = load_scan(room)
     out = tmp_path / 'view.png'
@@ -373,11 +373,11 @@ def test_top_view_draws_class_colours_and_boxes(tmp_path):
                   [Box('table', (3.0, 3.0, 0.4), (0.6, 0.6, 0.8), score=0.8)])
     with Image.open(out) as image:
         pixels = np.asarray(image.convert('RGB')).reshape(-1, 3)
-    chair = np.round(class_colours(np.array(['chair']))[0] * 255)
-    table = np.round(class_colours(np.array(['table']))[0] * 255)
+    chair = np.round(class_colors(np.array(['chair']))[0] * 255)
+    table = np.round(class_colors(np.array(['table']))[0] * 255)
     assert (np.abs(pixels - chair).max(axis=1) <= 2).sum() > 200  # chair points and GT box
     assert (np.abs(pixels - table).max(axis=1) <= 2).sum() > 20  # the predicted box outline
-    unlabelled = Scan(scan.points, None, 'raw')  # no annotations: coloured by RGB
+    unlabelled = Scan(scan.points, None, 'raw')  # no annotations: colored by RGB
     draw_top_view(tmp_path / 'rgb.png', unlabelled)
     with Image.open(tmp_path / 'rgb.png') as image:
         pixels = np.asarray(image.convert('RGB')).reshape(-1, 3)

@@ -165,10 +165,10 @@ GUI_DRIVER = textwrap.dedent('''\
     seen['classes'] = sorted(o.DetectedClass for o in doc.Objects if hasattr(o, 'DetectedClass'))
     seen['floor_area'] = doc.getObject('Floor').Shape.Area if doc.getObject('Floor') else None
     table = [o for o in doc.Objects if getattr(o, 'DetectedClass', None) == 'table'][0]
-    seen['table_colour'] = list(doc.getObject(table.Name + '_Top').ViewObject.ShapeColor)[:3]
+    seen['table_color'] = list(doc.getObject(table.Name + '_Top').ViewObject.ShapeColor)[:3]
     sofa = [o for o in doc.Objects if getattr(o, 'DetectedClass', None) == 'sofa'][0]
     seen['sofa_model'] = sofa.CadModel
-    seen['sofa_colour'] = list(doc.getObject(sofa.Name + '_Model').ViewObject.ShapeMaterial
+    seen['sofa_color'] = list(doc.getObject(sofa.Name + '_Model').ViewObject.ShapeMaterial
                                .DiffuseColor)[:3]
     parts = [o for o in doc.Objects if o.TypeId == 'App::LinkGroup']
     # a part draws its solids at its placement: shown on their own they would be drawn twice
@@ -589,7 +589,7 @@ def test_macro_in_the_gui_asks_for_the_files_and_imports(workspace, tmp_path):
     expected = [d['class'] for d in MAIN_DETECTIONS if d['score'] >= 0.3] + workspace['hostile']
     assert seen['classes'] == sorted(expected)
     assert seen['floor_area'] == pytest.approx(24e6)
-    assert seen['table_colour'] == pytest.approx([31 / 255, 119 / 255, 180 / 255], abs=0.01)
+    assert seen['table_color'] == pytest.approx([31 / 255, 119 / 255, 180 / 255], abs=0.01)
     assert seen['solids_shown_on_their_own'] == [] and seen['hidden_parts'] == []
-    assert seen['sofa_model'] == 'step'  # a linked STEP model takes the class colour too
-    assert seen['sofa_colour'] == pytest.approx([44 / 255, 160 / 255, 44 / 255], abs=0.01)
+    assert seen['sofa_model'] == 'step'  # a linked STEP model takes the class color too
+    assert seen['sofa_color'] == pytest.approx([44 / 255, 160 / 255, 44 / 255], abs=0.01)

@@ -268,14 +268,14 @@ def test_lean_tree_with_labels_matching_their_part(scene):
 
 
 def _pixel_shares(path: Path) -> tuple[float, float]:
-    """Shares of non-white pixels and of strongly coloured ones (the class colours)."""
+    """Shares of non-white pixels and of strongly colored ones (the class colors)."""
     rgb = np.asarray(Image.open(path).convert('RGB')).astype(float)
     drawn = (rgb < 245).any(axis=2)
     saturation = rgb.max(axis=2) - rgb.min(axis=2)
     return drawn.mean(), (saturation > 60).mean()
 
 
-def test_the_gui_opens_the_document_visible_coloured_and_fitted(scene, tmp_path):
+def test_the_gui_opens_the_document_visible_colored_and_fitted(scene, tmp_path):
     picture = tmp_path / 'room.png'
     code = configurator_main([
         'screenshot',
@@ -285,9 +285,9 @@ def test_the_gui_opens_the_document_visible_coloured_and_fitted(scene, tmp_path)
     assert code == 0
     with Image.open(picture) as image:
         assert image.size == (800, 600)
-    drawn, coloured = _pixel_shares(picture)
+    drawn, colored = _pixel_shares(picture)
     assert drawn > 0.15  # the room fills a good part of the view
-    assert coloured > 0.005  # and the class-coloured objects are drawn
+    assert colored > 0.005  # and the class-colored objects are drawn
 
 
 def test_the_screenshot_ignores_the_qt_settings_of_the_calling_process(scene, tmp_path,

@@ -1,7 +1,7 @@
-"""Appearance of generated scans: shading by a light, per-instance colours, colourless rooms.
+"""Appearance of generated scans: shading by a light, per-instance colors, colorless rooms.
 
 Through the real generator (bpy, Embree, procedural library) on small rooms, and on a hand-made
-triangle scene scanned by the real Embree scanner where the expected colours follow from the
+triangle scene scanned by the real Embree scanner where the expected colors follow from the
 geometry.
 """
 import json
@@ -19,7 +19,7 @@ from synthdet.point_text import read_point_file
 from tests.test_generator_pipeline import _box_room_scene
 
 PROFILES = Path(__file__).resolve().parents[1] / 'generator' / 'profiles'
-OFF = {'shading': 0.0, 'instance_variation': 0.0, 'colourless': 0.0}
+OFF = {'shading': 0.0, 'instance_variation': 0.0, 'colorless': 0.0}
 
 
 @pytest.fixture(scope='module')
@@ -45,10 +45,10 @@ def _config_file(tmp_path: Path, appearance: dict) -> Path:
     return path
 
 
-def test_colourless_rooms_write_zeros_and_keep_the_scan(asset_cache, tmp_path):
-    root = tmp_path / 'colourless'
+def test_colorless_rooms_write_zeros_and_keep_the_scan(asset_cache, tmp_path):
+    root = tmp_path / 'colorless'
     out = root / 'Stanford3dDataset_v1.2_Aligned_Version'
-    rooms = _generate(out, asset_cache, PROFILES / 'colourless.json')
+    rooms = _generate(out, asset_cache, PROFILES / 'colorless.json')
     # the paper profile: the same settings with appearance off
     plain = _generate(tmp_path / 'off', asset_cache, PROFILES / 'paper.json')
     for room, reference in zip(rooms, plain):
@@ -62,7 +62,7 @@ def test_colourless_rooms_write_zeros_and_keep_the_scan(asset_cache, tmp_path):
         assert meta['generator']['appearance'] == {
             'shading': False,
             'light': None,
-            'colourless': True,
+            'colorless': True,
             'instance_variation': 0.0
         }
         # appearance draws from its own stream: same points and objects as without it
@@ -72,7 +72,7 @@ def test_colourless_rooms_write_zeros_and_keep_the_scan(asset_cache, tmp_path):
         reference_meta = json.loads((reference / 'meta.json').read_text())
         assert meta['objects'] == reference_meta['objects']
         assert meta['room'] == reference_meta['room']
-    # the dataset converter and the Table 1 counter take all-zero colours
+    # the dataset converter and the Table 1 counter take all-zero colors
     from projects.synthdet.datasets.s3dis_converter import convert_s3dis
     from projects.synthdet.evaluation.table1 import count_instances
     converted = tmp_path / 'converted'
@@ -84,7 +84,7 @@ def test_colourless_rooms_write_zeros_and_keep_the_scan(asset_cache, tmp_path):
     assert sum(count_instances(converted, [7])[7].values()) > 0
 
 
-def test_shaded_profile_changes_colours_only(asset_cache, tmp_path):
+def test_shaded_profile_changes_colors_only(asset_cache, tmp_path):
     rooms = _generate(tmp_path / 'shaded', asset_cache, PROFILES / 'shaded.json')
     # the paper profile: the same settings with appearance off
     plain = _generate(tmp_path / 'off', asset_cache, PROFILES / 'paper.json')
@@ -94,7 +94,7 @@ def test_shaded_profile_changes_colours_only(asset_cache, tmp_path):
         assert np.array_equal(points[:, :3], reference_points[:, :3])
         assert not np.array_equal(points[:, 3:], reference_points[:, 3:])
         appearance = json.loads((room / 'meta.json').read_text())['generator']['appearance']
-        assert appearance['shading'] and not appearance['colourless']
+        assert appearance['shading'] and not appearance['colorless']
         light = np.asarray(appearance['light'])
         assert abs(np.linalg.norm(light) - 1) < 1e-5 and light[2] >= np.cos(np.radians(60)) - 1e-6
 
@@ -117,11 +117,11 @@ def _scan(scene: TriangleScene, polygon: np.ndarray):
     return Scanner(scene).scan(path, 20000, 0.5, np.random.default_rng(1), config)
 
 
-def _appearance(light=(0.0, 0.0, 1.0), shading=True, variation=0.0, colourless=False,
+def _appearance(light=(0.0, 0.0, 1.0), shading=True, variation=0.0, colorless=False,
                 factor=None) -> RoomAppearance:
     factor = np.ones((4, 3)) if factor is None else factor
     light = np.asarray(light, float) / np.linalg.norm(light)
-    return RoomAppearance(shading, light, 0.5, colourless, variation, factor)
+    return RoomAppearance(shading, light, 0.5, colorless, variation, factor)
 
 
 def test_shading_darkens_faces_turned_away_from_the_light():
@@ -156,42 +156,42 @@ def test_shading_darkens_faces_turned_away_from_the_light():
     assert np.array_equal(apply_appearance(_appearance(light), scan, flipped), rgb)
 
 
-def test_instance_variation_gives_two_instances_of_one_asset_different_colours():
+def test_instance_variation_gives_two_instances_of_one_asset_different_colors():
     scene, polygon = _two_cube_room()
     scan = _scan(scene, polygon)
     config = dict(DEFAULTS['appearance'], **OFF) | {'instance_variation': 0.1}
     appearance = draw_appearance(np.random.default_rng(3), config, 4)
     rgb = apply_appearance(appearance, scan, scene)
-    colours = [np.unique(rgb[scan.part == p], axis=0) for p in (2, 3)]
-    # one colour per instance (no shading), and the two cubes differ
-    assert len(colours[0]) == 1 and len(colours[1]) == 1
-    assert not np.array_equal(colours[0], colours[1])
+    colors = [np.unique(rgb[scan.part == p], axis=0) for p in (2, 3)]
+    # one color per instance (no shading), and the two cubes differ
+    assert len(colors[0]) == 1 and len(colors[1]) == 1
+    assert not np.array_equal(colors[0], colors[1])
     expected = np.rint(np.array([200, 40, 40]) * appearance.part_factor[2:]).astype(int)
-    assert np.array_equal(np.concatenate(colours), np.clip(expected, 0, 255))
+    assert np.array_equal(np.concatenate(colors), np.clip(expected, 0, 255))
 
 
-def test_appearance_off_keeps_the_material_colours():
+def test_appearance_off_keeps_the_material_colors():
     scene, polygon = _two_cube_room()
     scan = _scan(scene, polygon)
     appearance = draw_appearance(np.random.default_rng(4), dict(DEFAULTS['appearance'], **OFF), 4)
     assert appearance.meta() == {
         'shading': False,
         'light': None,
-        'colourless': False,
+        'colorless': False,
         'instance_variation': 0.0
     }
     assert np.array_equal(apply_appearance(appearance, scan, scene), scene.colors[scan.triangle])
-    colourless = apply_appearance(_appearance(colourless=True), scan, scene)
-    assert colourless.shape == scan.rgb.shape and not colourless.any()
+    colorless = apply_appearance(_appearance(colorless=True), scan, scene)
+    assert colorless.shape == scan.rgb.shape and not colorless.any()
 
 
 def test_switching_one_effect_leaves_the_other_draws_unchanged():
     base = dict(DEFAULTS['appearance'], instance_variation=0.2)
     draws = [
-        draw_appearance(np.random.default_rng(9), dict(base, shading=p, colourless=q), 5)
+        draw_appearance(np.random.default_rng(9), dict(base, shading=p, colorless=q), 5)
         for p, q in ((0.0, 0.0), (1.0, 0.0), (1.0, 1.0))
     ]
-    flags = [(d.shading, d.colourless) for d in draws]
+    flags = [(d.shading, d.colorless) for d in draws]
     assert flags == [(False, False), (True, False), (False, True)]
     for other in draws[1:]:
         assert np.array_equal(other.light, draws[0].light)
@@ -200,7 +200,7 @@ def test_switching_one_effect_leaves_the_other_draws_unchanged():
 
 @pytest.mark.parametrize('key, value, message', [
     ('shading', 1.5, '"appearance.shading" = 1.5 is outside [0, 1]'),
-    ('colourless', -0.1, '"appearance.colourless" = -0.1 is outside [0, 1]'),
+    ('colorless', -0.1, '"appearance.colorless" = -0.1 is outside [0, 1]'),
     ('ambient', 'dim', '"appearance.ambient" must be a number'),
     ('instance_variation', -1, '"appearance.instance_variation" must not be negative'),
     ('light_tilt', [60, 30], '"appearance.light_tilt" has min > max'),
@@ -216,5 +216,5 @@ def test_config_errors_name_the_file_and_key(tmp_path, key, value, message):
 
 def test_profiles_load():
     assert load_config(PROFILES / 'shaded.json')['appearance']['shading'] == 1.0
-    assert load_config(PROFILES / 'colourless.json')['appearance']['colourless'] == 1.0
+    assert load_config(PROFILES / 'colorless.json')['appearance']['colorless'] == 1.0
     assert load_config()['appearance'] == DEFAULTS['appearance']

@@ -48,9 +48,9 @@ def test_every_kind_builds_a_closed_mesh_of_its_size(kind):
         assert spec.cls == 'clutter' and spec.params['kind'] == kind
         assert spec.asset == f'clutter/{kind}'
         json.dumps(spec.params)  # written to meta.json as it is
-        vertices, triangles, colours = clutter_mesh(spec)
-        assert len(triangles) >= 12 and colours.shape == (len(triangles), 3)
-        assert colours.dtype == np.uint8
+        vertices, triangles, colors = clutter_mesh(spec)
+        assert len(triangles) >= 12 and colors.shape == (len(triangles), 3)
+        assert colors.dtype == np.uint8
         size = np.asarray(spec.size)
         assert np.all(size > 0.02) and np.all(size < 10.0), (kind, size)
         assert np.allclose(vertices.min(axis=0), [-size[0] / 2, -size[1] / 2, 0], atol=1e-9)

@@ -480,9 +480,9 @@ def test_expected_counts_are_calibrated(catalog):
     }, 'sum to'),
     ({
         'room': {
-            'colour': 'red'
+            'color': 'red'
         }
-    }, 'unknown key "room.colour"'),
+    }, 'unknown key "room.color"'),
     ({
         'scanner': {
             'dropout': 'high'

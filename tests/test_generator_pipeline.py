@@ -157,11 +157,11 @@ def test_scene_export_matches_the_layout_boxes(asset_cache):
         verts = triangles.vertices[np.unique(triangles.triangles[triangles.part == part])]
         if obj.cls == 'clutter':
             continue
-        local, _, colours = by_name[obj.spec.name].mesh_arrays()
+        local, _, colors = by_name[obj.spec.name].mesh_arrays()
         c, s = np.cos(obj.yaw), np.sin(obj.yaw)
         expected = local @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T + obj.base
         assert np.allclose(np.sort(verts, axis=0), np.sort(expected, axis=0), atol=1e-5)
-        assert np.array_equal(triangles.colors[triangles.part == part], colours)
+        assert np.array_equal(triangles.colors[triangles.part == part], colors)
     assert {'floor', 'ceiling', 'wall'} <= set(classes)
 
 

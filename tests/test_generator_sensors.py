@@ -239,7 +239,7 @@ def test_tablet_drops_returns_on_dark_and_shiny_triangles():
             np.random.default_rng(4),
             cfg,
             BATCH,
-            shiny_colours=METAL)
+            shiny_colors=METAL)
         return np.array([np.mean(scan.part == p) for p in (1, 2, 3)])
 
     clean = shares(0.0, 0.0)
@@ -577,7 +577,7 @@ def test_profile_option_selects_a_packaged_profile(mixed_run, capsys):
         generator = meta['generator']
         assert generator['sensor']['model'] == 'paper'
         assert generator['config']['scanner']['aim_at_objects'] is False
-        assert not generator['appearance']['shading'] and not generator['appearance']['colourless']
+        assert not generator['appearance']['shading'] and not generator['appearance']['colorless']
         assert not [obj for obj in meta['objects'] if obj['class'] == 'clutter']
     with pytest.raises(SystemExit):
         main(['--out', str(work / 'bad'), '--profile', 'nope'])
@@ -595,7 +595,7 @@ def glass_scene() -> TriangleScene:
 
 @pytest.mark.parametrize('transmission', [0.0, 0.5, 1.0])
 def test_rays_pass_glass_with_the_configured_probability(transmission):
-    scanner = Scanner(glass_scene(), glass_colours=SEE_THROUGH, glass_transmission=transmission)
+    scanner = Scanner(glass_scene(), glass_colors=SEE_THROUGH, glass_transmission=transmission)
     rng = np.random.default_rng(0)
     n = 4000
     origins = np.tile([1.0, 3.0, 1.0], (n, 1))
@@ -625,7 +625,7 @@ def test_every_sensor_model_sees_through_glass():
         np.array([[0, 0], [8, 0], [8, 6], [0, 6]], float), 3.0, [], glass_scene(),
         ['wall', '3dprinter', 'clutter'])
     for transmission, seen in ((1.0, False), (0.0, True)):
-        scanner = Scanner(glass_scene(), glass_colours=SEE_THROUGH,
+        scanner = Scanner(glass_scene(), glass_colors=SEE_THROUGH,
                           glass_transmission=transmission)
         for model in SENSOR_MODELS:
             scan, _ = scan_room(scanner, room, model, 20000, 0.5, np.random.default_rng(2),

@@ -24,7 +24,7 @@ from configurator.freecad_cli import build_document
 from configurator.labels import (BOX_MARGIN, LabelsInputError, background_elements, check_overlaps,
                                  instance_names, point_owners)
 from generator.__main__ import main as generator_main
-from synthdet.classes import GENERATED_CLASSES, class_colour
+from synthdet.classes import GENERATED_CLASSES, class_color
 from synthdet.contracts import read_labels, write_corners, write_predictions
 from synthdet.geometry import box_corners_xy
 from synthdet.scan_io import read_scan, write_scan
@@ -565,7 +565,7 @@ GUI_DRIVER = textwrap.dedent('''\
     seen.update(
         added=len(added), base=list(part.Placement.Base),
         reviewed=doc.Meta.get('SynthdetReviewed'),
-        colour=list(doc.getObject(part.Name + '_Base').ViewObject.ShapeColor)[:3],
+        color=list(doc.getObject(part.Name + '_Base').ViewObject.ShapeColor)[:3],
         z_bound=[e[0] for e in part.ExpressionEngine])
 ''') + WRITE_REPORT
 
@@ -579,7 +579,7 @@ def test_macro_in_the_gui_adds_a_part_at_the_picked_point_and_marks_reviewed(rou
     assert seen['base'] == pytest.approx([6100.0, 2500.0, 0.0])  # on the floor, z 0
     assert '.Placement.Base.z' in seen['z_bound']  # follows the room's floor_z
     assert seen['reviewed'] == 'true'
-    assert seen['colour'] == pytest.approx([v / 255 for v in class_colour('3dprinter')], abs=0.01)
+    assert seen['color'] == pytest.approx([v / 255 for v in class_color('3dprinter')], abs=0.01)
 
 
 def test_teach_finetune_config_mixes_the_user_rooms_with_the_generated_areas():

@@ -44,7 +44,7 @@ def test_every_format_reads_back_the_same_points_whole_and_in_chunks(tmp_path, g
     chunks = list(read_scan_chunks(path, chunk_points=7_777, notes=notes))
     assert max(len(chunk) for chunk in chunks) <= 7_777 and len(chunks) >= 2
     np.testing.assert_array_equal(np.concatenate(chunks), points)
-    assert notes == []  # colours present: nothing to say
+    assert notes == []  # colors present: nothing to say
 
 
 def test_float32_bin_keeps_a_local_room_and_warns_for_georeferenced_ones(
@@ -97,7 +97,7 @@ def test_e57_reads_every_scan_moved_by_its_pose(tmp_path, room):
     np.testing.assert_array_equal(loaded[:, 3:], points[:, 3:])
 
 
-def test_e57_without_colours_gets_intensity_as_grey(tmp_path):
+def test_e57_without_colors_gets_intensity_as_grey(tmp_path):
     import pye57
     xyz = np.random.default_rng(0).uniform(0, 5, (100, 3))
     e57 = pye57.E57(str(tmp_path / 'grey.e57'), mode='w')
@@ -113,12 +113,12 @@ def test_e57_without_colours_gets_intensity_as_grey(tmp_path):
     np.testing.assert_allclose(points[:, 3], np.linspace(0, 255, 100), atol=1e-4)
     np.testing.assert_array_equal(points[:, 3], points[:, 5])
     assert notes == [
-        f'{tmp_path / "grey.e57"}: no colours: the model gets the intensity as '
+        f'{tmp_path / "grey.e57"}: no colors: the model gets the intensity as '
         f'grey instead'
     ]
 
 
-def test_las_16_bit_colours_and_intensity_without_colours(tmp_path):
+def test_las_16_bit_colors_and_intensity_without_colors(tmp_path):
     import laspy
     rng = np.random.default_rng(1)
     xyz = GEO + rng.uniform(0, 10, (50, 3))
@@ -135,7 +135,7 @@ def test_las_16_bit_colours_and_intensity_without_colours(tmp_path):
         points = np.concatenate(
             list(read_scan_chunks(tmp_path / f'f{point_format}.las', notes=notes)))
         assert np.abs(points[:, :3] - xyz).max() <= 0.0005 + 1e-9
-        np.testing.assert_array_equal(points[:, 3:], 255.0)  # 65535 colour, 4095 intensity
+        np.testing.assert_array_equal(points[:, 3:], 255.0)  # 65535 color, 4095 intensity
         assert bool(notes) == (point_format == 0)
 
 
@@ -158,7 +158,7 @@ def test_text_scans_detect_delimiter_header_and_columns(tmp_path, name, text, co
     np.testing.assert_allclose(read_scan(path, columns=columns), expected)
 
 
-def test_pcd_ascii_and_binary_with_packed_colours_and_intensity(tmp_path):
+def test_pcd_ascii_and_binary_with_packed_colors_and_intensity(tmp_path):
     header = ('VERSION 0.7\nFIELDS x y z rgb\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\n'
               'WIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA ascii\n')
     packed = np.array([(10 << 16) | (20 << 8) | 30, (255 << 16)], dtype=np.uint32)
@@ -210,10 +210,10 @@ def test_clear_one_line_errors_name_the_file(tmp_path, room):
         load_scan(tmp_path / 'mm.laz', voxel=0.05)
 
 
-def test_files_without_colours_say_what_the_model_gets(tmp_path):
+def test_files_without_colors_say_what_the_model_gets(tmp_path):
     (tmp_path / 'bare.xyz').write_text('1 2 3\n4 5 6\n')
     loaded = load_scan(tmp_path / 'bare.xyz')
-    assert loaded.report[0] == (f'{tmp_path / "bare.xyz"}: no colours and no intensity: the '
+    assert loaded.report[0] == (f'{tmp_path / "bare.xyz"}: no colors and no intensity: the '
                                 f'model gets zeros (black) instead')
     np.testing.assert_array_equal(loaded.points[:, 3:], 0.0)
 

@@ -48,7 +48,7 @@ def assert_one_line_error(proc: subprocess.CompletedProcess, code: int, *fragmen
 
 def _open3d_pcd_pair(folder: Path, points: int = 6000) -> tuple[Path, Path]:
     """The same cloud (with normals, so fields are skipped) as binary and binary_compressed
-    PCD files written by Open3D; repeated points and colours give long LZF back references."""
+    PCD files written by Open3D; repeated points and colors give long LZF back references."""
     rng = np.random.default_rng(4)
     xyz = np.round(rng.uniform(-2.0, 6.0, (points, 3)), 2)
     xyz[::3] = xyz[0]  # one point repeated: runs the compressor replaces by back references

@@ -19,7 +19,7 @@ import projects.synthdet.datasets.synthdet_s3dis  # noqa: F401  (registers the t
 from generator.__main__ import main as generate
 from projects.synthdet.config_helpers import with_robustness, without_robustness
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
-from projects.synthdet.datasets.transforms import (RandomColourJitter, RandomDensityFalloff,
+from projects.synthdet.datasets.transforms import (RandomColorJitter, RandomDensityFalloff,
                                                    RandomPointDropout, RandomQuarterTurn,
                                                    ThinRoomStructure, VoxelGridSample)
 from tests.s3dis_fixtures import S3DIS_DIR
@@ -31,7 +31,7 @@ BOXES = np.array([[1.3, -0.7, 0.45, 1.2, 0.7, 0.9], [-2.1, 3.4, 0.6, 0.5, 0.65, 
                   [0.25, 0.35, 1.1, 0.33, 1.9, 0.4]])
 ROBUST_TYPES = [
     'RandomQuarterTurn', 'RandomDensityFalloff', 'RandomPointDropout', 'RandomJitterPoints',
-    'RandomColourJitter', 'RandomDropPointsColor'
+    'RandomColorJitter', 'RandomDropPointsColor'
 ]
 
 
@@ -152,49 +152,49 @@ def test_quarter_turn_probability():
     assert np.all(np.abs(counts / 800 - 0.25) < 0.05), counts
 
 
-def _colour_jitter(colours: np.ndarray, seed: int = 0, **strengths) -> torch.Tensor:
-    """Colours after RandomColourJitter(prob=1, **strengths); the xyz must not change."""
-    xyz = np.random.default_rng(seed).random((len(colours), 3))
-    scene = make_scene(xyz, colours)
+def _color_jitter(colors: np.ndarray, seed: int = 0, **strengths) -> torch.Tensor:
+    """Colors after RandomColorJitter(prob=1, **strengths); the xyz must not change."""
+    xyz = np.random.default_rng(seed).random((len(colors), 3))
+    scene = make_scene(xyz, colors)
     np.random.seed(seed)
-    out = RandomColourJitter(prob=1.0, **strengths)(scene)['points']
+    out = RandomColorJitter(prob=1.0, **strengths)(scene)['points']
     assert torch.equal(out.coord, torch.tensor(xyz, dtype=torch.float32))
     return out.color
 
 
-def test_colour_jitter_clips_to_0_255():
-    colours = np.random.default_rng(2).integers(0, 256, (2000, 3))
+def test_color_jitter_clips_to_0_255():
+    colors = np.random.default_rng(2).integers(0, 256, (2000, 3))
     jittered = torch.cat([
-        _colour_jitter(colours, seed, brightness=120.0, contrast=0.9, channel_gain=0.5)
+        _color_jitter(colors, seed, brightness=120.0, contrast=0.9, channel_gain=0.5)
         for seed in range(6)
     ])
     assert jittered.min() == 0 and jittered.max() == 255  # clipping happened, nothing beyond
 
 
-def test_colour_jitter_brightness_contrast_and_gain():
-    colours = np.random.default_rng(3).uniform(80, 170, (500, 3))
-    original = torch.tensor(colours, dtype=torch.float32)
-    shift = _colour_jitter(colours, brightness=30.0, contrast=0.0, channel_gain=0.0) - original
+def test_color_jitter_brightness_contrast_and_gain():
+    colors = np.random.default_rng(3).uniform(80, 170, (500, 3))
+    original = torch.tensor(colors, dtype=torch.float32)
+    shift = _color_jitter(colors, brightness=30.0, contrast=0.0, channel_gain=0.0) - original
     assert torch.allclose(shift, shift[0, 0], atol=1e-4) and 0 < abs(float(shift[0, 0])) <= 30
 
-    stretched = _colour_jitter(colours, seed=1, brightness=0.0, contrast=0.2, channel_gain=0.0)
+    stretched = _color_jitter(colors, seed=1, brightness=0.0, contrast=0.2, channel_gain=0.0)
     factor = (stretched - stretched.mean()) / (original - original.mean())
     assert torch.allclose(stretched.mean(), original.mean(), atol=1e-3)
     assert torch.allclose(factor, factor[0, 0], atol=1e-3) and 0.8 <= factor[0, 0] <= 1.2
     assert abs(float(factor[0, 0]) - 1.0) > 1e-3
 
-    gains = _colour_jitter(
-        colours, seed=2, brightness=0.0, contrast=0.0, channel_gain=0.1) / original
+    gains = _color_jitter(
+        colors, seed=2, brightness=0.0, contrast=0.0, channel_gain=0.1) / original
     assert torch.allclose(gains, gains[0], atol=1e-4)
     assert (gains[0] >= 0.9).all() and (gains[0] <= 1.1).all() and gains[0].std() > 1e-3
 
 
-def test_colour_jitter_leaves_scans_without_colour_black():
-    assert not _colour_jitter(np.zeros((100, 3)), brightness=50.0).any()
+def test_color_jitter_leaves_scans_without_color_black():
+    assert not _color_jitter(np.zeros((100, 3)), brightness=50.0).any()
 
 
 @pytest.mark.parametrize('drop_ratio', [0.0, 1.0])
-def test_colour_dropout_gives_zeros_after_normalisation(drop_ratio):
+def test_color_dropout_gives_zeros_after_normalisation(drop_ratio):
     steps = base_config().robust_augmentations
     [dropout] = [step for step in steps if step.type == 'RandomDropPointsColor']
     pipeline = Compose([
@@ -202,9 +202,9 @@ def test_colour_dropout_gives_zeros_after_normalisation(drop_ratio):
         TRANSFORMS.build(dict(type='NormalizePointsColor', color_mean=None))
     ])
     rng = np.random.default_rng(4)
-    colours = rng.integers(1, 256, (300, 3))
-    out = pipeline(make_scene(rng.random((300, 3)), colours))['points'].color
-    expected = np.zeros((300, 3)) if drop_ratio else colours / 255.0
+    colors = rng.integers(1, 256, (300, 3))
+    out = pipeline(make_scene(rng.random((300, 3)), colors))['points'].color
+    expected = np.zeros((300, 3)) if drop_ratio else colors / 255.0
     assert np.allclose(out.numpy(), expected)
 
 
@@ -297,7 +297,7 @@ def test_invalid_strengths_are_refused():
     with pytest.raises(ValueError, match='prob'):
         RandomQuarterTurn(prob=1.5)
     with pytest.raises(ValueError, match='contrast'):
-        RandomColourJitter(contrast=-0.1)
+        RandomColorJitter(contrast=-0.1)
     with pytest.raises(ValueError, match='ratio_range'):
         RandomPointDropout(ratio_range=(0.5, 1.0))
     with pytest.raises(ValueError, match='sensor_height'):
@@ -319,12 +319,12 @@ def test_with_robustness_inserts_after_point_sample():
         with_robustness(robust, base.robust_augmentations)
     with pytest.raises(ValueError, match='no PointSample'):
         with_robustness(base.train_pipeline[:2], base.robust_augmentations)
-    colour_first = [
+    color_first = [
         base.train_pipeline[0],
         dict(type='NormalizePointsColor', color_mean=None), *base.train_pipeline[1:-2]
     ]
-    with pytest.raises(ValueError, match='normalises colours before PointSample'):
-        with_robustness(colour_first, base.robust_augmentations)
+    with pytest.raises(ValueError, match='normalises colors before PointSample'):
+        with_robustness(color_first, base.robust_augmentations)
 
 
 def test_experiment_2_trains_with_robustness_and_the_domain_shift_baseline_without():
@@ -370,11 +370,11 @@ def _dataset(data_root: Path, pipeline: list[dict]):
 def _check_sample(sample: dict, num_points: int, n_boxes: int,
                   objects_kept: float = 1.0) -> tuple[torch.Tensor, int]:
     """Sampled points and boxes as training expects them, at least ``objects_kept`` of the
-    objects with points in their box; returns the colours and the count."""
+    objects with points in their box; returns the colors and the count."""
     points = sample['inputs']['points']
     assert points.shape[1] == 6 and 2000 <= len(points) <= num_points
-    colours = points[:, 3:]
-    assert colours.min() >= 0 and colours.max() <= 1
+    colors = points[:, 3:]
+    assert colors.min() >= 0 and colors.max() <= 1
     boxes = sample['data_samples'].gt_instances_3d.bboxes_3d
     assert len(boxes) == n_boxes and not boxes.with_yaw and not boxes.tensor[:, 6].any()
     # objects keep points in their box (2 cm: the xyz jitter is clipped at 1.5 cm)
@@ -382,7 +382,7 @@ def _check_sample(sample: dict, num_points: int, n_boxes: int,
     inside = ((points[:, None, :3] >= low[None] - 0.02) &
               (points[:, None, :3] <= high[None] + 0.02)).all(dim=2)
     assert inside.any(dim=0).float().mean() >= objects_kept
-    return colours, len(points)
+    return colors, len(points)
 
 
 def test_robust_pipeline_runs_on_a_generated_room(generated_room):
@@ -404,8 +404,8 @@ def test_robust_pipeline_runs_on_a_generated_room(generated_room):
     set_random_seed(0)
     # the room is a laser scan of 50,000 points, whose far objects hold a dozen: at full
     # strength the density falloff keeps 10 % of them and the dropout half the rest
-    colours, count = _check_sample(strong[0], num_points, n_boxes, objects_kept=0.8)
-    assert not colours.any() and count < 0.9 * num_points
+    colors, count = _check_sample(strong[0], num_points, n_boxes, objects_kept=0.8)
+    assert not colors.any() and count < 0.9 * num_points
 
 
 @pytest.mark.slow

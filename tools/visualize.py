@@ -1,14 +1,14 @@
-"""Draw a scan from above, coloured by class, with ground-truth and predicted boxes (PNG), and
+"""Draw a scan from above, colored by class, with ground-truth and predicted boxes (PNG), and
 export it as PLY.
 
     python tools/visualize.py Area_9/factory_1/factory_1.txt --gt Area_9/factory_1/meta.json \\
         --pred factory_1.pred.json --corners factory_1.corners.json --out factory_1.png \\
-        [--ply factory_1.ply] [--colour-by class|rgb|height] [--min-score 0.3]
+        [--ply factory_1.ply] [--color-by class|rgb|height] [--min-score 0.3]
 
 SCAN is an S3DIS room ``.txt`` (classes from its ``Annotations/``), a converted
 ``points/<room>.bin`` (classes from ``semantic_mask/``), or any scan ``synthdet.scan_io`` reads
 (``.e57``, ``.las``/``.laz``, ``.ply``, ``.pcd``, ``.xyz``/``.pts``/``.csv``, ``.txt``, ``.bin``;
-then coloured by RGB or height). ``--gt`` takes a generator ``meta.json`` or an info pickle
+then colored by RGB or height). ``--gt`` takes a generator ``meta.json`` or an info pickle
 (``s3dis_infos_Area_N.pkl``, matched by the scan's file name).
 """
 from __future__ import annotations
@@ -33,9 +33,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('--out', required=True, help='output PNG')
     parser.add_argument('--ply', help='also write the scan as PLY (with class indices)')
     parser.add_argument(
-        '--colour-by',
+        '--color-by',
         choices=('class', 'rgb', 'height'),
-        help='point colours (default: class if annotated, else rgb/height)')
+        help='point colors (default: class if annotated, else rgb/height)')
     parser.add_argument(
         '--min-score',
         type=float,
@@ -53,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
         gt = load_ground_truth(args.gt, args.scan) if args.gt else []
         pred = boxes_from_predictions(args.pred, args.min_score) if args.pred else []
         corners = corner_polygon(args.corners) if args.corners else None
-        draw_top_view(args.out, scan, gt, pred, corners, args.colour_by, args.title)
+        draw_top_view(args.out, scan, gt, pred, corners, args.color_by, args.title)
         if args.ply:
             write_labelled_ply(args.ply, scan)
     except (ValueError, KeyError) as error:  # a bad input file: exit 2 (docs/safety.md)

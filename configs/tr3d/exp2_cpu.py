@@ -9,7 +9,7 @@
 # - `ThinRoomStructure` keeps 10 % of the floor, wall and ceiling points before the sampling,
 #   so that the objects keep their points (benchmarks/bench_structure_thinning.py);
 # - the base config's robustness augmentations in training (quarter turns, density falloff,
-#   point dropout, jitter, colour jitter, colour-less rooms), for real scans' colours and density;
+#   point dropout, jitter, color jitter, color-less rooms), for real scans' colors and density;
 # - TR3D's 1x schedule: 12 epochs of the training areas repeated 5 times, the learning rate
 #   dropping 10x after epochs 8 and 11; batch 4, 1 loader worker, log every 10 iterations;
 # - the final epoch is the tested model (no best-epoch checkpoint: area 9 is both the validation

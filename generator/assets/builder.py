@@ -1,7 +1,7 @@
 """bmesh building blocks for the procedural assets.
 
 A :class:`MeshBuilder` collects closed solids (boxes, cylinders, rods, lofts) into one bmesh, each
-face tagged with a named material of a plain sRGB colour, and turns the result into a bpy object.
+face tagged with a named material of a plain sRGB color, and turns the result into a bpy object.
 Placement uses 4x4 ``mathutils.Matrix`` frames, so kinematic chains compose by multiplication.
 """
 from __future__ import annotations
@@ -22,14 +22,14 @@ IDENTITY = Matrix.Identity(4)
 
 
 def srgb_to_linear(value: float) -> float:
-    """sRGB-encoded channel in [0, 1] -> linear channel (Blender stores linear colours)."""
+    """sRGB-encoded channel in [0, 1] -> linear channel (Blender stores linear colors)."""
     if value <= 0.04045:
         return value / 12.92
     return ((value + 0.055) / 1.055)**2.4
 
 
 def linear_to_srgb(value: float) -> float:
-    """Linear channel -> sRGB-encoded channel in [0, 1] (what Blender's colour picker shows)."""
+    """Linear channel -> sRGB-encoded channel in [0, 1] (what Blender's color picker shows)."""
     value = min(max(value, 0.0), 1.0)
     if value <= 0.0031308:
         return value * 12.92
@@ -37,12 +37,12 @@ def linear_to_srgb(value: float) -> float:
 
 
 def rgb_to_blender(rgb: RGB) -> tuple[float, float, float, float]:
-    """uint8 sRGB colour -> linear RGBA floats for a material."""
+    """uint8 sRGB color -> linear RGBA floats for a material."""
     return (*(srgb_to_linear(c / 255.0) for c in rgb), 1.0)
 
 
 def blender_to_rgb(rgba: Sequence[float]) -> RGB:
-    """Linear material colour -> uint8 sRGB colour."""
+    """Linear material color -> uint8 sRGB color."""
     return tuple(int(round(linear_to_srgb(float(c)) * 255.0)) for c in rgba[:3])
 
 
@@ -97,24 +97,24 @@ def rounded_rect(width: float,
 
 
 class MeshBuilder:
-    """Accumulates coloured closed solids in one bmesh."""
+    """Accumulates colored closed solids in one bmesh."""
 
     def __init__(self) -> None:
         self.bm = bmesh.new()
         self._materials: dict[str, int] = {}
-        self._colours: list[RGB] = []
+        self._colors: list[RGB] = []
 
     def material(self, name: str, rgb: Sequence[int]) -> int:
-        """Register (or look up) a named material with a uint8 sRGB colour; returns its index."""
+        """Register (or look up) a named material with a uint8 sRGB color; returns its index."""
         if name in self._materials:
             return self._materials[name]
-        self._materials[name] = len(self._colours)
-        self._colours.append(tuple(int(c) for c in rgb))
+        self._materials[name] = len(self._colors)
+        self._colors.append(tuple(int(c) for c in rgb))
         return self._materials[name]
 
     def materials(self, params: dict, **color_keys: str) -> tuple[int, ...]:
         """Register one material per keyword, in order: the keyword names it and its value is the
-        key of its colour in ``params``; returns their indices."""
+        key of its color in ``params``; returns their indices."""
         return tuple(self.material(name, params[key]) for name, key in color_keys.items())
 
     @property
@@ -123,9 +123,9 @@ class MeshBuilder:
         return list(self._materials)
 
     @property
-    def colours(self) -> list[RGB]:
-        """Material colours in index order."""
-        return list(self._colours)
+    def colors(self) -> list[RGB]:
+        """Material colors in index order."""
+        return list(self._colors)
 
     def _tag(self, verts: Iterable[bmesh.types.BMVert], material: int) -> None:
         for face in {f for v in verts for f in v.link_faces}:
@@ -227,17 +227,17 @@ class MeshBuilder:
         self.bm.to_mesh(mesh)
         self.bm.free()
         prefix = material_prefix or name
-        for part, colour in zip(self._materials, self._colours):
+        for part, color in zip(self._materials, self._colors):
             material = bpy.data.materials.new(f'{prefix}.{part}')
-            set_material_colour(material, colour)
+            set_material_color(material, color)
             mesh.materials.append(material)
         obj = bpy.data.objects.new(name, mesh)
         collection.objects.link(obj)
         return obj
 
 
-def set_material_colour(material: bpy.types.Material, rgb: RGB) -> None:
-    """Set both the viewport colour and the Principled BSDF base colour."""
+def set_material_color(material: bpy.types.Material, rgb: RGB) -> None:
+    """Set both the viewport color and the Principled BSDF base color."""
     rgba = rgb_to_blender(rgb)
     material.diffuse_color = rgba
     if material.node_tree is not None:
@@ -246,9 +246,9 @@ def set_material_colour(material: bpy.types.Material, rgb: RGB) -> None:
                 node.inputs['Base Color'].default_value = rgba
 
 
-def material_colour(material: bpy.types.Material | None, default: RGB = (128, 128, 128)) -> RGB:
-    """uint8 sRGB colour of a material: an unlinked Principled BSDF base colour, else the
-    viewport (diffuse) colour; `default` for an empty slot."""
+def material_color(material: bpy.types.Material | None, default: RGB = (128, 128, 128)) -> RGB:
+    """uint8 sRGB color of a material: an unlinked Principled BSDF base color, else the
+    viewport (diffuse) color; `default` for an empty slot."""
     if material is None:
         return default
     if material.node_tree is not None:

@@ -38,9 +38,9 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
         bool(rng.random() < (0.7 if office else 0.4)),
         'arm_height':
         uniform(rng, 0.18, 0.26),
-        'frame_colour':
+        'frame_color':
         list(pick(rng, palette.METAL if variant != 'fourleg' else palette.METAL + palette.WOOD)),
-        'seat_colour':
+        'seat_color':
         list(pick(rng, palette.FABRIC + palette.WOOD[:2])),
     }
     if variant == 'fourleg':
@@ -69,7 +69,7 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
             armrests=True,
             seat_width=uniform(rng, 0.44, 0.50),
             seat_thickness=uniform(rng, 0.02, 0.04),
-            seat_colour=list(pick(rng, palette.PLASTIC)),
+            seat_color=list(pick(rng, palette.PLASTIC)),
             leg_profile='round',
             leg_splay=uniform(rng, 0.01, 0.03),
             stretchers=False)
@@ -79,7 +79,7 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
 def build(variant: str, params: dict) -> MeshBuilder:
     """Build the chair's mesh from its parameters."""
     mb = MeshBuilder()
-    frame, seat = mb.materials(params, frame='frame_colour', seat='seat_colour')
+    frame, seat = mb.materials(params, frame='frame_color', seat='seat_color')
     width, depth = params['seat_width'], params['seat_depth']
     seat_top, thickness = params['seat_height'], params['seat_thickness']
     seat_bottom = seat_top - thickness

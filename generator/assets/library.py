@@ -21,7 +21,7 @@ import numpy as np
 from tqdm import tqdm
 
 from generator.assets import chair, printer3d, sofa, table, yumi
-from generator.assets.builder import material_colour
+from generator.assets.builder import material_color
 
 ASSET_CLASSES = ('table', 'chair', 'sofa', 'yumi', '3dprinter')
 GENERATORS: dict[str, ModuleType] = {
@@ -33,7 +33,7 @@ GENERATORS: dict[str, ModuleType] = {
 }
 ASSET_PROP = 'synthdet_asset'
 PARAMS_PROP = 'synthdet_params'
-DEFAULT_COLOUR = (128, 128, 128)
+DEFAULT_COLOR = (128, 128, 128)
 UP_NORMAL_Z = 0.99
 
 
@@ -50,12 +50,12 @@ class AssetInstance:
     top_size: tuple[float, float] | None
     vertices: np.ndarray = dataclasses.field(repr=False, compare=False)
     triangles: np.ndarray = dataclasses.field(repr=False, compare=False)
-    colours: np.ndarray = dataclasses.field(repr=False, compare=False)
+    colors: np.ndarray = dataclasses.field(repr=False, compare=False)
 
     def mesh_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(vertices (V,3) float64 in the local frame, triangles (T,3) int32, face colours (T,3)
+        """(vertices (V,3) float64 in the local frame, triangles (T,3) int32, face colors (T,3)
         uint8)."""
-        return self.vertices, self.triangles, self.colours
+        return self.vertices, self.triangles, self.colors
 
 
 class AssetLibrary:
@@ -231,7 +231,7 @@ def _object_linear(obj: bpy.types.Object) -> np.ndarray:
 
 
 def instance_from_object(obj: bpy.types.Object, cls: str, path: Path) -> AssetInstance:
-    """Extract the triangles, colours and metadata of one library object."""
+    """Extract the triangles, colors and metadata of one library object."""
     where = f'{path}: object {obj.name!r}'
     mesh = obj.data
     mesh.calc_loop_triangles()
@@ -252,9 +252,9 @@ def instance_from_object(obj: bpy.types.Object, cls: str, path: Path) -> AssetIn
     vertices = vertices - np.array([(low[0] + high[0]) / 2, (low[1] + high[1]) / 2, low[2]])
     size = tuple(float(s) for s in vertices.max(0) - vertices.min(0))
 
-    palette = [material_colour(slot.material, DEFAULT_COLOUR) for slot in obj.material_slots]
-    palette = np.array(palette or [DEFAULT_COLOUR], np.uint8)
-    colours = palette[np.clip(material_index, 0, len(palette) - 1)]
+    palette = [material_color(slot.material, DEFAULT_COLOR) for slot in obj.material_slots]
+    palette = np.array(palette or [DEFAULT_COLOR], np.uint8)
+    colors = palette[np.clip(material_index, 0, len(palette) - 1)]
 
     asset = str(obj.get(ASSET_PROP, f'{cls}/{obj.name}'))
     if not asset.startswith(f'{cls}/'):
@@ -272,7 +272,7 @@ def instance_from_object(obj: bpy.types.Object, cls: str, path: Path) -> AssetIn
         top_size = _top_extent(vertices, triangles, top_z)
         if 'top_size' in params:  # a declared usable area (e.g. inside a round top) may shrink it
             top_size = tuple(min(float(a), b) for a, b in zip(params['top_size'], top_size))
-    for array in (vertices, triangles, colours):
+    for array in (vertices, triangles, colors):
         array.setflags(write=False)
     return AssetInstance(
         cls=cls,
@@ -284,7 +284,7 @@ def instance_from_object(obj: bpy.types.Object, cls: str, path: Path) -> AssetIn
         top_size=top_size,
         vertices=vertices,
         triangles=triangles,
-        colours=colours)
+        colors=colors)
 
 
 def _top_extent(vertices: np.ndarray, triangles: np.ndarray, top_z: float) -> tuple[float, float]:

@@ -1,4 +1,4 @@
-"""Plain sRGB base colours (uint8) per material kind, for the procedural assets."""
+"""Plain sRGB base colors (uint8) per material kind, for the procedural assets."""
 
 WOOD = ((176, 132, 86), (140, 98, 60), (205, 170, 125), (110, 74, 48), (222, 196, 160), (92, 64,
                                                                                          44))
@@ -23,7 +23,7 @@ GLASS = ((70, 90, 105), (95, 120, 130), (50, 60, 70))
 # glass doors of enclosed 3D printers; their displays are opaque
 PRINTER_GLASS = (70, 80, 85)
 DISPLAY = (28, 32, 36)
-# the colours the scanner treats as glass (``scanner.glass_transmission``); no other material
+# the colors the scanner treats as glass (``scanner.glass_transmission``); no other material
 # uses them
 SEE_THROUGH = GLASS + (PRINTER_GLASS, )
 PIPE = ((40, 120, 60), (230, 190, 20), (170, 40, 40), (40, 90, 170), (150, 150, 150),

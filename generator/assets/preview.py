@@ -1,5 +1,5 @@
 """Preview pictures of an asset library: one PNG per class with every instance drawn as shaded,
-coloured triangles in an orthographic 3D view (matplotlib, headless)."""
+colored triangles in an orthographic 3D view (matplotlib, headless)."""
 from __future__ import annotations
 
 import math
@@ -17,14 +17,14 @@ from generator.assets.library import AssetInstance, AssetLibrary  # noqa: E402
 LIGHT = np.array([-0.4, -0.7, 0.6]) / np.linalg.norm([-0.4, -0.7, 0.6])
 
 
-def shaded_colours(instance: AssetInstance) -> np.ndarray:
-    """Face colours (T,3) in [0, 1], darkened by a two-sided Lambert term for depth cues."""
-    vertices, triangles, colours = instance.mesh_arrays()
+def shaded_colors(instance: AssetInstance) -> np.ndarray:
+    """Face colors (T,3) in [0, 1], darkened by a two-sided Lambert term for depth cues."""
+    vertices, triangles, colors = instance.mesh_arrays()
     corners = vertices[triangles]
     normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
     shade = 0.45 + 0.55 * np.abs(normals @ LIGHT)
-    return np.clip(colours / 255.0 * shade[:, None], 0.0, 1.0)
+    return np.clip(colors / 255.0 * shade[:, None], 0.0, 1.0)
 
 
 def draw_instance(ax, instance: AssetInstance) -> None:
@@ -32,7 +32,7 @@ def draw_instance(ax, instance: AssetInstance) -> None:
     vertices, triangles, _ = instance.mesh_arrays()
     ax.add_collection3d(
         Poly3DCollection(
-            vertices[triangles], facecolors=shaded_colours(instance), edgecolors='none'))
+            vertices[triangles], facecolors=shaded_colors(instance), edgecolors='none'))
     half = 0.5 * np.asarray(instance.size)
     ax.set_xlim(-half[0], half[0])
     ax.set_ylim(-half[1], half[1])

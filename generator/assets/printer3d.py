@@ -1,6 +1,6 @@
 """Procedural 3D printers (class `3dprinter`), strongly varied: enclosed box printers (door
 closed, absent or swung open), bed-slingers, deltas, large-format machines, open-frame CoreXY
-cubes, resin (MSLA / SLA) printers with a coloured lid, compact cantilever bed-slingers and
+cubes, resin (MSLA / SLA) printers with a colored lid, compact cantilever bed-slingers and
 Ultimaker-style box frames. Filament printers have frame, bed, gantry / print head and a spool.
 The door or display faces -y."""
 from __future__ import annotations
@@ -34,10 +34,10 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
     """Draw a variant (cycled by index) and its dimensions in metres."""
     variant = VARIANTS[index % len(VARIANTS)]
     params: dict = {
-        'body_colour': list(pick(rng, palette.PRINTER_BODY)),
-        'frame_colour': list(pick(rng, palette.METAL)),
-        'bed_colour': list(pick(rng, ((30, 30, 30), (190, 190, 195), (170, 140, 60)))),
-        'filament_colour': list(pick(rng, palette.FILAMENT)),
+        'body_color': list(pick(rng, palette.PRINTER_BODY)),
+        'frame_color': list(pick(rng, palette.METAL)),
+        'bed_color': list(pick(rng, ((30, 30, 30), (190, 190, 195), (170, 140, 60)))),
+        'filament_color': list(pick(rng, palette.FILAMENT)),
         'spool': pick(rng, ('top', 'side', 'back'))
     }
     if variant == 'enclosed':
@@ -75,7 +75,7 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
             _outer_size(rng, (0.22, 0.42), (0.22, 0.40), (0.38, 0.55)),
             base_fraction=uniform(rng, 0.25, 0.40),
             lid_style=pick(rng, ('box', 'hinged')),
-            lid_colour=list(pick(rng, RESIN_LIDS)))
+            lid_color=list(pick(rng, RESIN_LIDS)))
     elif variant == 'cantilever':  # Prusa MINI+ 0.33 x 0.34 x 0.38, Bambu Lab A1 mini
         params.update(
             _outer_size(rng, (0.30, 0.36), (0.30, 0.36), (0.34, 0.40)),
@@ -111,8 +111,8 @@ def build(variant: str, params: dict) -> MeshBuilder:
 
 
 def _materials(mb: MeshBuilder, params: dict) -> tuple[int, int, int, int]:
-    return mb.materials(params, body='body_colour', frame='frame_colour', bed='bed_colour',
-                        filament='filament_colour')
+    return mb.materials(params, body='body_color', frame='frame_color', bed='bed_color',
+                        filament='filament_color')
 
 
 def _spool(mb: MeshBuilder, centre, filament: int, frame: int, axis: str = 'x') -> None:
@@ -368,10 +368,10 @@ def _corexy(mb: MeshBuilder, params: dict) -> None:
 
 
 def _resin(mb: MeshBuilder, params: dict) -> None:
-    """Base with the light engine and a display, a translucent coloured lid over the vat: a
+    """Base with the light engine and a display, a translucent colored lid over the vat: a
     box (MSLA) or a sloped hinged lid (SLA), the z tower inside."""
     body, frame, _, _ = _materials(mb, params)
-    lid = mb.material('lid', params['lid_colour'])
+    lid = mb.material('lid', params['lid_color'])
     w, d, h = params['width'], params['depth'], params['height']
     base_h = round(params['base_fraction'] * h, 4)
     mb.box_between((-w / 2, -d / 2, 0.0), (w / 2, d / 2, base_h), body)

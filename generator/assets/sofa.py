@@ -40,9 +40,9 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
         'back_cushions': bool(rng.random() < 0.7),
         'base': pick(rng, ('feet', 'plinth')),
         'back_tilt': uniform(rng, 0.08, 0.22),
-        'fabric_colour': list(fabric),
-        'cushion_colour': list(fabric if rng.random() < 0.6 else pick(rng, palette.FABRIC)),
-        'feet_colour': list(pick(rng, palette.WOOD + palette.METAL[:1])),
+        'fabric_color': list(fabric),
+        'cushion_color': list(fabric if rng.random() < 0.6 else pick(rng, palette.FABRIC)),
+        'feet_color': list(pick(rng, palette.WOOD + palette.METAL[:1])),
     }
     if variant == 'chaise':  # chaise longue sections are 1.4-1.7 m deep
         params.update(chaise_depth=uniform(rng, 1.40, 1.70), chaise_side=pick(rng, (-1, 1)))
@@ -61,8 +61,8 @@ def build(variant: str, params: dict) -> MeshBuilder:
     """Build the sofa's mesh from its parameters."""
     check_variant('sofa', variant, VARIANTS)
     mb = MeshBuilder()
-    body, cushion, feet = mb.materials(params, body='fabric_colour', cushion='cushion_colour',
-                                       feet='feet_colour')
+    body, cushion, feet = mb.materials(params, body='fabric_color', cushion='cushion_color',
+                                       feet='feet_color')
     if variant == 'bench':
         _bench(mb, params, cushion, feet)
         return mb

@@ -28,8 +28,8 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
     params: dict = {
         'height': uniform(rng, 0.72, 0.77),
         'top_thickness': uniform(rng, 0.025, 0.04),
-        'top_colour': list(pick(rng, palette.LAMINATE + palette.WOOD)),
-        'frame_colour': list(pick(rng, palette.METAL))
+        'top_color': list(pick(rng, palette.LAMINATE + palette.WOOD)),
+        'frame_color': list(pick(rng, palette.METAL))
     }
     if variant == 'legs':
         params.update(
@@ -54,7 +54,7 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
             height=uniform(rng, 0.85, 0.95),
             top_thickness=uniform(rng, 0.04, 0.06),
             drawers=bool(rng.random() < 0.5),
-            shelf_colour=list(pick(rng, palette.WOOD)))
+            shelf_color=list(pick(rng, palette.WOOD)))
     elif variant == 'standing':  # IKEA BEKANT sit/stand 160 x 80, 65-125 cm; FlexiSpot E7
         params.update(
             width=uniform(rng, 1.2, 1.8),
@@ -67,15 +67,15 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
             depth=0.76,
             height=0.74,
             top_thickness=0.045,
-            top_colour=list(pick(rng, ((238, 238, 232), (214, 214, 206), (90, 90, 92)))))
+            top_color=list(pick(rng, ((238, 238, 232), (214, 214, 206), (90, 90, 92)))))
     elif variant == 'steelbench':  # industrial workbench 60-96 x 30-36 in, 34 in high
         params.update(
             width=pick(rng, (1.52, 1.83, 2.13)),
             depth=pick(rng, (0.76, 0.91)),
             height=uniform(rng, 0.84, 0.90),
             top_thickness=uniform(rng, 0.035, 0.05),
-            top_colour=list(pick(rng, palette.METAL[1:] + ((60, 90, 140), ))),
-            frame_colour=list(pick(rng, palette.METAL + ((40, 80, 150), (240, 180, 20)))),
+            top_color=list(pick(rng, palette.METAL[1:] + ((60, 90, 140), ))),
+            frame_color=list(pick(rng, palette.METAL + ((40, 80, 150), (240, 180, 20)))),
             shelf_height=uniform(rng, 0.12, 0.25))
     elif variant == 'panel':  # office desk with panel ends, 140-180 x 80 x 74 cm (EN 527)
         params.update(
@@ -97,7 +97,7 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
 def build(variant: str, params: dict) -> MeshBuilder:
     """Build the table's mesh from its parameters."""
     mb = MeshBuilder()
-    top, frame = mb.materials(params, top='top_colour', frame='frame_colour')
+    top, frame = mb.materials(params, top='top_color', frame='frame_color')
     height, thick = params['height'], params['top_thickness']
     under = height - thick
     if variant == 'round':
@@ -196,7 +196,7 @@ def _trestle(mb: MeshBuilder, params: dict, frame: int, under: float) -> None:
 
 def _workbench(mb: MeshBuilder, params: dict, frame: int, under: float) -> None:
     width, depth = params['width'], params['depth']
-    shelf = mb.material('shelf', params['shelf_colour'])
+    shelf = mb.material('shelf', params['shelf_color'])
     inset = 0.04
     for sx in (-1, 1):
         for sy in (-1, 1):
@@ -240,7 +240,7 @@ def _standing(mb: MeshBuilder, params: dict, frame: int, under: float) -> None:
 def _folding(mb: MeshBuilder, params: dict, frame: int, under: float) -> None:
     """Blow-moulded top with a rim, folding tube legs as two braced U-frames."""
     width, depth = params['width'], params['depth']
-    top = mb.material('top', params['top_colour'])
+    top = mb.material('top', params['top_color'])
     mb.box_between((-width / 2 + 0.02, -depth / 2 + 0.02, under - 0.03),
                    (width / 2 - 0.02, depth / 2 - 0.02, under), top)
     radius = 0.0125
@@ -265,7 +265,7 @@ def _folding(mb: MeshBuilder, params: dict, frame: int, under: float) -> None:
 def _steelbench(mb: MeshBuilder, params: dict, frame: int, under: float) -> None:
     """Square-tube legs with levelling feet, front and side rails, a full-size lower shelf."""
     width, depth = params['width'], params['depth']
-    shelf = mb.material('shelf', params['top_colour'])
+    shelf = mb.material('shelf', params['top_color'])
     inset, half = 0.04, 0.025
     for sx in (-1, 1):
         for sy in (-1, 1):
@@ -287,7 +287,7 @@ def _steelbench(mb: MeshBuilder, params: dict, frame: int, under: float) -> None
 def _panel_ends(mb: MeshBuilder, params: dict, frame: int, under: float) -> None:
     """Two full-depth side panels joined at the back by a metal rail or a modesty panel."""
     width, depth = params['width'], params['depth']
-    side = mb.material('panel', params['top_colour'])
+    side = mb.material('panel', params['top_color'])
     thick = params['panel_thickness']
     for sx in (-1, 1):
         x = sx * (width / 2 - 0.02)

@@ -70,7 +70,7 @@ MAX_ARM_Z = 0.8  # working poses: no arm raised far above the head
 MAX_REACH_XY = 0.55
 MAX_HALF_WIDTH = 0.36  # arms stay within 0.36 m of the robot's mid-plane
 MAX_TRIES = 2000
-PLATE_COLOUR = (182, 184, 188)  # plain aluminium
+PLATE_COLOR = (182, 184, 188)  # plain aluminium
 
 
 def _rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
@@ -210,8 +210,8 @@ def sample_params(rng: np.random.Generator, index: int) -> tuple[str, dict]:
         'pose': style,
         'joints': angles,
         'gripper_opening': uniform(rng, 0.0, 0.05),
-        'body_colour': list(pick(rng, palette.ROBOT_BODY)),
-        'joint_colour': list(pick(rng, palette.ROBOT_JOINT))
+        'body_color': list(pick(rng, palette.ROBOT_BODY)),
+        'joint_color': list(pick(rng, palette.ROBOT_JOINT))
     }
     if variant == 'irb14000_plate':  # robot x (depth) by y (width) by thickness, metres
         params['plate'] = [
@@ -226,14 +226,14 @@ def build(variant: str, params: dict) -> MeshBuilder:
     """Build the robot's mesh from its joint angles."""
     check_variant('yumi', variant, VARIANTS)
     mb = MeshBuilder()
-    body, joint = mb.materials(params, body='body_colour', joint='joint_colour')
+    body, joint = mb.materials(params, body='body_color', joint='joint_color')
     gripper = mb.material('gripper', (45, 45, 48))
     face = rot_z(-math.pi / 2)  # robot x (forward) -> -y
     if variant == 'irb14000_plate':
         plate_depth, plate_width, thickness = params['plate']
         mb.box_between((-plate_depth / 2, -plate_width / 2, 0.0),
                        (plate_depth / 2, plate_width / 2, thickness),
-                       mb.material('plate', PLATE_COLOUR), face)
+                       mb.material('plate', PLATE_COLOR), face)
         face = translate(0, 0, thickness) @ face
     depth, width, plate = BASE_SIZE
     mb.prism(rounded_rect(depth, width, 0.05), plate, body, face)

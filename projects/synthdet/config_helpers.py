@@ -108,14 +108,14 @@ def with_robustness(pipeline: Sequence[Mapping[str, Any]],
     ``_base_/s3dis-synthdet.py``) inserted right after its ``PointSample`` step.
 
     There the point dropout and thinning change what the model sees (before it, sampling would
-    refill the count), they work on the sampled points only, and the colour steps act on
-    0..255 colours before ``NormalizePointsColor``. Raises ``ValueError`` if the pipeline has no
-    ``PointSample``, normalises colours before it, or already holds one of the augmentations.
+    refill the count), they work on the sampled points only, and the color steps act on
+    0..255 colors before ``NormalizePointsColor``. Raises ``ValueError`` if the pipeline has no
+    ``PointSample``, normalises colors before it, or already holds one of the augmentations.
     """
     index = _point_sample_index(pipeline)
     types = [step['type'] for step in pipeline]
     if 'NormalizePointsColor' in types[:index]:
-        raise ValueError(f'the pipeline normalises colours before PointSample: {types}')
+        raise ValueError(f'the pipeline normalises colors before PointSample: {types}')
     repeated = sorted({step['type'] for step in augmentations} & set(types))
     if repeated:
         raise ValueError(f'the pipeline already has {repeated}: {types}')

@@ -1,7 +1,7 @@
 """``tools/test.py --show-dir``: one top-view picture per test scan with truth and predictions.
 
 :class:`TopViewHook` draws every test sample with the project's renderer
-(``synthdet.topview.draw_top_view``): the converted scan's points coloured by class (from its
+(``synthdet.topview.draw_top_view``): the converted scan's points colored by class (from its
 ``semantic_mask``), the ground-truth boxes solid and the predictions with a score of at least
 ``score_thr`` dashed, in the frame of the info pickles. In a distributed test each process
 draws the samples it evaluates.

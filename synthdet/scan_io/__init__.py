@@ -42,13 +42,13 @@ from synthdet.scan_io.common import (CHUNK_POINTS, MAX_LINE_BYTES, TEXT_BYTES_PE
 from synthdet.scan_io.e57 import write_e57_scans
 from synthdet.scan_io.las import write_las_chunks
 from synthdet.scan_io.pcd import LZF_BLOCK, LZF_LONGEST, LZF_WINDOW
-from synthdet.scan_io.ply import PLY_COLOUR_NAMES, PLY_INTENSITY_NAMES, ply_vertex
+from synthdet.scan_io.ply import PLY_COLOR_NAMES, PLY_INTENSITY_NAMES, ply_vertex
 from synthdet.scan_io.text_columns import COLUMN_NAMES, DEFAULT_COLUMNS, parse_columns
 from synthdet.voxels import VoxelFilter
 
 __all__ = [
     'CHUNK_POINTS', 'COLUMN_NAMES', 'DEFAULT_COLUMNS', 'LZF_BLOCK', 'LZF_LONGEST', 'LZF_WINDOW',
-    'MAX_HEIGHT', 'MAX_LINE_BYTES', 'MAX_WIDTH', 'PLY_COLOUR_NAMES', 'PLY_INTENSITY_NAMES',
+    'MAX_HEIGHT', 'MAX_LINE_BYTES', 'MAX_WIDTH', 'PLY_COLOR_NAMES', 'PLY_INTENSITY_NAMES',
     'READERS', 'SCAN_SUFFIXES', 'TEXT_BYTES_PER_POINT', 'WRITERS', 'ChunkReader', 'LoadedScan',
     'ScanFormatError', 'check_units', 'load_scan', 'parse_columns', 'ply_vertex', 'read_scan',
     'read_scan_chunks', 'write_e57_scans', 'write_las_chunks', 'write_scan'
@@ -92,7 +92,7 @@ def read_scan_chunks(path: str | os.PathLike,
     """Stream a scan file as ``(n, 6)`` float64 chunks of ``x y z r g b`` (n <= chunk_points).
 
     Coordinates are the file's own (georeferenced ones exact in float64). ``columns`` names
-    the values of a text scan's lines (``'x,y,z,i'``). One-line notes (no colours...) are
+    the values of a text scan's lines (``'x,y,z,i'``). One-line notes (no colors...) are
     appended to ``notes``. Raises ``ScanFormatError`` naming the file on an unknown suffix,
     malformed, empty or non-finite input, ``FileNotFoundError`` if it does not exist.
     """
@@ -115,7 +115,7 @@ def read_scan_chunks(path: str | os.PathLike,
         bad_rows = np.flatnonzero(~np.isfinite(chunk).all(axis=1))
         if len(bad_rows):
             raise ScanFormatError(f'{path} (point {total + bad_rows[0]}): non-finite coordinate '
-                                  f'or colour ({len(bad_rows)} bad points among points {total}-'
+                                  f'or color ({len(bad_rows)} bad points among points {total}-'
                                   f'{total + len(chunk) - 1})')
         total += len(chunk)
         if len(chunk):
@@ -209,7 +209,7 @@ def check_units(points: np.ndarray, path: str | os.PathLike) -> None:
 def write_scan(path: str | os.PathLike, points: np.ndarray) -> None:
     """Write an ``(N, 6)`` (or ``(N, 3)``) array in the format of the path's suffix.
 
-    Colours are rounded to integers 0-255; ``.txt`` and ``.xyz`` keep 6 decimals, ``.las``/
+    Colors are rounded to integers 0-255; ``.txt`` and ``.xyz`` keep 6 decimals, ``.las``/
     ``.laz`` millimetres, ``.ply`` and ``.pcd`` float64, ``.bin`` float32 and ``.e57`` float32
     around a float64 pose. Non-finite points raise ``ValueError``. The file is written next
     to its destination and renamed into place, so readers never see a partial file.

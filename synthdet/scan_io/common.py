@@ -29,13 +29,13 @@ ChunkReader = Callable[[Path, int, 'tuple[str, ...] | None', list], Iterator[np.
 
 
 def grey(intensity: np.ndarray) -> np.ndarray:
-    """``(n, 3)`` grey colours of intensities already scaled to 0-255."""
+    """``(n, 3)`` grey colors of intensities already scaled to 0-255."""
     level = np.clip(intensity, 0.0, 255.0)
     return np.repeat(level[:, None], 3, axis=1)
 
 
 class Scale:
-    """Maps raw colour or intensity values to 0-255 with a range fixed by the first chunk.
+    """Maps raw color or intensity values to 0-255 with a range fixed by the first chunk.
 
     The range is the header's when known, else the smallest usual one holding the first
     chunk's values: [0, 1] (float), 0-255 (8 bit), 0-4095 (12 bit), 0-65535 (16 bit), or
@@ -79,8 +79,8 @@ def structured_chunk(part: np.ndarray, colors: np.ndarray | None, intensity: str
 def no_color_note(path: Path, has_intensity: bool) -> str:
     """The note for a scan without colors: what the model gets instead."""
     if has_intensity:
-        return f'{path}: no colours: the model gets the intensity as grey instead'
-    return f'{path}: no colours and no intensity: the model gets zeros (black) instead'
+        return f'{path}: no colors: the model gets the intensity as grey instead'
+    return f'{path}: no colors and no intensity: the model gets zeros (black) instead'
 
 
 _SPLIT = {',': b',', ';': b';', ' ': None}

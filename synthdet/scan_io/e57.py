@@ -26,9 +26,9 @@ def read_chunks(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
         missing = 0
         for index in range(scan_count):
             fields = set(e57.get_header(index).point_fields)
-            has_colour = {'colorRed', 'colorGreen', 'colorBlue'} <= fields
-            missing += not has_colour
-            yield from _e57_scan_chunks(path, e57, index, fields, has_colour, chunk_points)
+            has_color = {'colorRed', 'colorGreen', 'colorBlue'} <= fields
+            missing += not has_color
+            yield from _e57_scan_chunks(path, e57, index, fields, has_color, chunk_points)
         if missing:
             note = no_color_note(path, True)
             notes.append(note if missing ==
@@ -37,7 +37,7 @@ def read_chunks(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
         e57.close()
 
 
-def _e57_scan_chunks(path: Path, e57, index: int, fields: set[str], has_colour: bool,
+def _e57_scan_chunks(path: Path, e57, index: int, fields: set[str], has_color: bool,
                      chunk_points: int) -> Iterator[np.ndarray]:
     """The points of the E57 file's scan ``index``, moved by its pose into the file's frame."""
     header = e57.get_header(index)
@@ -48,9 +48,9 @@ def _e57_scan_chunks(path: Path, e57, index: int, fields: set[str], has_colour: 
         raise ScanFormatError(f'{path}: scan {index} has neither cartesian '
                               f'nor spherical coordinates')
     invalid = 'cartesianInvalidState' if coordinates is cartesian else 'sphericalInvalidState'
-    colour_names = ['colorRed', 'colorGreen', 'colorBlue']
+    color_names = ['colorRed', 'colorGreen', 'colorBlue']
     wanted = coordinates + (
-        colour_names if has_colour else ['intensity'] if 'intensity' in fields else [])
+        color_names if has_color else ['intensity'] if 'intensity' in fields else [])
     wanted += [invalid] if invalid in fields else []
     capacity = max(1, min(chunk_points, header.point_count))
     buffers_by_name, buffers = e57.make_buffers(wanted, capacity)
@@ -58,7 +58,7 @@ def _e57_scan_chunks(path: Path, e57, index: int, fields: set[str], has_colour: 
     if header.has_pose():
         rotation = _quaternion_matrix(np.asarray(header.rotation, dtype=np.float64))
         translation = np.asarray(header.translation, dtype=np.float64)
-    scale = Scale(*_e57_limits(header, 'colorRed' if has_colour else 'intensity'))
+    scale = Scale(*_e57_limits(header, 'colorRed' if has_color else 'intensity'))
     reader = header.points.reader(buffers)
     try:
         while True:
@@ -71,8 +71,8 @@ def _e57_scan_chunks(path: Path, e57, index: int, fields: set[str], has_colour: 
                 xyz = _spherical_to_cartesian(xyz)
             chunk = np.zeros((count, 6))
             chunk[:, :3] = xyz @ rotation.T + translation
-            if has_colour:
-                chunk[:, 3:] = scale(np.column_stack([values[name] for name in colour_names]))
+            if has_color:
+                chunk[:, 3:] = scale(np.column_stack([values[name] for name in color_names]))
             elif 'intensity' in values:
                 chunk[:, 3:] = grey(scale(values['intensity']))
             if invalid in values:
@@ -83,7 +83,7 @@ def _e57_scan_chunks(path: Path, e57, index: int, fields: set[str], has_colour: 
 
 
 def _e57_limits(header, name: str) -> tuple[float | None, float | None]:
-    """The header's colour or intensity limits (``colorRedMinimum``...), if it has them."""
+    """The header's color or intensity limits (``colorRedMinimum``...), if it has them."""
     node = {'colorRed': 'colorLimits', 'intensity': 'intensityLimits'}[name]
     try:
         limits = header[node]
@@ -144,14 +144,14 @@ def write_e57_scans(path: str | os.PathLike, scans: Sequence[tuple[np.ndarray, n
             rotation = np.asarray(rotation, dtype=np.float64)
             shift = np.floor(points[:, :3].min(axis=0))
             local = points[:, :3] - shift
-            colours = colors_0_255(points).astype(np.uint8)
+            colors = colors_0_255(points).astype(np.uint8)
             data = {
                 'cartesianX': local[:, 0],
                 'cartesianY': local[:, 1],
                 'cartesianZ': local[:, 2],
-                'colorRed': colours[:, 0],
-                'colorGreen': colours[:, 1],
-                'colorBlue': colours[:, 2],
+                'colorRed': colors[:, 0],
+                'colorGreen': colors[:, 1],
+                'colorBlue': colors[:, 2],
             }
             e57.write_scan_raw(
                 data,

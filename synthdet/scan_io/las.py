@@ -23,10 +23,10 @@ def read_chunks(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
         raise ScanFormatError(f'{path}: not a readable LAS/LAZ file ({one_line(error)})') from None
     with reader:
         dimensions = set(reader.header.point_format.dimension_names)
-        has_colour = {'red', 'green', 'blue'} <= dimensions
-        if not has_colour:
+        has_color = {'red', 'green', 'blue'} <= dimensions
+        if not has_color:
             notes.append(no_color_note(path, True))
-        colour_scale, intensity_scale = Scale(), Scale()
+        color_scale, intensity_scale = Scale(), Scale()
         total = 0
         try:
             for points in reader.chunk_iterator(chunk_points):
@@ -35,8 +35,8 @@ def read_chunks(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
                 chunk[:, 0] = points.x  # scale and offset applied in float64
                 chunk[:, 1] = points.y
                 chunk[:, 2] = points.z
-                if has_colour:  # 16-bit by the standard; some writers store 8-bit values
-                    chunk[:, 3:] = colour_scale(
+                if has_color:  # 16-bit by the standard; some writers store 8-bit values
+                    chunk[:, 3:] = color_scale(
                         np.column_stack([points.red, points.green, points.blue]))
                 else:
                     chunk[:, 3:] = grey(intensity_scale(points.intensity))
@@ -60,7 +60,7 @@ def write_las_chunks(path: str | os.PathLike,
     """Write ``(n, 6)`` chunks as one LAS (or, for ``.laz``, LAZ) file; returns the count.
 
     Coordinates are stored to the millimetre (scale 0.001) around ``offset`` (default: the
-    first chunk's minimum floored to metres), colours as 16-bit (value x 257). Memory stays
+    first chunk's minimum floored to metres), colors as 16-bit (value x 257). Memory stays
     one chunk, so large test scans can be written.
     """
     import laspy
@@ -78,8 +78,8 @@ def write_las_chunks(path: str | os.PathLike,
                     path, mode='w', header=header, do_compress=path.suffix.lower() == '.laz')
             record = laspy.ScaleAwarePointRecord.zeros(len(chunk), header=writer.header)
             record.x, record.y, record.z = chunk[:, 0], chunk[:, 1], chunk[:, 2]
-            colours = colors_0_255(chunk).astype(np.uint16) * 257
-            record.red, record.green, record.blue = colours[:, 0], colours[:, 1], colours[:, 2]
+            colors = colors_0_255(chunk).astype(np.uint16) * 257
+            record.red, record.green, record.blue = colors[:, 0], colors[:, 1], colors[:, 2]
             writer.write_points(record)
             total += len(chunk)
     finally:

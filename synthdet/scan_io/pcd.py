@@ -89,8 +89,8 @@ def _pcd_number(path: Path, key: str, text: str) -> int:
     return int(text)
 
 
-def _pcd_colours(packed: np.ndarray) -> np.ndarray:
-    """``(n, 3)`` colours of PCD's packed ``rgb``/``rgba`` (float32 or uint32 bits)."""
+def _pcd_colors(packed: np.ndarray) -> np.ndarray:
+    """``(n, 3)`` colors of PCD's packed ``rgb``/``rgba`` (float32 or uint32 bits)."""
     bits = np.ascontiguousarray(packed).view(np.uint32)
     return np.column_stack([(bits >> 16) & 255, (bits >> 8) & 255, bits & 255]).astype(float)
 
@@ -100,11 +100,11 @@ def read_chunks(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
     """``(n, 6)`` chunks of the points, packed ``rgb`` as colors, else intensity as grey;
     records without coordinates (an organised cloud's pixels without a depth) left out."""
     header = _pcd_header(path)
-    colour = next((name for name in ('rgb', 'rgba') if name in header.fields), None)
+    color = next((name for name in ('rgb', 'rgba') if name in header.fields), None)
     intensity = 'intensity' if 'intensity' in header.fields else None
     if not {'x', 'y', 'z'} <= set(header.fields):
         raise ScanFormatError(f'{path}: PCD fields need x, y and z, got {header.fields}')
-    wanted = ['x', 'y', 'z'] + [name for name in (colour or intensity, ) if name]
+    wanted = ['x', 'y', 'z'] + [name for name in (color or intensity, ) if name]
     if header.data == 'binary':
         blocks = _pcd_binary_tables(path, header, chunk_points)
     elif header.data == 'binary_compressed':
@@ -115,7 +115,7 @@ def read_chunks(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
     else:
         raise ScanFormatError(f'{path}: PCD data {header.data!r} is not one of ascii, binary '
                               f'and binary_compressed')
-    if colour is None:
+    if color is None:
         notes.append(no_color_note(path, intensity is not None))
     intensity_scale = Scale()
     total = invalid = 0
@@ -123,7 +123,7 @@ def read_chunks(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
         total += len(block)
         for start in range(0, len(block), chunk_points):
             part = block[start:start + chunk_points]
-            colors = None if colour is None else _pcd_colours(part[colour])
+            colors = None if color is None else _pcd_colors(part[color])
             chunk = structured_chunk(part, colors, intensity, intensity_scale)
             # An organised cloud (a depth camera's frame, HEIGHT > 1) keeps one record per
             # pixel and marks the pixels without a depth by NaN coordinates: they are no points.
@@ -177,11 +177,11 @@ def _pcd_ascii_rows(path: Path, first_line: int, block: bytes, header: _PcdHeade
 
 def write(path: Path, points: np.ndarray) -> None:
     """A binary PCD with float64 ``x y z`` and packed ``rgb`` (uint32)."""
-    colours = colors_0_255(points).astype(np.uint32)
+    colors = colors_0_255(points).astype(np.uint32)
     table = np.empty(len(points), dtype=[('x', '<f8'), ('y', '<f8'), ('z', '<f8'), ('rgb', '<u4')])
     for i, name in enumerate('xyz'):
         table[name] = points[:, i]
-    table['rgb'] = (colours[:, 0] << 16) | (colours[:, 1] << 8) | colours[:, 2]
+    table['rgb'] = (colors[:, 0] << 16) | (colors[:, 1] << 8) | colors[:, 2]
     header = (f'# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z rgb\n'
               f'SIZE 8 8 8 4\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH {len(points)}\nHEIGHT 1\n'
               f'VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {len(points)}\nDATA binary\n')

@@ -12,7 +12,7 @@ from synthdet.ply import write_ply as write_ply_file
 from synthdet.scan_io.common import (Scale, ScanFormatError, colors_0_255, no_color_note,
                                      structured_chunk)
 
-PLY_COLOUR_NAMES = (
+PLY_COLOR_NAMES = (
     ('red', 'green', 'blue'),
     ('r', 'g', 'b'),
     ('diffuse_red', 'diffuse_green', 'diffuse_blue'),
@@ -27,29 +27,29 @@ def read_chunks(path: Path, chunk_points: int, columns: tuple[str, ...] | None,
         vertex = read_ply_vertices(path)
     except ValueError as error:
         raise ScanFormatError(str(error)) from None
-    yield from _structured_chunks(path, vertex, PLY_COLOUR_NAMES, PLY_INTENSITY_NAMES,
+    yield from _structured_chunks(path, vertex, PLY_COLOR_NAMES, PLY_INTENSITY_NAMES,
                                   chunk_points, notes, 'PLY vertices')
 
 
-def _structured_chunks(path: Path, table: np.ndarray, colour_names: Sequence[Sequence[str]],
+def _structured_chunks(path: Path, table: np.ndarray, color_names: Sequence[Sequence[str]],
                        intensity_names: Sequence[str], chunk_points: int, notes: list[str],
                        what: str) -> Iterator[np.ndarray]:
-    """``(n, 6)`` chunks of a structured array with ``x y z`` and optional colour fields."""
+    """``(n, 6)`` chunks of a structured array with ``x y z`` and optional color fields."""
     names = table.dtype.names or ()
     if not {'x', 'y', 'z'} <= set(names):
         raise ScanFormatError(f'{path}: {what} need x, y and z properties, got {names}')
-    colour = next((list(group) for group in colour_names if set(group) <= set(names)), None)
+    color = next((list(group) for group in color_names if set(group) <= set(names)), None)
     intensity = next((name for name in intensity_names if name in names), None)
-    if colour is None:
+    if color is None:
         notes.append(no_color_note(path, intensity is not None))
     scale = Scale(0.0, 255.0)
-    if colour is not None and table.dtype[colour[0]].kind == 'f':
-        scale = Scale()  # float colours: [0, 1] or 0-255, from the first chunk
+    if color is not None and table.dtype[color[0]].kind == 'f':
+        scale = Scale()  # float colors: [0, 1] or 0-255, from the first chunk
     intensity_scale = Scale()
     for start in range(0, len(table), chunk_points):
         part = table[start:start + chunk_points]
-        colors = None if colour is None else scale(
-            np.column_stack([part[name] for name in colour]))
+        colors = None if color is None else scale(
+            np.column_stack([part[name] for name in color]))
         yield structured_chunk(part, colors, intensity, intensity_scale)
 
 
@@ -64,12 +64,12 @@ def write(path: Path, points: np.ndarray) -> None:
 def ply_vertex(points: np.ndarray) -> dict[str, np.ndarray]:
     """PLY vertex properties of an ``(N, 6)`` scan: ``x y z`` float32, ``red green blue``
     uchar."""
-    colours = colors_0_255(points).astype(np.uint8)
+    colors = colors_0_255(points).astype(np.uint8)
     return {
         'x': points[:, 0].astype(np.float32),
         'y': points[:, 1].astype(np.float32),
         'z': points[:, 2].astype(np.float32),
-        'red': colours[:, 0],
-        'green': colours[:, 1],
-        'blue': colours[:, 2],
+        'red': colors[:, 0],
+        'green': colors[:, 1],
+        'blue': colors[:, 2],
     }

@@ -92,10 +92,10 @@ def _parse_text_blocks(path: Path, blocks: Iterable[tuple[int, bytes]], names: S
                        notes: list[str]) -> Iterator[np.ndarray]:
     """Parse blocks of text lines holding the columns ``names`` into ``(n, 6)`` chunks."""
     index = {name: i for i, name in enumerate(names) if name != '_'}
-    has_colour, has_intensity = 'r' in index, 'i' in index
-    if not has_colour:
+    has_color, has_intensity = 'r' in index, 'i' in index
+    if not has_color:
         notes.append(no_color_note(path, has_intensity))
-    colour_scale, intensity_scale = Scale(), Scale()
+    color_scale, intensity_scale = Scale(), Scale()
     for first_line, block in blocks:
         try:
             values = np.loadtxt(
@@ -113,8 +113,8 @@ def _parse_text_blocks(path: Path, blocks: Iterable[tuple[int, bytes]], names: S
             part = values[start:start + chunk_points]
             chunk = np.zeros((len(part), 6))
             chunk[:, :3] = part[:, [index['x'], index['y'], index['z']]]
-            if has_colour:
-                chunk[:, 3:] = colour_scale(part[:, [index['r'], index['g'], index['b']]])
+            if has_color:
+                chunk[:, 3:] = color_scale(part[:, [index['r'], index['g'], index['b']]])
             elif has_intensity:
                 chunk[:, 3:] = grey(intensity_scale(part[:, index['i']]))
             yield chunk

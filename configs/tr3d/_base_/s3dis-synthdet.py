@@ -51,7 +51,7 @@ test_pipeline = [
 # derives this from its own.
 tta_pipeline = with_test_time_augmentation(test_pipeline)
 
-# Augmentations that make real scans look less foreign (other colours, sparser, partial), off
+# Augmentations that make real scans look less foreign (other colors, sparser, partial), off
 # here: a config inserts them after PointSample with `with_robustness(_base_.train_pipeline,
 # _base_.robust_augmentations)`. docs/training.md, "Robustness augmentations", explains them.
 robust_augmentations = [
@@ -66,7 +66,7 @@ robust_augmentations = [
         min_points=2000),
     dict(type='RandomPointDropout', prob=0.3, ratio_range=(0.1, 0.5), min_points=2000),
     dict(type='RandomJitterPoints', jitter_std=[0.005, 0.005, 0.005], clip_range=[-0.015, 0.015]),
-    dict(type='RandomColourJitter', prob=0.8, brightness=20.0, contrast=0.2, channel_gain=0.1),
+    dict(type='RandomColorJitter', prob=0.8, brightness=20.0, contrast=0.2, channel_gain=0.1),
     dict(type='RandomDropPointsColor', drop_ratio=0.2),
 ]
 

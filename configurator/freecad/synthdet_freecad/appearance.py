@@ -1,9 +1,9 @@
-"""What the document looks like when opened: visibility, a colour per class, the first view.
+"""What the document looks like when opened: visibility, a color per class, the first view.
 
-Runs inside FreeCAD. Colours, visibility and the camera belong to FreeCAD's GUI side (view
+Runs inside FreeCAD. Colors, visibility and the camera belong to FreeCAD's GUI side (view
 providers), which ``freecadcmd`` neither creates nor saves: a document it writes has no
 ``GuiDocument.xml`` and opens with every object hidden. So the build records a ``Look`` (object
-name -> colour, transparency) and then either applies it to the view providers (macro in the
+name -> color, transparency) and then either applies it to the view providers (macro in the
 GUI) or writes it as the ``GuiDocument.xml`` FreeCAD itself would have saved (headless), with
 an isometric camera fitted to the room.
 """
@@ -14,7 +14,7 @@ from xml.sax.saxutils import escape, quoteattr
 import FreeCAD as App
 
 # the project's one palette (standard library only; the macro puts synthdet on sys.path)
-from synthdet.classes import class_colour
+from synthdet.classes import class_color
 
 WALL_TRANSPARENCY = 75  # percent: the walls stay visible without hiding the room's contents
 # FreeCAD's isometric view: camera x to the right along (1, 1, 0), looking along (-1, 1, -1)
@@ -29,31 +29,31 @@ def _packed(rgb: tuple[int, int, int]) -> int:
 
 
 class Look:
-    """Colours (and transparency) of the document's solids, keyed by object name."""
+    """Colors (and transparency) of the document's solids, keyed by object name."""
 
     def __init__(self):
-        self.colours: dict[str, tuple[tuple[int, int, int], int]] = {}
+        self.colors: dict[str, tuple[tuple[int, int, int], int]] = {}
 
     def paint(self, obj, rgb: tuple[int, int, int], transparency: int = 0) -> None:
-        """Give ``obj`` a colour (0-255 RGB) and a transparency (percent)."""
-        self.colours[obj.Name] = (tuple(rgb), transparency)
+        """Give ``obj`` a color (0-255 RGB) and a transparency (percent)."""
+        self.colors[obj.Name] = (tuple(rgb), transparency)
 
     def apply_in_gui(self, doc) -> None:
-        """Colour the view providers of ``doc`` in a running GUI and fit an isometric view."""
+        """Color the view providers of ``doc`` in a running GUI and fit an isometric view."""
         import FreeCADGui as Gui
 
-        for name, (rgb, transparency) in self.colours.items():
+        for name, (rgb, transparency) in self.colors.items():
             obj = doc.getObject(name)
             view = obj.ViewObject
-            colour = tuple(value / 255.0 for value in rgb)
+            color = tuple(value / 255.0 for value in rgb)
             if obj.TypeId == 'App::Link':  # a link shows its target unless told otherwise
                 material = view.ShapeMaterial
-                material.DiffuseColor = colour
+                material.DiffuseColor = color
                 material.Transparency = transparency / 100.0
                 view.ShapeMaterial = material
                 view.OverrideMaterial = True
             else:
-                view.ShapeColor = colour
+                view.ShapeColor = color
                 view.Transparency = transparency
         gui_document = Gui.getDocument(doc.Name)
         view = gui_document.activeView()
@@ -65,7 +65,7 @@ class Look:
         """Insert into the saved ``path`` the ``GuiDocument.xml`` the GUI would have written.
 
         Every object gets its stored visibility (origin helpers hidden), painted solids their
-        colour, and the camera an isometric view fitted to the visible shapes. FreeCAD reads
+        color, and the camera an isometric view fitted to the visible shapes. FreeCAD reads
         the zip's files in the order it asks for them, so the new file goes after the
         document's own files (the shapes), where a GUI-saved document has it: appended, or, if
         the file already holds one, by writing the archive anew.
@@ -98,8 +98,8 @@ class Look:
                 _property('Visibility', 'App::PropertyBool',
                           f'<Bool value="{"true" if visible else "false"}"/>')
             ]
-            if obj.Name in self.colours and obj.TypeId == 'App::Link':
-                rgb, transparency = self.colours[obj.Name]
+            if obj.Name in self.colors and obj.TypeId == 'App::Link':
+                rgb, transparency = self.colors[obj.Name]
                 properties.append(
                     _property('OverrideMaterial', 'App::PropertyBool', '<Bool value="true"/>'))
                 properties.append(
@@ -108,8 +108,8 @@ class Look:
                         f'<PropertyMaterial ambientColor="{_packed((51, 51, 51))}" '
                         f'diffuseColor="{_packed(rgb)}" specularColor="0" emissiveColor="0" '
                         f'shininess="0.2" transparency="{transparency / 100.0:.2f}"/>'))
-            elif obj.Name in self.colours:
-                rgb, transparency = self.colours[obj.Name]
+            elif obj.Name in self.colors:
+                rgb, transparency = self.colors[obj.Name]
                 properties.append(
                     _property('ShapeColor', 'App::PropertyColor',
                               f'<PropertyColor value="{_packed(rgb)}"/>'))

@@ -117,8 +117,8 @@ def build_room(doc, corners: dict, wall_thickness: float, group, look):
         group.addObject(obj)
     for obj in (sketch, outline, profile):
         obj.Visibility = False
-    look.paint(floor, appearance.class_colour('floor'))
-    look.paint(walls, appearance.class_colour('wall'), appearance.WALL_TRANSPARENCY)
+    look.paint(floor, appearance.class_color('floor'))
+    look.paint(walls, appearance.class_color('wall'), appearance.WALL_TRANSPARENCY)
     return sheet
 
 
@@ -176,10 +176,10 @@ def _add_members(group, objects: list) -> None:
 
 
 def _paint_model(look, container) -> None:
-    colour = appearance.class_colour(container.DetectedClass)
+    color = appearance.class_color(container.DetectedClass)
     for child in library.children(container):
         if hasattr(child, 'Shape') or child.TypeId == 'App::Link':
-            look.paint(child, colour)
+            look.paint(child, color)
 
 
 def import_detections(doc,
@@ -192,7 +192,7 @@ def import_detections(doc,
     """Add the room (if corners are given) and every detection scoring >= ``min_score``.
 
     Detections are merged, stood on the floor or their table, oriented and kept inside the
-    walls by ``arrangement``; ``look`` (an ``appearance.Look``) collects the colours. Returns a
+    walls by ``arrangement``; ``look`` (an ``appearance.Look``) collects the colors. Returns a
     report: ``objects`` (name, label, class, group, model, stands_on, orientation,
     alternatives), ``warnings`` and ``skipped_low_score``.
     """

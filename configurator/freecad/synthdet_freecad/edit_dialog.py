@@ -28,17 +28,17 @@ def picked_point() -> tuple[float, float] | None:
 
 
 def add_in_gui(doc, class_name: str):
-    """Add a part of ``class_name`` at the picked point or the view centre, coloured by its
+    """Add a part of ``class_name`` at the picked point or the view centre, colored by its
     class; returns it."""
     import FreeCADGui as Gui
     where = picked_point()
     if where is None:
         where = editing.view_point(Gui.ActiveDocument.ActiveView, editing.floor_height(doc))
     part = editing.add_part(doc, class_name, *where)
-    colour = tuple(value / 255.0 for value in appearance.class_colour(class_name))
+    color = tuple(value / 255.0 for value in appearance.class_color(class_name))
     for child in labels.part_children(part):
         if hasattr(child, 'Shape') and hasattr(child.ViewObject, 'ShapeColor'):
-            child.ViewObject.ShapeColor = colour
+            child.ViewObject.ShapeColor = color
     Gui.Selection.clearSelection()
     Gui.Selection.addSelection(part)
     return part

@@ -61,7 +61,7 @@ def options_from_environment(overrides: dict | None = None, require_out: bool = 
 
 
 def import_into(doc, options: dict, look) -> dict:
-    """Validate the option's files and import them into ``doc`` (colours into ``look``, an
+    """Validate the option's files and import them into ``doc`` (colors into ``look``, an
     ``appearance.Look``); returns the import report."""
     predictions = schema.read_predictions(options['predictions'])
     corners = schema.read_corners(options['corners']) if options['corners'] else None

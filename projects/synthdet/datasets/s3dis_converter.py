@@ -4,7 +4,7 @@ Reads ``root/Stanford3dDataset_v1.2_Aligned_Version/Area_N/<room>/Annotations/<c
 and writes, in ``out_dir``, for every room:
 
 - ``points/Area_N_<room>.bin``: float32 (N, 6), xyz shifted so the room's minimum is 0,
-  colours 0-255;
+  colors 0-255;
 - ``semantic_mask/Area_N_<room>.bin``: int64 ids of :data:`SEMANTIC_CLASSES`;
 - ``instance_mask/Area_N_<room>.bin``: int64, annotation files numbered 1..K in natural file
   order (structural ones included; 0 means unannotated), like mmdet3d's collect step;
@@ -222,7 +222,7 @@ def convert_room(room_dir: Path, name: str, out_dir: Path, skip: bool) -> RoomRe
         return RoomResult(name, 0, [], room.skipped, room.unknown)
     low, high = _xyz_min_max(room.points)
     # xyz shifted to the room's minimum, computed in float64 and rounded to float32 once (as
-    # shifting the float64 points, then converting); colours converted as they are
+    # shifting the float64 points, then converting); colors converted as they are
     points = np.empty(room.points.shape, dtype=np.float32)
     np.subtract(room.points[:, :3], low, out=points[:, :3], casting='unsafe')
     points[:, 3:] = room.points[:, 3:]

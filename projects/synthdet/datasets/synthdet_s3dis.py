@@ -10,7 +10,7 @@ from mmdet3d.datasets import S3DISDataset
 from mmdet3d.registry import DATASETS
 
 from projects.synthdet.datasets import transforms  # noqa: F401  (registers the augmentations)
-from synthdet.classes import (CLASS_COLOURS, DETECTION_CLASSES, DETECTION_SEMANTIC_IDS,
+from synthdet.classes import (CLASS_COLORS, DETECTION_CLASSES, DETECTION_SEMANTIC_IDS,
                               SEMANTIC_CLASSES)
 from synthdet.info_files import InfoFileError, load_info_pickle
 
@@ -33,7 +33,7 @@ class SynthdetS3DISDataset(S3DISDataset):
         DETECTION_SEMANTIC_IDS,
         'seg_all_class_ids':
         tuple(range(len(SEMANTIC_CLASSES))),
-        'palette': [CLASS_COLOURS[name] for name in DETECTION_CLASSES],
+        'palette': [CLASS_COLORS[name] for name in DETECTION_CLASSES],
     }
 
     def __init__(self,

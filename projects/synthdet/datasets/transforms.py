@@ -2,14 +2,14 @@
 
 Registered in mmdet3d's ``TRANSFORMS`` when ``projects.synthdet.datasets.synthdet_s3dis`` is
 imported (the configs' ``custom_imports``). They work on mmdet3d's ``results`` dicts after
-``LoadPointsFromFile`` (``DepthPoints`` with the colour in dims 3:6, still 0-255) and
+``LoadPointsFromFile`` (``DepthPoints`` with the color in dims 3:6, still 0-255) and
 ``LoadAnnotations3D`` (axis-aligned ``DepthInstance3DBoxes``); ``with_robustness`` of
 ``projects/synthdet/config_helpers.py`` puts them right after ``PointSample`` and before
 ``NormalizePointsColor`` (docs/training.md says why). Like mmdet3d's own transforms they draw
 from numpy's global generator, which mmengine seeds (``randomness.seed``, one seed per loader
 worker), so a seeded run repeats its augmentations.
 
-Colour dropout and xyz jitter are mmdet3d's ``RandomDropPointsColor`` and
+Color dropout and xyz jitter are mmdet3d's ``RandomDropPointsColor`` and
 ``RandomJitterPoints``; ``robust_augmentations`` in ``configs/tr3d/_base_/s3dis-synthdet.py``
 lists them with these.
 """
@@ -98,17 +98,17 @@ class RandomQuarterTurn(BaseTransform):
 
 
 @TRANSFORMS.register_module()
-class RandomColourJitter(BaseTransform):
-    """Change the colours of the whole scene as another scanner or lighting would: contrast
+class RandomColorJitter(BaseTransform):
+    """Change the colors of the whole scene as another scanner or lighting would: contrast
     about the mean grey level, a gain per channel, a brightness offset, then clipped to 0..255.
 
-    Works on colours in 0..255, before ``NormalizePointsColor``. A scene without colour (all
-    zeros, as colour-less scanners and the generator write them) stays without colour.
+    Works on colors in 0..255, before ``NormalizePointsColor``. A scene without color (all
+    zeros, as color-less scanners and the generator write them) stays without color.
 
     Args:
         prob: probability of jittering a scene.
         brightness: the offset added to every channel is uniform in
-            [-brightness, brightness] (colour units, 0..255).
+            [-brightness, brightness] (color units, 0..255).
         contrast: the distances to the mean grey level are scaled by a factor uniform in
             [1 - contrast, 1 + contrast].
         channel_gain: each channel is multiplied by its own factor uniform in
@@ -130,18 +130,18 @@ class RandomColourJitter(BaseTransform):
         self.channel_gain = channel_gain
 
     def transform(self, results: dict) -> dict:
-        """Jitter the colour of ``points``."""
+        """Jitter the color of ``points``."""
         if np.random.rand() >= self.prob:
             return results
         points = results['points']
-        colours = points.color
-        if not colours.any():
+        colors = points.color
+        if not colors.any():
             return results
         contrast = np.random.uniform(1 - self.contrast, 1 + self.contrast)
         gains = np.random.uniform(1 - self.channel_gain, 1 + self.channel_gain, 3)
         offset = np.random.uniform(-self.brightness, self.brightness)
-        grey = colours.mean()
-        jittered = ((colours - grey) * contrast + grey) * colours.new_tensor(gains) + offset
+        grey = colors.mean()
+        jittered = ((colors - grey) * contrast + grey) * colors.new_tensor(gains) + offset
         points.color = jittered.clamp(0.0, 255.0)
         return results
 

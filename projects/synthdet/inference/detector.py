@@ -1,7 +1,7 @@
 """A model as a detector function of :mod:`projects.synthdet.inference.windows`.
 
 Each call runs the config's test pipeline (``PointSample`` with the training number of points,
-colour normalisation) through mmdet3d's ``inference_detector`` on the given points, shifted so
+color normalisation) through mmdet3d's ``inference_detector`` on the given points, shifted so
 that their minimum is at the origin like the converted training data, and shifts the boxes back.
 """
 from __future__ import annotations
