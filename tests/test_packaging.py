@@ -1,119 +1,152 @@
-"""``pip install .`` into a fresh venv that already has the native stack gives a working install.
+"""What ``pip install .`` and the editable install (``pip install -e .``) put on ``sys.path``.
 
-The fresh venv sees the project's stack (torch, mmcv, MinkowskiEngine, bpy, ...) through a ``.pth``
-line, as a machine that built the stack once would, and installs synthdet from a copy of the
-working tree with ``--no-index``: the install may not need the network, and every
-``install_requires`` entry must be met by the stack. The checks then run from outside the
-source tree, so only the installed files can be imported.
+The wheel holds one top-level package, the shared library ``synthdet``: the generic names of the
+clone's other folders (``generator``, ``configurator``, ``projects``) are not installed. The
+editable install, the one ``scripts/setup.sh`` makes, is a ``.pth`` line naming the clone, so
+``generator``, ``configurator``, ``projects.synthdet``, ``tools`` and ``tests`` import under their
+one name from any folder. Both are built from a copy of the working tree without network access,
+into fresh venvs that see the project's stack (numpy, torch, ...) through a ``.pth`` line, as a
+machine that built the stack once would; the checks run outside the source tree.
 """
 import json
 import shutil
 import subprocess
 import sys
 import sysconfig
+import zipfile
 from pathlib import Path
 
-import numpy as np
 import pytest
 
+from synthdet.scan_io import write_scan
 from tests.room_scans import make_room
 
 REPO = Path(__file__).resolve().parents[1]
 SOURCE_IGNORE = shutil.ignore_patterns('.git', '.venv', 'work_dirs', 'data', '__pycache__',
                                        '*.egg-info', 'build', '.pytest_cache')
-# Console scripts and the module each must run (see setup.cfg [options.entry_points]).
-CONSOLE_SCRIPTS = ('synthdet-generate', 'synthdet-configurator')
+CLONE_ONLY = ('generator', 'configurator', 'projects')
 
 
-def run(command: list, cwd: Path, timeout: float = 600) -> subprocess.CompletedProcess:
-    """Run ``command``; fail the test with its output when it exits non-zero."""
+def run(command: list, cwd: Path, check: bool = True) -> subprocess.CompletedProcess:
+    """Run ``command``; with ``check``, fail the test with its output when it exits non-zero."""
     result = subprocess.run([str(part) for part in command],
                             cwd=cwd,
                             capture_output=True,
                             text=True,
-                            timeout=timeout)
-    assert result.returncode == 0, f'{command} exited {result.returncode}:\n' \
-                                   f'{result.stdout[-3000:]}\n{result.stderr[-3000:]}'
+                            timeout=600)
+    if check:
+        assert result.returncode == 0, f'{command} exited {result.returncode}:\n' \
+                                       f'{result.stdout[-3000:]}\n{result.stderr[-3000:]}'
     return result
 
 
-@pytest.fixture(scope='module')
-def installed(tmp_path_factory) -> dict:
-    """A fresh venv with synthdet installed from a copy of the working tree."""
-    root = tmp_path_factory.mktemp('packaging')
-    source = root / 'source'
-    shutil.copytree(REPO, source, ignore=SOURCE_IGNORE, symlinks=True)
+def fresh_venv(root: Path) -> dict:
+    """A venv under ``root`` that sees this interpreter's site-packages (the stack) via a .pth."""
     venv = root / 'venv'
     run([sys.executable, '-m', 'venv', '--without-pip', venv], cwd=root)
     python = venv / 'bin' / 'python'
     purelib = Path(
         run([python, '-c', 'import sysconfig; print(sysconfig.get_paths()["purelib"])'],
             cwd=root).stdout.strip())
-    stack = sysconfig.get_paths()['purelib']  # this interpreter's site-packages: the stack
-    (purelib / 'native_stack.pth').write_text(stack + '\n')
-    run([python, '-m', 'pip', 'install', '--no-index', '--no-build-isolation', '--quiet', source],
-        cwd=root)
+    (purelib / 'native_stack.pth').write_text(sysconfig.get_paths()['purelib'] + '\n')
     outside = root / 'elsewhere'
     outside.mkdir()
-    return {'python': python, 'bin': venv / 'bin', 'purelib': purelib, 'cwd': outside}
+    return {'python': python, 'purelib': purelib, 'cwd': outside}
 
 
-def test_packages_import_from_the_install_not_the_source_tree(installed):
-    code = ('import json, configurator, generator, projects.synthdet, synthdet; '
-            'print(json.dumps([m.__file__ for m in '
-            '(configurator, generator, projects.synthdet, synthdet)]))')
-    files = json.loads(run([installed['python'], '-c', code], cwd=installed['cwd']).stdout)
-    for file in files:
-        assert Path(file).is_relative_to(installed['purelib']), file
+def copy_source(root: Path) -> Path:
+    """A copy of the working tree without its build outputs, data and venv."""
+    source = root / 'source'
+    shutil.copytree(REPO, source, ignore=SOURCE_IGNORE, symlinks=True)
+    return source
 
 
-def test_macro_profiles_and_license_are_installed(installed):
-    purelib = installed['purelib']
-    macro = purelib / 'configurator' / 'freecad' / 'ImportSynthdet.FCMacro'
-    assert macro.read_text() == (REPO / 'configurator/freecad/ImportSynthdet.FCMacro').read_text()
-    profiles = sorted(p.name for p in (purelib / 'generator' / 'profiles').glob('*.json'))
-    assert profiles == sorted(p.name for p in (REPO / 'generator' / 'profiles').glob('*.json'))
-    assert 'paper.json' in profiles
-    licences = list(purelib.glob('synthdet-*.dist-info/**/LICENSE'))
-    assert licences and 'Apache License' in licences[0].read_text()
-
-
-@pytest.mark.parametrize('script', CONSOLE_SCRIPTS)
-def test_console_scripts_answer_help(installed, script):
-    result = run([installed['bin'] / script, '--help'], cwd=installed['cwd'])
-    assert result.stdout.startswith('usage:')
-
-
-def test_installed_configurator_builds_a_freecad_document(installed):
-    """The installed package data (the FreeCAD macro) works: corners, then a document."""
-    work = installed['cwd']
-    room = make_room('L', n_points=60_000, seed=3, furniture=0)
-    scan = work / 'room.txt'
-    np.savetxt(scan, room.points, fmt='%.4f')
-    corners = work / 'room.corners.json'
-    run([installed['bin'] / 'synthdet-configurator', 'corners', scan, '--out', corners], cwd=work)
-    found = json.loads(corners.read_text())['corners']
-    assert len(found) == 6
-    predictions = work / 'room.pred.json'
-    centre = np.asarray(room.polygon).mean(axis=0)
-    predictions.write_text(
-        json.dumps({
-            'format': 'synthdet.predictions/1',
-            'scan': 'room.txt',
-            'model': 'test',
-            'classes': ['table'],
-            'detections': [{
-                'class': 'table',
-                'score': 0.9,
-                'center': [float(centre[0]), float(centre[1]), room.floor_z + 0.375],
-                'size': [1.2, 0.8, 0.75],
-                'yaw': 0.0
-            }]
-        }))
-    document = work / 'room.FCStd'
+@pytest.fixture(scope='module')
+def wheel(tmp_path_factory) -> Path:
+    """The wheel ``pip wheel`` builds from a copy of the working tree."""
+    root = tmp_path_factory.mktemp('wheel')
+    source = copy_source(root)
     run([
-        installed['bin'] / 'synthdet-configurator', 'freecad', '--scan', scan, '--predictions',
-        predictions, '--corners', corners, '--out', document
+        sys.executable, '-m', 'pip', 'wheel', '--no-deps', '--no-build-isolation', '--no-index',
+        '--quiet', '--wheel-dir', root / 'dist', source
     ],
-        cwd=work)
-    assert document.stat().st_size > 0
+        cwd=root)
+    (built, ) = (root / 'dist').glob('synthdet-*.whl')
+    return built
+
+
+@pytest.fixture(scope='module')
+def installed(wheel, tmp_path_factory) -> dict:
+    """A fresh venv with the wheel installed (its ``install_requires`` met by the stack)."""
+    env = fresh_venv(tmp_path_factory.mktemp('installed'))
+    run([env['python'], '-m', 'pip', 'install', '--no-index', '--quiet', wheel], cwd=env['cwd'])
+    return env
+
+
+@pytest.fixture(scope='module')
+def editable(tmp_path_factory) -> dict:
+    """A fresh venv with a copy of the clone installed the way scripts/setup.sh installs it."""
+    root = tmp_path_factory.mktemp('editable')
+    env = fresh_venv(root)
+    env['source'] = copy_source(root)
+    run([
+        env['python'], '-m', 'pip', 'install', '--no-deps', '--no-build-isolation', '--no-index',
+        '--quiet', '-e', env['source']
+    ],
+        cwd=env['cwd'])
+    return env
+
+
+def test_wheel_has_one_top_level_package_synthdet(wheel):
+    with zipfile.ZipFile(wheel) as archive:
+        names = archive.namelist()
+        (top_level, ) = [name for name in names if name.endswith('.dist-info/top_level.txt')]
+        assert archive.read(top_level).decode().split() == ['synthdet']
+        licence = [name for name in names if name.endswith('/LICENSE')]
+        assert licence and 'Apache License' in archive.read(licence[0]).decode()
+    roots = {name.split('/')[0] for name in names}
+    assert roots == {'synthdet', 'synthdet-0.1.0.dist-info'}
+    # every module of the library, subpackages included, and nothing else
+    library = {path.relative_to(REPO).as_posix() for path in (REPO / 'synthdet').rglob('*.py')}
+    assert {name for name in names if name.endswith('.py')} == library
+
+
+def test_installed_library_reads_a_scan_outside_the_clone(installed):
+    points = make_room('L', n_points=2_000, seed=1).points
+    write_scan(installed['cwd'] / 'room.ply', points)
+    code = ('import json, synthdet, synthdet.scan_io as scan_io; '
+            'points = scan_io.read_scan("room.ply"); '
+            'print(json.dumps([synthdet.__file__, scan_io.__file__, len(points)]))')
+    package, scan_io, count = json.loads(run([installed['python'], '-c', code],
+                                             cwd=installed['cwd']).stdout)
+    assert Path(package).is_relative_to(installed['purelib'])
+    assert Path(scan_io).is_relative_to(installed['purelib'])
+    assert count == len(points)
+
+
+@pytest.mark.parametrize('name', CLONE_ONLY)
+def test_install_has_no_generic_top_level_package(installed, name):
+    result = run([installed['python'], '-c', f'import {name}'], cwd=installed['cwd'], check=False)
+    assert result.returncode == 1
+    assert f"No module named '{name}'" in result.stderr
+    assert not (installed['purelib'] / name).exists()
+
+
+def test_editable_install_imports_the_clone_under_its_folder_names(editable):
+    modules = ('synthdet.scan_io', 'generator.config', 'configurator.corners',
+               'projects.synthdet', 'tests.room_scans')
+    code = ('import importlib, json, sys; '
+            f'files = [importlib.import_module(m).__file__ for m in {modules!r}]; '
+            'print(json.dumps(files))')
+    files = json.loads(run([editable['python'], '-c', code], cwd=editable['cwd']).stdout)
+    for module, file in zip(modules, files):
+        expected = editable['source'].joinpath(*module.split('.'))
+        assert Path(file) in (expected / '__init__.py', expected.with_suffix('.py')), module
+
+
+def test_a_tool_runs_from_another_folder_with_the_editable_install(editable):
+    """A tool imports the clone's packages through the install; it inserts no path itself."""
+    tool = editable['source'] / 'tools' / 'check_annotations.py'
+    assert 'sys.path' not in tool.read_text()
+    result = run([editable['python'], tool, '--help'], cwd=editable['cwd'])
+    assert result.stdout.startswith('usage:')
