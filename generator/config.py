@@ -89,7 +89,8 @@ DEFAULTS: dict[str, Any] = {
         'sensors': {
             'paper': 0.34,
             'tls': 0.33,
-            'tablet': 0.33
+            'tablet': 0.33,
+            'depth_frame': 0.0
         },
         # every sensor model: probability that a ray passes glass (printer doors, cabinet fronts)
         # to the surface behind it, as a laser crosses clear glass; 0: glass is opaque (paper)
@@ -127,6 +128,24 @@ DEFAULTS: dict[str, Any] = {
             'dark_luminance': 40.0,  # a triangle color darker than this (0-255) is dark
             'dark_dropout': 0.7,  # probability that a return on a dark triangle is lost
             'shiny_dropout': 0.5,  # the same on shiny (metal palette) triangles
+        },
+        'depth_frame': {  # one RGB-D camera frame (Kinect-like; generator/sensors.py)
+            'height': [1.0, 1.6],  # camera height, metres
+            'wall_distance': [0.2, 0.8],  # camera distance from the nearest wall, metres
+            'object_clearance': 0.3,  # camera distance from any object's bounds, metres
+            'aim_at_objects': 0.7,  # probability of facing an object (else a cell's centre)
+            'pitch_deg': [0.0, 25.0],  # downward tilt of the view
+            'horizontal_fov_deg': [57.0, 62.0],
+            'vertical_fov_deg': [45.0, 49.0],
+            'min_range': 0.5,
+            'max_range': [4.5, 5.0],  # drawn per frame; no return beyond it
+            'depth_noise': [0.0012, 0.0019],  # std a + b * depth**2 of the range error, metres
+            'edge_jump': 0.1,  # depth step between neighbouring pixels that makes an edge, metres
+            'edge_dropout': 0.8,  # probability that a pixel at a depth edge has no return
+            'dark_luminance': 40.0,  # a triangle color darker than this (0-255) is dark
+            'dark_dropout': 0.5,  # probability that a return on a dark triangle is lost
+            'shiny_dropout': 0.4,  # the same on shiny (metal palette) triangles
+            'min_object_points': 100,  # an object with fewer returns loses them
         },
     },
     'appearance': {  # drawn per room (generator/appearance.py); all 0 = the paper's flat colors
@@ -386,7 +405,7 @@ def _validate_appearance(config: dict[str, Any], source: str) -> None:
 
 
 def _validate_sensors(scanner: dict[str, Any], source: str) -> None:
-    """The sensor mix and the TLS and tablet parameters."""
+    """The sensor mix and the TLS, tablet and depth frame parameters."""
     _distribution({'scanner': scanner}, 'scanner', 'sensors', source)
     for sensor, ranges, probabilities, lengths in (
         ('tls', ('height', 'stations_per_cell'), ('mixed_pixels', ),
@@ -443,6 +462,40 @@ def _validate_sensors(scanner: dict[str, Any], source: str) -> None:
     if isinstance(poses, bool) or not isinstance(poses, int) or poses < 2:
         raise ConfigError(f'{source}: "scanner.tablet.poses" must be an integer >= 2, '
                           f'got {_shown(poses)}')
+    _validate_depth_frame(scanner['depth_frame'], source)
+
+
+def _validate_depth_frame(frame: dict[str, Any], source: str) -> None:
+    """The depth frame's parameters."""
+    where = 'scanner.depth_frame'
+    view = {where: frame}  # _number and _range name the key by its full path
+    for key in ('height', 'wall_distance', 'pitch_deg', 'horizontal_fov_deg', 'vertical_fov_deg',
+                'max_range'):
+        _range(view, where, key, source)
+    for key in ('aim_at_objects', 'edge_dropout', 'dark_dropout', 'shiny_dropout'):
+        if not 0.0 <= _number(view, where, key, source) <= 1.0:
+            raise ConfigError(f'{source}: "{where}.{key}" is outside [0, 1]')
+    for key in ('object_clearance', 'min_range', 'edge_jump', 'dark_luminance'):
+        if _number(view, where, key, source) < 0:
+            raise ConfigError(f'{source}: "{where}.{key}" must not be negative')
+    if frame['min_range'] >= frame['max_range'][0]:
+        raise ConfigError(f'{source}: "{where}.min_range" must be below "{where}.max_range"')
+    if frame['pitch_deg'][1] > 90:
+        raise ConfigError(f'{source}: "{where}.pitch_deg" must stay within [0, 90] degrees')
+    for key in ('horizontal_fov_deg', 'vertical_fov_deg'):
+        if not (1.0 <= frame[key][0] and frame[key][1] <= 170.0):
+            raise ConfigError(f'{source}: "{where}.{key}" must lie in [1, 170] degrees, '
+                              f'got {_shown(frame[key])}')
+    noise = frame['depth_noise']
+    if (not isinstance(noise, (list, tuple)) or len(noise) != 2
+            or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0
+                   or not math.isfinite(v) for v in noise)):
+        raise ConfigError(f'{source}: "{where}.depth_noise" must be [a, b], two non-negative '
+                          f'numbers (std a + b * depth**2), got {_shown(noise)}')
+    least = frame['min_object_points']
+    if isinstance(least, bool) or not isinstance(least, int) or least < 0:
+        raise ConfigError(f'{source}: "{where}.min_object_points" must be a non-negative '
+                          f'integer, got {_shown(least)}')
 
 
 def _validate_hall(config: dict[str, Any], source: str) -> None:

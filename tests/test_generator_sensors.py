@@ -29,6 +29,8 @@ REPO = Path(__file__).resolve().parents[1]
 # the raw scanner: no noise, no mixed pixels, no export spacing filter (each tested on its own)
 TLS = dict(DEFAULTS['scanner']['tls'], mixed_pixels=0.0, range_noise=[0.0, 0.0], point_spacing=None)
 TABLET = DEFAULTS['scanner']['tablet']
+# the sensor models of the default mix (the depth frame is in profiles only)
+DEFAULT_MIX = {model for model, p in DEFAULTS['scanner']['sensors'].items() if p > 0}
 BATCH = 65536
 
 
@@ -332,7 +334,8 @@ class RecordingScanner(Scanner):
 
 def test_paper_profile_casts_uniform_directions():
     profile = load_config(REPO / 'generator' / 'profiles' / 'paper.json')['scanner']
-    assert profile['sensors'] == {'paper': 1.0, 'tls': 0.0, 'tablet': 0.0}
+    assert profile['sensors'] == {'paper': 1.0, 'tls': 0.0, 'tablet': 0.0,
+                                  'depth_frame': 0.0}
     scene = room_scene((6, 4, 3), [((2, 1, 0), (3, 2, 1), (255, 0, 0))])
     room = RoomGeometry(
         np.array([[0, 0], [0, 4], [6, 4], [6, 0]], float), 3.0, [], np.zeros((0, 2, 2)),
@@ -466,7 +469,7 @@ def test_the_default_mix_gives_each_sensor_its_rooms(mixed_run):
         assert len(points) == 20000
         sensor = meta['generator']['sensor']
         models[sensor['model']] = (meta, points[:, :3])
-    assert set(models) == set(SENSOR_MODELS)
+    assert set(models) == DEFAULT_MIX
     paper, _ = models['paper']
     assert paper['generator']['sensor_path'] and paper['generator']['object_points'] == 10000
     meta, xyz = models['tls']
@@ -539,7 +542,7 @@ def test_check_annotations_passes_the_rooms_and_catches_points_given_to_an_objec
     work, _ = mixed_run
     assert check_annotations([str(work / 'out'), '--areas', '7', '--out', str(tmp_path / 'ok.json')]) == 0
     rows = json.loads((tmp_path / 'ok.json').read_text())['rows']
-    assert {row['sensor'] for row in rows} == set(SENSOR_MODELS)
+    assert {row['sensor'] for row in rows} == DEFAULT_MIX
     assert all(row['objects_with_points_outside'] == 0 for row in rows)
     assert all(row['extent_median'] <= 1.1 for row in rows)  # tablet noise: about 1 cm
     assert all(0.0 < row['coverage_median'] <= 1.0 for row in rows)
