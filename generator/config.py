@@ -134,9 +134,10 @@ DEFAULTS: dict[str, Any] = {
             'wall_distance': [0.2, 0.8],  # camera distance from the nearest wall, metres
             'object_clearance': 0.3,  # camera distance from any object's bounds, metres
             'aim_at_objects': 0.7,  # probability of facing an object (else a cell's centre)
-            'pitch_deg': [0.0, 25.0],  # downward tilt of the view
-            'horizontal_fov_deg': [57.0, 62.0],
-            'vertical_fov_deg': [45.0, 49.0],
+            'pitch_deg': [0.0, 30.0],  # downward tilt of the view
+            # Kinect v1 / Xtion (about 58 x 45 degrees) to the wider cameras of SUN RGB-D
+            'horizontal_fov_deg': [57.0, 70.0],
+            'vertical_fov_deg': [43.0, 56.0],
             'min_range': 0.5,
             'max_range': [4.5, 5.0],  # drawn per frame; no return beyond it
             'depth_noise': [0.0012, 0.0019],  # std a + b * depth**2 of the range error, metres
