@@ -99,11 +99,11 @@ def summarize(fits: list[ObjectFit]) -> list[dict]:
 
 def format_summary(rows: list[dict]) -> str:
     """The rows of :func:`summarize` as aligned text."""
-    header = (f'{"sensor":8s}{"class":11s}{"objects":>8s}{"extent":>8s}{"p90":>7s}'
+    header = (f'{"sensor":13s}{"class":11s}{"objects":>8s}{"extent":>8s}{"p90":>7s}'
               f'{"outside":>9s}{"p90":>7s}{"with":>6s}{"coverage":>10s}{"<0.5":>6s}')
     lines = [header]
     for r in rows:
-        lines.append(f'{r["sensor"]:8s}{r["class"]:11s}{r["objects"]:8d}{r["extent_median"]:8.2f}'
+        lines.append(f'{r["sensor"]:13s}{r["class"]:11s}{r["objects"]:8d}{r["extent_median"]:8.2f}'
                      f'{r["extent_p90"]:7.2f}{r["outside_median"]:9.3f}{r["outside_p90"]:7.3f}'
                      f'{r["objects_with_points_outside"]:6d}{r["coverage_median"]:10.2f}'
                      f'{r["covered_below_half"]:6.2f}')

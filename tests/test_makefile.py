@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from synthdet.contracts import SENSOR_MODELS
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -78,3 +80,12 @@ def test_rooms_are_generated_in_the_mixed_room_kinds_unless_a_profile_is_given()
     assert '--profile' not in _generator_command(factory.stdout)
     tablet = exp2_dry_run('EXP2_PROFILE=tablet')
     assert _generator_command(tablet.stdout).split()[-2:] == ['--profile', 'tablet']
+
+
+def test_the_per_sensor_tests_cover_every_sensor_model():
+    proc = exp2_dry_run()
+    assert proc.returncode == 0, proc.stderr
+    loop = [line for line in proc.stdout.replace('\\\n', ' ').splitlines() if 'for sensor in' in line]
+    assert len(loop) == 1, proc.stdout
+    listed = loop[0].split('for sensor in', 1)[1].split(';', 1)[0].split()
+    assert listed == list(SENSOR_MODELS)
