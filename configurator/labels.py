@@ -89,8 +89,14 @@ def _check_fcstd(document: Path) -> None:
 
 
 # the start of a Python object's element (its module is named after a value of any length),
-# or of a link whose file (the element's first attribute) is not empty
-UNSAFE_ELEMENTS = re.compile(rb'<Python |<XLink file="(?!")')
+# except two that run nothing: synthdet's own part proxy without state (the reader loads that
+# module itself) and a JSON null (what a proxy FreeCAD did not restore is saved as); or of a
+# link whose file (the element's first attribute) is not empty
+SYNTHDET_PROXY = (b'value="bnVsbA==" encoded="yes" module="synthdet_freecad.library" '
+                  b'class="DetectionModel"/>')
+NULL_PROXY = b'value="bnVsbA==" encoded="yes" json="yes"/>'
+UNSAFE_ELEMENTS = re.compile(rb'<Python (?!' + re.escape(SYNTHDET_PROXY) + rb'|' +
+                             re.escape(NULL_PROXY) + rb')|<XLink file="(?!")')
 XML_CHUNK = 1 << 20  # bytes of Document.xml searched at a time
 XML_OVERLAP = 4096  # bytes kept from the previous chunk: a start cut by a chunk boundary
 
@@ -102,7 +108,8 @@ def _first_unsafe_element(stream) -> str | None:
         chunk = stream.read(XML_CHUNK)
         text = tail + chunk
         match = UNSAFE_ELEMENTS.search(text)
-        if match is not None:
+        # a start in the kept tail is judged in the next round, with what follows it
+        if match is not None and (not chunk or match.start() < len(text) - XML_OVERLAP):
             if match.group().startswith(b'<XLink'):
                 linked = text[match.end():match.end() + 80].split(b'"')[0]
                 return f'a link to another file ({linked.decode("utf-8", "replace")!r})'

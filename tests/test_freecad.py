@@ -10,7 +10,6 @@ import json
 import math
 import os
 import subprocess
-import sys
 import textwrap
 from pathlib import Path
 
@@ -21,10 +20,8 @@ from configurator import freecad_cli
 from configurator.freecad_cli import MACRO, FreecadFailed, build_document
 from synthdet.contracts import SchemaError, load_json, validate_corners, validate_predictions
 from synthdet.scan_io import write_scan
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from freecad_gui import RUN_MACRO_ANSWERING, WRITE_REPORT, run_gui_driver  # noqa: E402
-from room_scans import make_room  # noqa: E402
+from tests.freecad_gui import RUN_MACRO_ANSWERING, WRITE_REPORT, run_gui_driver
+from tests.room_scans import make_room
 
 FREECADCMD = 'freecadcmd'
 L_ROOM = [[0.0, 0.0], [0.0, 5.0], [6.0, 5.0], [6.0, 2.0], [3.0, 2.0], [3.0, 0.0]]
@@ -71,6 +68,9 @@ INSPECT_SCRIPT = textwrap.dedent('''\
     import Part
 
     params = json.load(open(os.environ['SYNTHDET_TEST_PARAMS'], encoding='utf-8'))
+    sys.path.insert(0, params['package_dir'])
+    # the parts' proxy class, loaded before the documents open (the macro loads it so)
+    import synthdet_freecad.library
 
     def box(shape):  # exact bounds: BoundBox is loose on non-uniformly scaled curved faces
         bound = shape.optimalBoundingBox()
@@ -103,18 +103,18 @@ INSPECT_SCRIPT = textwrap.dedent('''\
     def set_cell(sheet, alias, value):
         sheet.set(sheet.getCellFromAlias(alias), value)
 
-    report = {'synthdet_loaded': any('synthdet' in name for name in sys.modules)}
     doc = App.openDocument(params['main'])
-    report['main'] = describe(doc)
+    report = {'main': describe(doc)}
     table, sofa, yumi = by_class(doc, 'table'), by_class(doc, 'sofa'), by_class(doc, 'yumi')
+    # the YuMi's solids: base plate, 3 body wedges, then per arm 7 links and a gripper
+    arms = {'Right': slice(4, 11), 'Left': slice(12, 19)}
     def arm(side):
-        return box(Part.makeCompound([doc.getObject(f'{yumi.Name}_{side}Link{k}').Shape
-                                      for k in range(1, 8)]))
+        return box(Part.makeCompound(yumi.Shape.Solids[arms[side]]))
 
     report['arms_before'] = [arm('Right'), arm('Left')]
-    set_cell(doc.getObject(table.Name + '_Parameters'), 'length', '=2000 mm')
-    set_cell(doc.getObject(sofa.Name + '_Parameters'), 'length', '=3000 mm')
-    set_cell(doc.getObject(yumi.Name + '_Parameters'), 'right_joint_2', '=90 deg')
+    table.Length = 2000.0
+    sofa.Length = 3000.0
+    yumi.RightJoint2 = 90.0
     set_cell(doc.RoomParameters, 'wall_thickness', '=300 mm')
     set_cell(doc.RoomParameters, 'height', '=4000 mm')
     doc.recompute()
@@ -165,15 +165,11 @@ GUI_DRIVER = textwrap.dedent('''\
     seen['classes'] = sorted(o.DetectedClass for o in doc.Objects if hasattr(o, 'DetectedClass'))
     seen['floor_area'] = doc.getObject('Floor').Shape.Area if doc.getObject('Floor') else None
     table = [o for o in doc.Objects if getattr(o, 'DetectedClass', None) == 'table'][0]
-    seen['table_color'] = list(doc.getObject(table.Name + '_Top').ViewObject.ShapeColor)[:3]
+    seen['table_color'] = list(table.ViewObject.ShapeColor)[:3]
     sofa = [o for o in doc.Objects if getattr(o, 'DetectedClass', None) == 'sofa'][0]
     seen['sofa_model'] = sofa.CadModel
-    seen['sofa_color'] = list(doc.getObject(sofa.Name + '_Model').ViewObject.ShapeMaterial
-                               .DiffuseColor)[:3]
-    parts = [o for o in doc.Objects if o.TypeId == 'App::LinkGroup']
-    # a part draws its solids at its placement: shown on their own they would be drawn twice
-    seen['solids_shown_on_their_own'] = [o.Label for part in parts for o in part.ElementList
-                                         if o.ViewObject.Visibility]
+    seen['sofa_color'] = list(sofa.ViewObject.ShapeColor)[:3]
+    parts = [o for o in doc.Objects if hasattr(o, 'DetectedClass')]
     seen['hidden_parts'] = [o.Label for o in parts if not o.ViewObject.Visibility
                             and 'Alternatives' not in [p.Name for p in o.InList]]
 ''') + WRITE_REPORT
@@ -316,7 +312,8 @@ def inspection(workspace, built, empty_build, scanned_build) -> dict:
             'main': built['document'],
             'empty': str(empty_build[1]),
             'scanned': str(scanned_build['out']),
-            'report': str(report)
+            'report': str(report),
+            'package_dir': str(Path(MACRO).parent),
         })
     process = run_freecad(script, {'SYNTHDET_TEST_PARAMS': str(params)})
     assert report.is_file(), (process.stdout + process.stderr)[-3000:]
@@ -460,9 +457,12 @@ def test_cli_result_lists_objects_groups_and_warnings(workspace, built):
 
 def test_reopened_document_has_groups_placements_and_properties(workspace, inspection):
     objects = inspection['main']
-    assert not inspection['synthdet_loaded']  # a plain FreeCAD, without synthdet's code
     assert all(entry['valid'] for entry in objects.values())
-    assert not [name for name, entry in objects.items() if entry['proxy']]
+    # each detection is one object, whose proxy rebuilds its shape; nothing else has one
+    assert {name for name, entry in objects.items() if entry['proxy']} == \
+        {name for name, entry in objects.items() if 'class' in entry}
+    assert {entry['type'] for entry in objects.values() if 'class' in entry} == \
+        {'Part::FeaturePython'}
     room = objects['Room']['group']
     assert {'RoomParameters', 'FloorSketch', 'Floor', 'Walls'} <= set(room)
     detected = detections_in(objects)
@@ -521,7 +521,7 @@ def test_room_floor_and_walls(inspection):
         (outer_area - area * 1e6) * height, rel=1e-6)
 
 
-def test_editing_parameters_in_plain_freecad_recomputes_geometry(inspection):
+def test_editing_parameters_recomputes_geometry(inspection):
     edited = inspection['edited']
     assert edited['invalid'] == []
     table_y, sofa_y = 400.0, 450.0
@@ -590,6 +590,6 @@ def test_macro_in_the_gui_asks_for_the_files_and_imports(workspace, tmp_path):
     assert seen['classes'] == sorted(expected)
     assert seen['floor_area'] == pytest.approx(24e6)
     assert seen['table_color'] == pytest.approx([31 / 255, 119 / 255, 180 / 255], abs=0.01)
-    assert seen['solids_shown_on_their_own'] == [] and seen['hidden_parts'] == []
-    assert seen['sofa_model'] == 'step'  # a linked STEP model takes the class color too
+    assert seen['hidden_parts'] == []
+    assert seen['sofa_model'] == 'step'  # a scaled STEP model takes the class color too
     assert seen['sofa_color'] == pytest.approx([44 / 255, 160 / 255, 44 / 255], abs=0.01)

@@ -83,13 +83,9 @@ def run_cli(command: list[str],
 
 
 def document_parts(path: Path) -> list[str]:
-    """Names of the detection parts (``App::LinkGroup`` objects) an .FCStd holds (read from
-    its Document.xml)."""
-    with zipfile.ZipFile(path) as archive:
-        xml = archive.read('Document.xml').decode('utf-8')
-    return [
-        chunk.split('"', 1)[0] for chunk in xml.split('<Object type="App::LinkGroup" name="')[1:]
-    ]
+    """Names of the detection parts (``Part::FeaturePython`` objects) an .FCStd holds (read
+    from its Document.xml)."""
+    return [name for kind, name in document_objects(path) if kind == 'Part::FeaturePython']
 
 
 def document_objects(path: Path) -> list[tuple[str, str]]:
@@ -164,7 +160,7 @@ def test_kill_9_ends_freecad_and_a_later_run_cleans_up(tmp_path):
     work folder it could not remove is removed by the next run."""
     work = tmp_path / 'tmp'
     work.mkdir()
-    inputs = write_inputs(tmp_path, 1000, side=32.0)
+    inputs = write_inputs(tmp_path, 8000, side=90.0)  # still being built a second in
     out = tmp_path / 'killed.FCStd'
     env = dict(os.environ, TMPDIR=str(work))
     cli = subprocess.Popen(
@@ -196,12 +192,12 @@ def test_kill_9_ends_freecad_and_a_later_run_cleans_up(tmp_path):
     assert list(work.iterdir()) == []
 
 
-def test_a_detection_adds_a_fixed_set_of_objects_named_by_synthdet(tmp_path):
-    """Each detection of a class without a model is three objects: its part, its parameter
-    sheet and its box, all named by synthdet (``Detection001``, ``Detection001_Parameters``,
-    ``Detection001_Box``). No origin helpers (an ``App::Part`` adds six under fixed names) and
-    no name FreeCAD had to make unique: FreeCAD 0.20 finds a free name by going through every
-    name in the document, which made building n detections take time in n squared."""
+def test_a_detection_adds_one_object_named_by_synthdet(tmp_path):
+    """Each detection is one object, its part, named by synthdet (``Detection001``), and one
+    stored shape: no name FreeCAD had to make unique (FreeCAD 0.20 finds a free name by going
+    through every name in the document, which made building n detections take time in n
+    squared), and one shape file per detection (FreeCAD 0.20 names each shape file by going
+    through the names stored before it)."""
     count = 25
     inputs = write_inputs(tmp_path, count)
     detections = json.loads(inputs['predictions'].read_text(encoding='utf-8'))
@@ -215,13 +211,14 @@ def test_a_detection_adds_a_fixed_set_of_objects_named_by_synthdet(tmp_path):
         assert done.returncode == 0, done.stderr
     boxes, room = (document_objects(out) for out in outputs)
     added = [item for item in boxes if item not in room]
-    assert len(boxes) == len(room) + 3 * count == len(room) + len(added)
-    parts = sorted(name for kind, name in added if kind == 'App::LinkGroup')
-    assert parts == [f'Detection{number:03d}' for number in range(1, count + 1)]
-    expected = {(kind, f'{part}{suffix}') for part in parts
-                for kind, suffix in (('App::LinkGroup', ''), ('Spreadsheet::Sheet', '_Parameters'),
-                                     ('Part::Box', '_Box'))}
-    assert set(added) == expected
+    assert len(boxes) == len(room) + count == len(room) + len(added)
+    assert sorted(added) == [('Part::FeaturePython', f'Detection{number:03d}')
+                             for number in range(1, count + 1)]
+    shape_files = []
+    for out in outputs:
+        with zipfile.ZipFile(out) as archive:
+            shape_files.append([name for name in archive.namelist() if name.endswith('.brp')])
+    assert len(shape_files[0]) == len(shape_files[1]) + count
 
 
 @pytest.mark.slow

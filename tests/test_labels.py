@@ -447,6 +447,12 @@ def test_the_document_check_finds_elements_across_chunk_boundaries(monkeypatch):
         b'<a><Python value="' + b'x' * 50000 + b'" module="os"/></a>': 'a Python object',
         b'<a>' + b' ' * 5 + b'<XLink file="' + b'p' * 9000 + b'"/>': 'a link to another file',
         b'<XLink file="" name="Box"/><XLinks count="0"><Link value="Box"/>': None,
+        # the Python objects read: synthdet's part proxy without state, a JSON null
+        b'<a><Python ' + labels_module.SYNTHDET_PROXY + b'</a>' + b' ' * 9000: None,
+        b'<Python ' + labels_module.SYNTHDET_PROXY.replace(b'library', b'macro'): 'a Python',
+        b'<Python ' + labels_module.SYNTHDET_PROXY.replace(b'bnVsbA==', b'e30='): 'a Python',
+        b'<Python ' + labels_module.NULL_PROXY + b' ' * 5000: None,
+        b'<Python ' + labels_module.NULL_PROXY.replace(b' json="yes"', b''): 'a Python',
     }
     for xml, expected in cases.items():
         found = labels_module._first_unsafe_element(io.BytesIO(xml))
@@ -565,7 +571,7 @@ GUI_DRIVER = textwrap.dedent('''\
     seen.update(
         added=len(added), base=list(part.Placement.Base),
         reviewed=doc.Meta.get('SynthdetReviewed'),
-        color=list(doc.getObject(part.Name + '_Base').ViewObject.ShapeColor)[:3],
+        color=list(part.ViewObject.ShapeColor)[:3],
         z_bound=[e[0] for e in part.ExpressionEngine])
 ''') + WRITE_REPORT
 

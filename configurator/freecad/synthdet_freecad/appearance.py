@@ -46,15 +46,8 @@ class Look:
             obj = doc.getObject(name)
             view = obj.ViewObject
             color = tuple(value / 255.0 for value in rgb)
-            if obj.TypeId == 'App::Link':  # a link shows its target unless told otherwise
-                material = view.ShapeMaterial
-                material.DiffuseColor = color
-                material.Transparency = transparency / 100.0
-                view.ShapeMaterial = material
-                view.OverrideMaterial = True
-            else:
-                view.ShapeColor = color
-                view.Transparency = transparency
+            view.ShapeColor = color
+            view.Transparency = transparency
         gui_document = Gui.getDocument(doc.Name)
         view = gui_document.activeView()
         if view is not None and hasattr(view, 'viewIsometric'):
@@ -98,17 +91,7 @@ class Look:
                 _property('Visibility', 'App::PropertyBool',
                           f'<Bool value="{"true" if visible else "false"}"/>')
             ]
-            if obj.Name in self.colors and obj.TypeId == 'App::Link':
-                rgb, transparency = self.colors[obj.Name]
-                properties.append(
-                    _property('OverrideMaterial', 'App::PropertyBool', '<Bool value="true"/>'))
-                properties.append(
-                    _property(
-                        'ShapeMaterial', 'App::PropertyMaterial',
-                        f'<PropertyMaterial ambientColor="{_packed((51, 51, 51))}" '
-                        f'diffuseColor="{_packed(rgb)}" specularColor="0" emissiveColor="0" '
-                        f'shininess="0.2" transparency="{transparency / 100.0:.2f}"/>'))
-            elif obj.Name in self.colors:
+            if obj.Name in self.colors:
                 rgb, transparency = self.colors[obj.Name]
                 properties.append(
                     _property('ShapeColor', 'App::PropertyColor',
@@ -132,29 +115,14 @@ def _property(name: str, type_name: str, value: str) -> str:
 
 
 def _visible_bounds(doc):
-    """World bounds of the visible solids: those outside parts, and all solids of visible
-    ``App::LinkGroup`` parts (hidden themselves: the part draws them), moved by the part's
-    placement. The solids' bounding boxes are transformed, not their shapes: no shape is
-    copied."""
+    """World bounds of the visible solids (a shape's bounds include its own placement; that
+    of the groups around it is added)."""
     bounds = App.BoundBox()
-    in_parts = set()
-    for part in doc.findObjects('App::LinkGroup'):
-        members = part.ElementList
-        in_parts.update(member.Name for member in members)
-        if part.Visibility:
-            for member in members:
-                _add_bounds(bounds, member, part.Placement)
     for obj in doc.Objects:
-        if obj.Name not in in_parts and obj.Visibility and obj.isDerivedFrom('Part::Feature'):
-            _add_bounds(bounds, obj, obj.getGlobalPlacement().multiply(obj.Placement.inverse()))
+        if obj.Visibility and obj.isDerivedFrom('Part::Feature') and not obj.Shape.isNull():
+            parent = obj.getGlobalPlacement().multiply(obj.Placement.inverse())
+            bounds.add(obj.Shape.BoundBox.transformed(parent.toMatrix()))
     return bounds
-
-
-def _add_bounds(bounds, obj, parent) -> None:
-    """Add the bounds of ``obj``'s shape (own placement applied) moved by the placement
-    ``parent``, if it has a shape."""
-    if obj.isDerivedFrom('Part::Feature') and not obj.Shape.isNull():
-        bounds.add(obj.Shape.BoundBox.transformed(parent.toMatrix()))
 
 
 def isometric_camera(bounds) -> str:

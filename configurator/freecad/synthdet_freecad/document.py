@@ -160,9 +160,8 @@ def _stand(container, placed, containers: dict, room_sheet) -> None:
     support = placed.support
     if support is not None and support in containers:
         table = containers[support]
-        container.setExpression(
-            '.Placement.Base.z',
-            f'{table.Name}.Placement.Base.z + {library.parameter_sheet(table).Name}.height')
+        container.setExpression('.Placement.Base.z',
+                                f'{table.Name}.Placement.Base.z + {table.Name}.Height')
     elif support is None and room_sheet is not None:
         container.setExpression('.Placement.Base.z', f'{room_sheet.Name}.floor_z')
 
@@ -175,11 +174,8 @@ def _add_members(group, objects: list) -> None:
         group.addObjects(objects)
 
 
-def _paint_model(look, container) -> None:
-    color = appearance.class_color(container.DetectedClass)
-    for child in library.children(container):
-        if hasattr(child, 'Shape') or child.TypeId == 'App::Link':
-            look.paint(child, color)
+def _paint_model(look, part) -> None:
+    look.paint(part, appearance.class_color(part.DetectedClass))
 
 
 def import_detections(doc,

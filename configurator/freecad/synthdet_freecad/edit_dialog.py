@@ -7,7 +7,7 @@ floor selects it), else where the view's centre ray meets the floor; it stands o
 """
 import FreeCAD as App
 
-from . import appearance, editing, labels
+from . import appearance, editing, labels, library
 
 TITLE = 'synthdet: correct the document'
 
@@ -36,9 +36,7 @@ def add_in_gui(doc, class_name: str):
         where = editing.view_point(Gui.ActiveDocument.ActiveView, editing.floor_height(doc))
     part = editing.add_part(doc, class_name, *where)
     color = tuple(value / 255.0 for value in appearance.class_color(class_name))
-    for child in labels.part_children(part):
-        if hasattr(child, 'Shape') and hasattr(child.ViewObject, 'ShapeColor'):
-            child.ViewObject.ShapeColor = color
+    part.ViewObject.ShapeColor = color
     Gui.Selection.clearSelection()
     Gui.Selection.addSelection(part)
     return part
@@ -49,6 +47,7 @@ def run(doc, import_more) -> None:
     import FreeCADGui as Gui
     from PySide import QtGui
 
+    library.restore_proxies(doc)  # parts opened before the macro loaded their proxy class
     dialog = QtGui.QDialog(Gui.getMainWindow())
     dialog.setWindowTitle(TITLE)
     layout = QtGui.QVBoxLayout(dialog)

@@ -3,8 +3,9 @@ inside FreeCAD).
 
 A synthdet part is any object carrying the ``Synthdet`` property ``DetectedClass`` (whatever
 its FreeCAD type); its box is its global placement (the centre of its base, in the scan's own
-coordinates, millimetres) turned about z, and the ``length``, ``width`` and ``height`` cells of
-its parameter sheet. Which parts count:
+coordinates, millimetres) turned about z, and its ``Length``, ``Width`` and ``Height``
+properties (in a document built before parts had them, the ``length``, ``width`` and ``height``
+cells of its parameter sheet). Which parts count:
 
 - a part that is nobody's alternative counts, unless it is hidden while one of its
   alternatives is shown (the user switched to that alternative);
@@ -21,9 +22,13 @@ import os
 
 import FreeCAD as App
 
+# the parts' proxy class: FreeCAD restores a proxy only from a module loaded before the
+# document opens (or an installed add-on), and the recompute below needs it
+from . import library
 from .schema import LABELS_READ_FORMAT as READ_FORMAT
 
-SIZE_ALIASES = ('length', 'width', 'height')
+SIZE_PROPERTIES = ('Length', 'Width', 'Height')
+SIZE_ALIASES = ('length', 'width', 'height')  # a parameter sheet's cells
 REVIEWED_KEY = 'SynthdetReviewed'  # document metadata (Document.Meta): 'true' once reviewed
 ENV_READ = 'SYNTHDET_READ'  # headless: the document to read (the result goes to SYNTHDET_RESULT)
 MAX_TILT_DEG = 0.5  # a part turned further off the vertical is not a box standing upright
@@ -83,18 +88,29 @@ def _parameter_sheet(doc, part):
     raise NotSynthdet(f'part {part.Label!r} has no parameter sheet with a length cell')
 
 
-def _millimetres(sheet, alias: str, what: str) -> float:
-    value = sheet.get(alias)
+def _positive(value, name: str, what: str) -> float:
     millimetres = value.Value if hasattr(value, 'Value') else float(value)
     if not (math.isfinite(millimetres) and millimetres > 0.0):
-        raise NotSynthdet(f'{what}: {alias} is {millimetres} mm, expected a positive length')
+        raise NotSynthdet(f'{what}: {name} is {millimetres} mm, expected a positive length')
     return millimetres
+
+
+def _millimetres(sheet, alias: str, what: str) -> float:
+    return _positive(sheet.get(alias), alias, what)
+
+
+def part_size(doc, part) -> list[float]:
+    """The part's length, width and height in mm: its own properties, else its sheet's."""
+    what = f'part {part.Label!r}'
+    if all(name in part.PropertiesList for name in SIZE_PROPERTIES):
+        return [_positive(getattr(part, name), name, what) for name in SIZE_PROPERTIES]
+    sheet = _parameter_sheet(doc, part)
+    return [_millimetres(sheet, alias, what) for alias in SIZE_ALIASES]
 
 
 def part_box(doc, part) -> dict:
     """The part's label box in metres and radians: class, centre, size, yaw (and its name)."""
-    sheet = _parameter_sheet(doc, part)
-    size = [_millimetres(sheet, alias, f'part {part.Label!r}') for alias in SIZE_ALIASES]
+    size = part_size(doc, part)
     # a part in the tree's groups (no placement of their own) or in an App::Part
     placement = part.getGlobalPlacement() if hasattr(part, 'getGlobalPlacement') \
         else part.Placement
@@ -146,6 +162,7 @@ def read_document(path: str) -> dict:
     """
     doc = App.openDocument(path)
     try:
+        library.restore_proxies(doc)
         doc.recompute()  # a cell edited without a recompute gives the sizes the user sees
         parts = synthdet_parts(doc)
         room = room_outline(doc)
