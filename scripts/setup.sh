@@ -106,6 +106,14 @@ import MinkowskiEngine as ME
 print(f"  torch {torch.__version__}, mmcv {mmcv.__version__}, mmdet3d {mmdet3d.__version__}, "
       f"MinkowskiEngine {ME.__version__}, bpy {bpy.app.version_string}, open3d {open3d.__version__}")
 EOF
+  # the editable install is a .pth line naming the clone: its packages import from any folder
+  (cd / && "$PY" - <<'EOF'
+import importlib.util
+import sys
+names = ('generator', 'configurator', 'projects', 'tools', 'tests')
+sys.exit(' '.join(name for name in names if importlib.util.find_spec(name) is None) or None)
+EOF
+  ) || die "the clone's packages above do not import outside $ROOT; run 'make setup' again"
   command -v freecadcmd >/dev/null || die "freecadcmd is not on PATH"
   log "verify: freecadcmd at $(command -v freecadcmd)"
 }
