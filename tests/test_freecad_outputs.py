@@ -217,8 +217,24 @@ def test_a_detection_adds_one_object_named_by_synthdet(tmp_path):
     shape_files = []
     for out in outputs:
         with zipfile.ZipFile(out) as archive:
-            shape_files.append([name for name in archive.namelist() if name.endswith('.brp')])
-    assert len(shape_files[0]) == len(shape_files[1]) + count
+            shape_files.append({name for name in archive.namelist() if name.endswith('.brp')})
+    # each part's shape in a file named after it, written by synthdet in linear time
+    assert shape_files[0] - shape_files[1] == {
+        f'Detection{number:03d}.Shape.brp' for number in range(1, count + 1)}
+    # a plain FreeCAD (synthdet's proxy module not loaded) reads every stored shape
+    script = tmp_path / 'volumes.py'
+    report = tmp_path / 'volumes.json'
+    script.write_text(
+        'import json\nimport FreeCAD as App\n'
+        f'doc = App.openDocument({str(outputs[0])!r})\n'
+        'json.dump({o.Name: o.Shape.Volume for o in doc.Objects if hasattr(o, "Shape")}, '
+        f'open({str(report)!r}, "w"))\n', encoding='utf-8')
+    subprocess.run(['freecadcmd', str(script)], cwd=tmp_path, capture_output=True, timeout=120)
+    volumes = json.loads(report.read_text(encoding='utf-8'))
+    assert {name: round(volume) for name, volume in volumes.items()
+            if name.startswith('Detection')} == {
+                f'Detection{number:03d}': 500 * 400 * 800 for number in range(1, count + 1)}
+    assert volumes['Walls'] > 0.0
 
 
 @pytest.mark.slow

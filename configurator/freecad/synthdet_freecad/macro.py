@@ -18,7 +18,7 @@ import FreeCAD as App
 # standard library only, importable wherever schema's synthdet.contracts is
 from synthdet.processes import process_alive
 
-from . import appearance, document, labels, schema
+from . import appearance, archive, document, labels, schema
 
 ENV_JOB = 'SYNTHDET_JOB'
 ENV_RESULT = 'SYNTHDET_RESULT'
@@ -116,11 +116,12 @@ def save_atomically(doc, out: str, look) -> None:
     FreeCAD only reports on its console, such as a full disk, found by reading the archive
     back) leaves the previous ``out`` untouched; temporary files of runs that died (killed)
     are removed first, and no FreeCAD backup (``*.FCStd1``) of a temporary file is left.
+    The parts' shapes are stored by ``archive.save_copy``, in time linear in the parts.
     """
     remove_stale_partials(out)
     partial = partial_path(out)
     try:
-        doc.saveCopy(partial)
+        archive.save_copy(doc, partial)  # the parts' shapes stored in linear time
         # FreeCAD reports some write errors only on its console
         _check_complete(partial, read_members=False)
         look.write_gui_document(partial, doc)
