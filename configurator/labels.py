@@ -289,8 +289,9 @@ def make_labels(document: Path,
     points = read_scan(scan)
     read = read_document(document, freecadcmd, timeout)
     boxes = read['boxes']
-    if not boxes:
-        raise LabelsInputError(f'{document}: the document holds no synthdet part to label')
+    if not boxes and not read['reviewed']:  # reviewed and empty: a room without the classes
+        raise LabelsInputError(f'{document}: the document holds no synthdet part to label '
+                               '(mark it reviewed if the room holds none of the classes)')
     check_overlaps(boxes, str(document))
     owners = point_owners(points[:, :3], boxes, str(document))
     elements = background_elements(points[:, :3], read['room'])
@@ -317,7 +318,8 @@ def make_labels(document: Path,
 
 def summary_line(summary: dict) -> str:
     """One line: what was written."""
-    boxes = ', '.join(f'{count} {name}' for name, count in summary['boxes'].items())
+    boxes = ', '.join(f'{count} {name}' for name, count in summary['boxes'].items()) or \
+        'no object'
     return (f'wrote {summary["labels"]} ({boxes}) and {summary["room_dir"]} '
             f'({summary["object_points"]} of {summary["points"]} points in boxes)'
             f'{"" if summary["reviewed"] else "; the document is not marked reviewed"}')

@@ -119,6 +119,8 @@ SMOKE: dict[str, Smoke | str] = {
               figure('save_ratio') + r'x; CPU time ' + figure('cpu_ratio') + r'x\)'),
     # its whole run at a tiny scale, headline included, is tests/test_bench_domain_shift.py's
     'bench_domain_shift.py': 'tests/test_bench_domain_shift.py',
+    # its whole run at a tiny scale, headline included, is tests/test_bench_teach.py's
+    'bench_teach.py': 'tests/test_bench_teach.py',
 }
 
 

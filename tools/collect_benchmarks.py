@@ -7,7 +7,7 @@ from them (``make bench``).
 Every ``benchmarks/bench_<name>.py`` runs in turn, as its own process, with the arguments of
 ``ARGUMENTS`` (the documented, paper-scale settings; a benchmark not listed runs without
 arguments). The benchmarks of ``OPT_IN`` run only when ``--only`` names them (``domain_shift``:
-hours of training; ``real_scans`` needs a checkpoint and a folder of labelled scans, so it is run
+hours of training; ``real_scans``, ``teach`` need a checkpoint and labelled scans, so are run
 directly with them); their kept outputs are still shown. Each one prints a side-by-side comparison
 measured in that one run and ends with a summary line. Its full output (without progress-bar lines)
 is kept in ``docs/benchmarks/<name>.txt`` and its record (exact command, exit code, wall time, the
@@ -52,7 +52,7 @@ ARGUMENTS = {
     'domain_shift': [],  # its defaults are the documented scale (about 1.5 h on 2 cores)
 }
 # Run only when named, e.g. `make bench BENCH_ARGS="--only domain_shift"` (docs/results.md).
-OPT_IN = {'domain_shift', 'real_scans'}
+OPT_IN = {'domain_shift', 'real_scans', 'teach'}
 WHAT = {
     'scanner':
     'ray casting: batched Embree scanner vs per-ray bpy `BVHTree`, `Object` and '
