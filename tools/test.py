@@ -16,9 +16,9 @@ with its ground truth and the predictions scoring at least ``--score-thr``
 mmdet3d's test tool. ``--sensor`` tests only the generated rooms that one of the generator's
 sensor models scanned (their ``meta.json``), for a table per sensor. The checkpoint is loaded
 weights-only (``projects/synthdet/checkpoint.py``): one that holds anything else is refused, as
-is a ``--sensor`` whose rooms cannot be found (exit 2). The config, the checkpoint, ``--out``
-and ``--show-dir`` are checked before the data and the model are loaded (one line naming the
-file, exit 2). ``--box-fit`` adds a table of how well
+is a ``--sensor`` whose rooms cannot be found (exit 2). The config, ``--out``, ``--show-dir``,
+the test split's info pickle (read as plain data) and the checkpoint are checked, in that
+order, before the model is built (one line naming the file, exit 2). ``--box-fit`` adds a table of how well
 the predicted boxes fit the true ones per class (median best IoU, the share below IoU 0.25 and
 0.5, size ratios per axis and centre distance; ``projects/synthdet/evaluation/box_fit.py``),
 printed and written to ``box_fit.json`` / ``box_fit.txt`` next to Table 3.
@@ -54,7 +54,7 @@ from projects.synthdet.evaluation.table3 import format_table3, table3  # noqa: E
 from projects.synthdet.evaluation.table_files import write_table  # noqa: E402
 from projects.synthdet.visualization import TopViewHook  # noqa: E402
 from synthdet.contracts import SENSOR_MODELS  # noqa: E402
-from synthdet.info_files import InfoFileError, rooms_scanned_by  # noqa: E402
+from synthdet.info_files import InfoFileError, load_info_pickle, rooms_scanned_by  # noqa: E402
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -128,6 +128,26 @@ def select_sensor(cfg: Config, sensor: str | None) -> str:
     return name
 
 
+def info_files(dataset: dict) -> list[Path]:
+    """The info pickles a dataset config reads: its ``data_root`` joined with its ``ann_file``,
+    and those of the datasets it wraps (``dataset``, ``datasets``)."""
+    files = []
+    if dataset.get('ann_file'):
+        files.append(Path(dataset.get('data_root') or '') / str(dataset['ann_file']))
+    wrapped = [dataset.get('dataset')] + list(dataset.get('datasets') or [])
+    for inner in wrapped:
+        if isinstance(inner, dict):
+            files.extend(info_files(inner))
+    return files
+
+
+def check_test_data(cfg: Config) -> None:
+    """Read the test split's info pickles (plain data only, ``InfoFileError`` naming a missing
+    or broken one), so that they are found wrong before the checkpoint and the model load."""
+    for info_file in info_files(cfg.test_dataloader.dataset):
+        load_info_pickle(info_file)
+
+
 def report(path: Path, document: dict, title: str, table: str) -> None:
     """Print a table under its title; write its document to ``path`` and the text beside it."""
     text = f'{title}:\n{table}'
@@ -143,7 +163,8 @@ def main(argv: list[str] | None = None) -> dict:
         check_output_file(args.out, make_parents=True)
     if args.show_dir:
         check_output_dir(args.show_dir)
-    checkpoint = load_checkpoint_file(args.checkpoint)  # checked before the data are loaded
+    check_test_data(cfg)
+    checkpoint = load_checkpoint_file(args.checkpoint)  # checked before the model is built
     cfg.load_from = None  # the weights come from the weights-only load below
     add_show_hook(cfg, args.show_dir, args.score_thr)
     if args.box_fit:
