@@ -18,7 +18,8 @@ sensor models scanned (their ``meta.json``), for a table per sensor. The checkpo
 weights-only (``projects/synthdet/checkpoint.py``): one that holds anything else is refused, as
 is a ``--sensor`` whose rooms cannot be found (exit 2). The config, ``--out``, ``--show-dir``,
 the test split's info pickle (read as plain data) and the checkpoint are checked, in that
-order, before the model is built (one line naming the file, exit 2). ``--box-fit`` adds a table of how well
+order, before the model is built (one line naming the file, exit 2). ``--box-fit`` adds a
+table of how well
 the predicted boxes fit the true ones per class (median best IoU, the share below IoU 0.25 and
 0.5, size ratios per axis and centre distance; ``projects/synthdet/evaluation/box_fit.py``),
 printed and written to ``box_fit.json`` / ``box_fit.txt`` next to Table 3.
