@@ -1,6 +1,6 @@
-"""FreeCAD documents from many detections: time per detection at two sizes.
+"""FreeCAD documents from many detections: time per detection at two or more sizes.
 
-    .venv/bin/python benchmarks/bench_freecad.py [--sizes 1000 10000] [--freecadcmd freecadcmd]
+    .venv/bin/python benchmarks/bench_freecad.py [--sizes 1000 10000 ...] [--freecadcmd freecadcmd]
 
 For each size it writes synthetic predictions (the classes table, chair, sofa, bookcase,
 3dprinter and forklift in turn, with random sizes and yaws, one per square-metre cell of a
@@ -8,10 +8,10 @@ square room, so that none overlap or merge) and, in one ``freecadcmd`` process p
 the build (``document.import_detections``: arrangement, parametric models, recompute) and the
 save (``macro.save_atomically``: the FCStd, its GUI document and the read-back check), in wall
 and CPU seconds of the FreeCAD process (the CPU seconds vary less with the machine's load).
-It also counts the document's objects per detection.
+It also counts the document's objects per detection. One row per size, in increasing order.
 
-Ends with one line: the larger size's wall seconds (build, save) and milliseconds per
-detection, then the ratio of the per-detection wall times of the larger and the smaller size
+Ends with one line: the largest size's wall seconds (build, save) and milliseconds per
+detection, then the ratio of the per-detection wall times of the largest and the smallest size
 (about 1.0: the time grows linearly with the detections; 10x the size and 3x: a step that grows
 with the square), for the whole run, the build and the save, and that ratio of the CPU times.
 """
@@ -103,20 +103,21 @@ def time_document(folder: Path, count: int, freecadcmd: str) -> dict:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--sizes', type=int, nargs=2, default=[1000, 10000],
-                        help='the two detection counts (default 1000 10000)')
+    parser.add_argument('--sizes', type=int, nargs='+', default=[1000, 10000],
+                        help='two or more detection counts (default 1000 10000)')
     parser.add_argument('--freecadcmd', default='freecadcmd')
     args = parser.parse_args()
-    small, large = sorted(args.sizes)
-    if small < 1 or small == large:
-        parser.error('--sizes: two different positive counts')
+    sizes = sorted(set(args.sizes))
+    if len(sizes) < 2 or sizes[0] < 1:
+        parser.error('--sizes: two or more different positive counts')
+    small, large = sizes[0], sizes[-1]
     print(f'load average before: {" ".join(f"{v:.2f}" for v in os.getloadavg())} '
           f'({os.cpu_count()} cores)')
     print(f'{"detections":>10} {"objects":>8} {"build s":>8} {"save s":>8} {"ms each":>8} '
           f'{"build cpu s":>11} {"save cpu s":>10} {"cpu ms each":>11}')
     runs = {}
     with tempfile.TemporaryDirectory(prefix='synthdet-bench-freecad-') as work:
-        for count in (small, large):
+        for count in sizes:
             run = runs[count] = time_document(Path(work), count, args.freecadcmd)
             wall = (run['build'][0] + run['save'][0]) / count * 1000.0
             cpu = (run['build'][1] + run['save'][1]) / count * 1000.0
