@@ -37,7 +37,6 @@ import os
 import pickle
 import resource
 import shutil
-import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -46,13 +45,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT))
-
-from projects.synthdet.datasets.s3dis_converter import (  # noqa: E402
+from projects.synthdet.datasets.s3dis_converter import (
     OUTPUT_DIRS, S3DIS_DIR, convert_s3dis)
-from synthdet.room_data import annotation_files  # noqa: E402  (the converter's file order)
-from tests.s3dis_fixtures import write_synthetic_area  # noqa: E402
+from synthdet.room_data import annotation_files  # the converter's file order
+from tests.s3dis_fixtures import write_synthetic_area
 
 S3DIS_CLASSES_13 = ('ceiling', 'floor', 'wall', 'beam', 'column', 'window', 'door', 'table',
                     'chair', 'sofa', 'bookcase', 'board', 'clutter')

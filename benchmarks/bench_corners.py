@@ -41,18 +41,16 @@ from scipy.spatial import ConvexHull
 from skimage import measure
 from sklearn.cluster import DBSCAN
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for tests/room_scans.py
-
 from configurator.corners import (
     CornerDetectionError,
     CornerParams,
     detect_corners,  # noqa
     find_levels,
     simplify_outline)
-from synthdet.contracts import read_room  # noqa: E402
-from synthdet.info_files import room_sensor  # noqa: E402
-from synthdet.scan_io import read_scan  # noqa: E402
-from tests.room_scans import SHAPES, NoiseModel, make_room  # noqa: E402
+from synthdet.contracts import read_room
+from synthdet.info_files import room_sensor
+from synthdet.scan_io import read_scan
+from tests.room_scans import SHAPES, NoiseModel, make_room
 
 
 class Result(NamedTuple):

@@ -43,12 +43,11 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))  # run as a script from anywhere: make `projects` importable
+from projects.synthdet.config_helpers import area_info_file, with_num_points
+from synthdet.info_files import RAW_DIR
+from tools.demo import StepError, claim_work_dir
 
-from projects.synthdet.config_helpers import area_info_file, with_num_points  # noqa: E402
-from synthdet.info_files import RAW_DIR  # noqa: E402
-from tools.demo import StepError, claim_work_dir  # noqa: E402
+REPO = Path(__file__).resolve().parents[1]
 
 MIXED = 'mixed'  # the generator's default configuration: no profile file
 TRAIN_AREAS = {'paper': 11, MIXED: 12}

@@ -32,12 +32,11 @@ from pathlib import Path
 
 import numpy as np
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT))
+from synthdet.contracts import read_predictions
+from synthdet.ply import read_ply_vertices
+from synthdet.scan_io import write_las_chunks
 
-from synthdet.contracts import read_predictions  # noqa: E402
-from synthdet.ply import read_ply_vertices  # noqa: E402
-from synthdet.scan_io import write_las_chunks  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parents[1]
 
 IOU = 0.25
 CHUNK = 2_000_000

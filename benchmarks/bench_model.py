@@ -34,10 +34,6 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0,
-                str(REPO))  # run as a script from anywhere: make `tests` and `projects` importable
-
 CLASSES = ('table', 'chair', 'sofa', 'bookcase', 'board')
 LABEL2LEVEL = (1, 0, 1, 1, 0)  # published TR3D S3DIS
 # model name: voxel size, backbone fine level, label2level (the fine level is level 0)

@@ -29,15 +29,14 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT))
-
-from projects.synthdet.evaluation.real_scans import (  # noqa: E402
+from projects.synthdet.evaluation.real_scans import (
     evaluate_detections, labels_path, summary_line)
-from synthdet.contracts import LABELS_FORMAT, read_labels, read_predictions  # noqa: E402
-from synthdet.contracts import write_labels  # noqa: E402
-from synthdet.scan_io import read_scan, write_scan  # noqa: E402
-from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area  # noqa: E402
+from synthdet.contracts import LABELS_FORMAT, read_labels, read_predictions
+from synthdet.contracts import write_labels
+from synthdet.scan_io import read_scan, write_scan
+from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
 def parse_args() -> argparse.Namespace:

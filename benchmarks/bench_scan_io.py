@@ -26,10 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for tests/room_scans.py
-
-from synthdet.scan_io import load_scan, read_scan, write_las_chunks  # noqa: E402
-from tests.room_scans import make_room  # noqa: E402
+from synthdet.scan_io import load_scan, read_scan, write_las_chunks
+from tests.room_scans import make_room
 
 GEO = np.array([500000.0, 5400000.0, 300.0])
 ROOM_POINTS = 1_000_000

@@ -50,7 +50,6 @@ import gc
 import os
 import shutil
 import statistics
-import sys
 import tempfile
 import time
 from collections import Counter
@@ -62,21 +61,19 @@ import numpy as np
 from mathutils import Vector
 from mathutils.bvhtree import BVHTree
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's generator
-
-from generator import sensors  # noqa: E402
-from generator.assets.palette import METAL, SEE_THROUGH  # noqa: E402
-from generator.config import load_config  # noqa: E402
-from generator.layout import catalog_from_library, generate_layout, layout_meta  # noqa: E402
-from generator.pipeline import RunOptions, open_library  # noqa: E402
-from generator.scanner import (  # noqa: E402
+from generator import sensors
+from generator.assets.palette import METAL, SEE_THROUGH
+from generator.config import load_config
+from generator.layout import catalog_from_library, generate_layout, layout_meta
+from generator.pipeline import RunOptions, open_library
+from generator.scanner import (
     ScanResult, Scanner, TriangleScene, _cast_slice, random_directions, sensor_path,
     triangles_of_colors)
-from generator.scene import COLLECTION, RoomScene, export_triangles  # noqa: E402
-from generator.sensors import (  # noqa: E402
+from generator.scene import COLLECTION, RoomScene, export_triangles
+from generator.sensors import (
     RoomGeometry, label_stray_returns, room_geometry, scan_room)
-from generator.writer import write_room  # noqa: E402
-from synthdet.contracts import ROOM_FORMAT, SENSOR_MODELS  # noqa: E402
+from generator.writer import write_room
+from synthdet.contracts import ROOM_FORMAT, SENSOR_MODELS
 
 Caster = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 ENGINES = ('embree', 'loop')  # the scans' two ray engines: Embree, the BVHTree loop

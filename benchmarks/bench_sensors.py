@@ -12,18 +12,16 @@ aimed paper sensor. The last line gives the slowest model's seconds per 1M-point
 """
 import argparse
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import bpy  # noqa: F401  (before open3d: both ship libtbb)
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))  # this checkout's generator
+from generator.config import load_config
+from generator.pipeline import RoomGenerator, RunOptions, plan_tasks
 
-from generator.config import load_config  # noqa: E402
-from generator.pipeline import RoomGenerator, RunOptions, plan_tasks  # noqa: E402
+REPO = Path(__file__).resolve().parents[1]
 
 PROFILES = {
     'paper': ('paper.json', {

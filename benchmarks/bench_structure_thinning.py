@@ -21,7 +21,6 @@ side, and last the gain of the voxel grid in 10th-percentile voxels per object p
 (``DIR/<sensor>_<pipeline>.png``, points by class, the true boxes).
 """
 import argparse
-import sys
 import tempfile
 import time
 import warnings
@@ -31,8 +30,7 @@ import bpy  # noqa: F401  (before open3d: both ship libtbb)
 import numpy as np
 import torch
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))  # this checkout's generator and projects
+# before the imports below, which load MinkowskiEngine (it warns when imported)
 warnings.filterwarnings('ignore', message='The MinkowskiEngine was compiled with CPU_ONLY')
 
 from mmdet3d.registry import TRANSFORMS  # noqa: E402
@@ -50,6 +48,8 @@ from synthdet.room_data import (
 from synthdet.scan_io import read_scan  # noqa: E402
 from synthdet.topview import draw_top_view  # noqa: E402
 from synthdet.voxels import cube_keys, one_point_per_cube  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
 
 SENSORS = ('paper', 'tls', 'tablet')
 

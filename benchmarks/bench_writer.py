@@ -10,15 +10,11 @@ is timed with it) and gets the best of ``--repeats`` runs, garbage collector off
 import argparse
 import gc
 import io
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's generator
-
-from generator.writer import format_lines  # noqa: E402
+from generator.writer import format_lines
 
 
 def best_of(fn, repeats: int) -> tuple[float, object]:

@@ -1,15 +1,8 @@
 """docs/benchmarks.md shows the end of each benchmark's output, without Python's warnings."""
-import importlib.util
 import json
 import tempfile
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-# tools/ is a folder of scripts, not a package
-_SPEC = importlib.util.spec_from_file_location('collect_benchmarks',
-                                               REPO / 'tools' / 'collect_benchmarks.py')
-collect_benchmarks = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(collect_benchmarks)
+from tools import collect_benchmarks
 
 
 def test_page_shows_the_end_of_an_output_without_warnings(tmp_path):

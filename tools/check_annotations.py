@@ -23,12 +23,10 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `synthdet`
-
-from synthdet.annotation_check import (  # noqa: E402
+from synthdet.annotation_check import (
     MAX_OUTSIDE, TOLERANCE, check_room, describe, format_summary, offenders, summarize)
-from synthdet.contracts import SchemaError  # noqa: E402
-from synthdet.point_text import PointFileError  # noqa: E402
+from synthdet.contracts import SchemaError
+from synthdet.point_text import PointFileError
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:

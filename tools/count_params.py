@@ -4,17 +4,13 @@ Usage: python tools/count_params.py CONFIG [--depth N] [--cfg-options key=value 
 Exit codes: 0, or 2 with one line naming the file for a CONFIG that cannot be loaded.
 """
 import argparse
-import sys
-from pathlib import Path
 
 from mmdet3d.registry import MODELS
 from mmdet3d.utils import register_all_modules
 from mmengine.config import DictAction
 from torch import nn
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
-
-from projects.synthdet.bootstrap import ConfigFileError, load_config, run_tool  # noqa: E402
+from projects.synthdet.bootstrap import ConfigFileError, load_config, run_tool
 
 
 def count_parameters(module: nn.Module) -> int:

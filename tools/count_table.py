@@ -17,19 +17,15 @@ The counting rule is in ``projects/synthdet/evaluation/table4.py``. Cells read
 table as JSON (``synthdet.table4/1``) and as text next to it (``table4.txt``).
 """
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT))
-
-from projects.synthdet.evaluation.table4 import (  # noqa: E402
+from projects.synthdet.evaluation.table4 import (
     TrueBox, format_table4, table4, truth_from_infos)
-from projects.synthdet.evaluation.table_files import write_table  # noqa: E402
-from synthdet.classes import DETECTION_CLASSES  # noqa: E402
-from synthdet.contracts import SchemaError, read_predictions, read_room  # noqa: E402
+from projects.synthdet.evaluation.table_files import write_table
+from synthdet.classes import DETECTION_CLASSES
+from synthdet.contracts import SchemaError, read_predictions, read_room
 
 
 

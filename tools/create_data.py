@@ -6,14 +6,11 @@ Example::
 """
 import argparse
 import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
-
-from projects.synthdet.datasets.s3dis_converter import (  # noqa: E402
+from projects.synthdet.datasets.s3dis_converter import (
     OutputOverflowError, S3DISLayoutError, convert_s3dis)
-from synthdet.point_text import PointFileError  # noqa: E402
-from synthdet.processes import Interrupted, stop_on_signals  # noqa: E402
+from synthdet.point_text import PointFileError
+from synthdet.processes import Interrupted, stop_on_signals
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:

@@ -8,13 +8,10 @@ Counts come from the info pickles ``<data_root>/s3dis_infos_Area_N.pkl`` written
 """
 import argparse
 import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
-
-from projects.synthdet.evaluation.table1 import count_instances, format_table1, table1  # noqa: E402,E501
-from synthdet.info_files import InfoFileError  # noqa: E402
-from projects.synthdet.evaluation.table_files import write_table  # noqa: E402
+from projects.synthdet.evaluation.table1 import count_instances, format_table1, table1  # noqa: E501
+from synthdet.info_files import InfoFileError
+from projects.synthdet.evaluation.table_files import write_table
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -34,12 +34,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT))
+from projects.synthdet.config_helpers import with_num_points
+from synthdet.contracts import read_corners, read_predictions, read_room
+from synthdet.info_files import RAW_DIR
 
-from projects.synthdet.config_helpers import with_num_points  # noqa: E402
-from synthdet.contracts import read_corners, read_predictions, read_room  # noqa: E402
-from synthdet.info_files import RAW_DIR  # noqa: E402
+REPO_ROOT = Path(__file__).resolve().parents[1]
 
 BASE_CONFIG = REPO_ROOT / 'configs/tr3d/exp2_cpu.py'
 AREAS = (7, 8, 9)

@@ -21,18 +21,15 @@ file, invalid JSON, a bad scan or checkpoint end with one line naming the file a
 failures at run time with exit code 1.
 """
 import argparse
-import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
-
-from projects.synthdet.bootstrap import (  # noqa: E402
+from projects.synthdet.bootstrap import (
     add_detection_arguments, load_config, run_tool)
-from projects.synthdet.evaluation.real_scans import (  # noqa: E402
+from projects.synthdet.evaluation.real_scans import (
     LabelsError, evaluate_scans, find_labelled_scans, format_result)
-from projects.synthdet.inference.detector import load_model  # noqa: E402
-from projects.synthdet.inference.windows import inference_settings  # noqa: E402
-from synthdet.scan_io import load_scan  # noqa: E402
+from projects.synthdet.inference.detector import load_model
+from projects.synthdet.inference.windows import inference_settings
+from synthdet.scan_io import load_scan
 
 
 class BadInput(ValueError):

@@ -25,20 +25,17 @@ renamed into place. A scan's name is used as the file system gives it (bytes tha
 included) for its output file; inside the JSON, and in messages, such bytes show as U+FFFD.
 """
 import argparse
-import sys
 from pathlib import Path
 
 from tqdm import tqdm
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
-
-from projects.synthdet.bootstrap import (  # noqa: E402
+from projects.synthdet.bootstrap import (
     add_detection_arguments, check_output_dir, load_config, run_tool)
-from projects.synthdet.inference.detector import ModelDetector, load_model  # noqa: E402
-from projects.synthdet.inference.windows import inference_settings  # noqa: E402
-from synthdet.contracts import write_predictions  # noqa: E402
-from synthdet.prepare import prepare_scan  # noqa: E402
-from synthdet.scan_io import load_scan  # noqa: E402
+from projects.synthdet.inference.detector import ModelDetector, load_model
+from projects.synthdet.inference.windows import inference_settings
+from synthdet.contracts import write_predictions
+from synthdet.prepare import prepare_scan
+from synthdet.scan_io import load_scan
 
 
 class BadInput(ValueError):

@@ -15,11 +15,8 @@ import argparse
 import sys
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT))
-
-from projects.synthdet.bootstrap import check_output_file  # noqa: E402
-from projects.synthdet.checkpoint import (  # noqa: E402
+from projects.synthdet.bootstrap import check_output_file
+from projects.synthdet.checkpoint import (
     load_checkpoint_file, save_inference_checkpoint)
 
 

@@ -31,18 +31,16 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
-
-from configurator.corners import SCAN_VOXEL, CornerDetectionError, room_outline  # noqa: E402
-from configurator.corners import outline_in_scan, outline_to_dict  # noqa: E402
-from configurator.freecad_cli import FreecadFailed, build_document  # noqa: E402
-from projects.synthdet.bootstrap import (  # noqa: E402
+from configurator.corners import SCAN_VOXEL, CornerDetectionError, room_outline
+from configurator.corners import outline_in_scan, outline_to_dict
+from configurator.freecad_cli import FreecadFailed, build_document
+from projects.synthdet.bootstrap import (
     add_detection_arguments, check_output_file, load_config)
-from projects.synthdet.inference.detector import ModelDetector, load_model  # noqa: E402
-from projects.synthdet.inference.windows import inference_settings  # noqa: E402
-from synthdet.contracts import write_corners, write_predictions  # noqa: E402
-from synthdet.prepare import align_scan, resample_to_density  # noqa: E402
-from synthdet.scan_io import load_scan  # noqa: E402
+from projects.synthdet.inference.detector import ModelDetector, load_model
+from projects.synthdet.inference.windows import inference_settings
+from synthdet.contracts import write_corners, write_predictions
+from synthdet.prepare import align_scan, resample_to_density
+from synthdet.scan_io import load_scan
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:

@@ -32,30 +32,27 @@ duplicate, another class, a loose box, or the annotation of the scan's points in
 (``projects/synthdet/evaluation/false_positives.py``), in ``false_positives.json`` / ``.txt``.
 """
 import argparse
-import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
+from mmengine.config import Config
+from mmengine.dist import is_main_process
+from mmengine.model import BaseTTAModel, is_model_wrapper
+from mmengine.runner import Runner
 
-from mmengine.config import Config  # noqa: E402
-from mmengine.dist import is_main_process  # noqa: E402
-from mmengine.model import BaseTTAModel, is_model_wrapper  # noqa: E402
-from mmengine.runner import Runner  # noqa: E402
-
-from projects.synthdet.bootstrap import (  # noqa: E402
+from projects.synthdet.bootstrap import (
     ConfigFileError, OutputPathError, TTAConfigError, check_output_dir, check_output_file,
     parse_runner_args, run_tool, runner_config, tta_settings)
-from projects.synthdet.checkpoint import (  # noqa: E402
+from projects.synthdet.checkpoint import (
     CheckpointError, load_checkpoint_file, load_state_into)
-from projects.synthdet.evaluation.box_fit import (  # noqa: E402
+from projects.synthdet.evaluation.box_fit import (
     SynthdetBoxFit, box_fit_document, format_box_fit)
-from projects.synthdet.evaluation.false_positives import (  # noqa: E402
+from projects.synthdet.evaluation.false_positives import (
     SynthdetFalsePositives, false_positives_document, format_false_positives)
-from projects.synthdet.evaluation.table3 import format_table3, table3  # noqa: E402
-from projects.synthdet.evaluation.table_files import write_table  # noqa: E402
-from projects.synthdet.visualization import TopViewHook  # noqa: E402
-from synthdet.contracts import SENSOR_MODELS  # noqa: E402
-from synthdet.info_files import InfoFileError, load_info_pickle, rooms_scanned_by  # noqa: E402
+from projects.synthdet.evaluation.table3 import format_table3, table3
+from projects.synthdet.evaluation.table_files import write_table
+from projects.synthdet.visualization import TopViewHook
+from synthdet.contracts import SENSOR_MODELS
+from synthdet.info_files import InfoFileError, load_info_pickle, rooms_scanned_by
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:

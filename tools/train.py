@@ -20,19 +20,17 @@ import pickle
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's `projects`
+import torch
+from mmengine.config import Config
+from mmengine.dist import is_main_process
+from mmengine.runner import Runner, find_latest_checkpoint
 
-import torch  # noqa: E402
-from mmengine.config import Config  # noqa: E402
-from mmengine.dist import is_main_process  # noqa: E402
-from mmengine.runner import Runner, find_latest_checkpoint  # noqa: E402
-
-from projects.synthdet.bootstrap import (  # noqa: E402
+from projects.synthdet.bootstrap import (
     parse_runner_args, runner_config)
-from projects.synthdet.checkpoint import (  # noqa: E402
+from projects.synthdet.checkpoint import (
     TRAINING_CHECKPOINT_TYPES, CheckpointError, check_resumable, load_checkpoint_file, refused,
     save_inference_checkpoint, trusted_resume_path)
-from synthdet.info_files import InfoFileError  # noqa: E402
+from synthdet.info_files import InfoFileError
 
 INFERENCE_CHECKPOINT = 'inference.pth'
 

@@ -15,13 +15,10 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from anywhere
-
-from synthdet.room_data import (boxes_from_predictions, corner_polygon,  # noqa: E402
+from synthdet.room_data import (boxes_from_predictions, corner_polygon,
                                  load_ground_truth, load_scan, write_labelled_ply)
-from synthdet.topview import draw_top_view  # noqa: E402
+from synthdet.topview import draw_top_view
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
