@@ -196,8 +196,7 @@ def test_benchmark_smoke_run(name, smoke_runs):
 
 
 def test_the_page_names_command_machine_and_date_and_no_path_of_the_machine(tmp_path):
-    sys.path.insert(0, str(REPO / 'tools'))
-    import collect_benchmarks
+    from tools import collect_benchmarks
     output_dir = tmp_path / 'kept'
     output_dir.mkdir()
     record = {
