@@ -9,6 +9,7 @@ import re
 import signal
 import subprocess
 import sys
+import textwrap
 import time
 import zipfile
 from pathlib import Path
@@ -221,20 +222,30 @@ def test_a_detection_adds_one_object_named_by_synthdet(tmp_path):
     # each part's shape in a file named after it, written by synthdet in linear time
     assert shape_files[0] - shape_files[1] == {
         f'Detection{number:03d}.Shape.brp' for number in range(1, count + 1)}
-    # a plain FreeCAD (synthdet's proxy module not loaded) reads every stored shape
+    # a plain FreeCAD (synthdet's proxy module not loaded) reads every stored shape; loaded
+    # afterwards, synthdet gives the parts their proxy back and an edit rebuilds the shape
     script = tmp_path / 'volumes.py'
     report = tmp_path / 'volumes.json'
-    script.write_text(
-        'import json\nimport FreeCAD as App\n'
-        f'doc = App.openDocument({str(outputs[0])!r})\n'
-        'json.dump({o.Name: o.Shape.Volume for o in doc.Objects if hasattr(o, "Shape")}, '
-        f'open({str(report)!r}, "w"))\n', encoding='utf-8')
+    script.write_text(textwrap.dedent(f'''\
+        import json, sys
+        import FreeCAD as App
+        doc = App.openDocument({str(outputs[0])!r})
+        volumes = {{o.Name: o.Shape.Volume for o in doc.Objects if hasattr(o, 'Shape')}}
+        sys.path.insert(0, {str(REPO / 'configurator' / 'freecad')!r})
+        from synthdet_freecad import library
+        restored = library.restore_proxies(doc)
+        doc.Detection001.Length = 1000.0
+        doc.recompute()
+        json.dump({{'volumes': volumes, 'restored': restored,
+                   'edited': doc.Detection001.Shape.Volume}}, open({str(report)!r}, 'w'))
+    '''), encoding='utf-8')
     subprocess.run(['freecadcmd', str(script)], cwd=tmp_path, capture_output=True, timeout=120)
-    volumes = json.loads(report.read_text(encoding='utf-8'))
-    assert {name: round(volume) for name, volume in volumes.items()
+    seen = json.loads(report.read_text(encoding='utf-8'))
+    assert {name: round(volume) for name, volume in seen['volumes'].items()
             if name.startswith('Detection')} == {
                 f'Detection{number:03d}': 500 * 400 * 800 for number in range(1, count + 1)}
-    assert volumes['Walls'] > 0.0
+    assert seen['volumes']['Walls'] > 0.0
+    assert seen['restored'] == count and round(seen['edited']) == 1000 * 400 * 800
 
 
 @pytest.mark.slow
