@@ -46,20 +46,19 @@ import sys
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))  # run as a script from anywhere: make `projects` importable
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from configurator.freecad_cli import run_freecad_process  # noqa: E402
-from configurator.labels import OVERLAP_TOLERANCE, read_document  # noqa: E402
-from projects.synthdet.config_helpers import area_info_file  # noqa: E402
-from projects.synthdet.evaluation.real_scans import (  # noqa: E402
+from configurator.freecad_cli import run_freecad_process
+from configurator.labels import OVERLAP_TOLERANCE, read_document
+from projects.synthdet.config_helpers import area_info_file
+from projects.synthdet.evaluation.real_scans import (
     IOU_THR, LabelledScan, box_array, find_labelled_scans, format_result, rotated_iou_3d)
-from synthdet.contracts import read_labels  # noqa: E402
-from synthdet.geometry import box_corners_xy  # noqa: E402
-from synthdet.info_files import RAW_DIR  # noqa: E402
-from synthdet.processes import work_folder  # noqa: E402
+from synthdet.contracts import read_labels
+from synthdet.geometry import box_corners_xy
+from synthdet.info_files import RAW_DIR
+from synthdet.processes import work_folder
+
+REPO = Path(__file__).resolve().parents[1]
 
 USER_AREA = 10  # the area teach_finetune.py trains the user's rooms as
 TEST_AREA = 9
