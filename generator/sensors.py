@@ -39,7 +39,6 @@ from generator.scanner import (ScanResult, Scanner, TriangleScene, part_bounds, 
                                sensor_path, triangles_of_colors)
 from synthdet.contracts import SENSOR_MODELS
 from synthdet.geometry import distance_to_polygon, grid_cells, points_in_polygon
-from synthdet.voxels import VoxelFilter
 
 # an empty index array
 _NONE = np.zeros(0, dtype=np.int64)
@@ -306,6 +305,24 @@ def _depth_edges(ranges: np.ndarray, triangle: np.ndarray, columns: int, on_obje
     return edges[:count].copy(), other[:count].copy(), other_tri[:count].copy()
 
 
+# uniform draws made at once by _uniform_at: a buffer that stays in the cache
+_DRAW_CHUNK = 1 << 16
+
+
+def _uniform_at(rng: np.random.Generator, size: int, index: np.ndarray) -> np.ndarray:
+    """The values at ``index`` (ascending) of ``rng.random(size)``: the same numbers, and
+    ``rng`` left in the same state, drawn in chunks into one small buffer instead of an array
+    of ``size`` (a grid of millions of beams needs only the draws of its few edge beams)."""
+    values = np.empty(len(index))
+    buffer = np.empty(min(size, _DRAW_CHUNK))
+    for start in range(0, size, _DRAW_CHUNK):
+        count = min(_DRAW_CHUNK, size - start)
+        rng.random(out=buffer[:count])
+        low, high = np.searchsorted(index, (start, start + count))
+        values[low:high] = buffer[index[low:high] - start]
+    return values
+
+
 def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.ndarray,
                   on_object: np.ndarray, part: np.ndarray, share: float,
                   jump: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -323,7 +340,7 @@ def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.nda
     columns = ranges.shape[1]
     ranges, triangle = ranges.reshape(-1), triangle.reshape(-1)
     edges, other, other_tri = _depth_edges(ranges, triangle, columns, on_object, part, jump)
-    chosen = rng.random(ranges.size)[edges] < share
+    chosen = _uniform_at(rng, ranges.size, edges) < share
     mixed, other, other_tri = edges[chosen], other[chosen], other_tri[chosen]
     fraction = rng.random(len(mixed))
     ranges[mixed] += fraction * (other - ranges[mixed])
@@ -337,28 +354,161 @@ def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.nda
 @numba.njit(cache=True, nogil=True)
 def _grid_points(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: np.ndarray,
                  cos_azimuth: np.ndarray, sin_azimuth: np.ndarray, ranges: np.ndarray,
-                 beams: np.ndarray, ordered: bool, order: np.ndarray, noise: np.ndarray,
-                 a: float, b: float) -> np.ndarray:
+                 beams: np.ndarray, ordered: bool, order: np.ndarray) -> np.ndarray:
     """Points (N, 3) of ``beams`` (grid indices), ``ordered``: those of ``order`` (indices into
-    ``beams``) in its order, else all in theirs, at their ranges; with ``noise`` (standard
-    normal draws, one per beam; empty: none), each range first moves by draw x (a + b x
-    range)."""
+    ``beams``) in its order, else all in theirs, at their ranges."""
     columns = len(cos_azimuth)
     count = len(order) if ordered else len(beams)
     xyz = np.empty((count, 3))
-    noisy = len(noise) > 0
     for k in range(count):
         index = order[k] if ordered else k
         beam = beams[index]
         measured = ranges[beam]
-        if noisy:
-            measured = measured + noise[index] * (a + b * measured)
         row = beam // columns
         column = beam - row * columns
         xyz[k, 0] = station[0] + cos_elevation[row] * cos_azimuth[column] * measured
         xyz[k, 1] = station[1] + cos_elevation[row] * sin_azimuth[column] * measured
         xyz[k, 2] = station[2] + sin_elevation[row] * measured
     return xyz
+
+
+def _add_range_noise(rng: np.random.Generator, ranges: np.ndarray, rows: np.ndarray, a: float,
+                     b: float) -> None:
+    """Move the range of each of ``rows`` by a standard normal draw x (a + b x range), in place:
+    the draws of ``rng.standard_normal(len(rows))``, made in chunks into one small buffer."""
+    buffer = np.empty(min(len(rows), _DRAW_CHUNK))
+    for start in range(0, len(rows), _DRAW_CHUNK):
+        count = min(_DRAW_CHUNK, len(rows) - start)
+        rng.standard_normal(out=buffer[:count])
+        _noisy_ranges(ranges, rows[start:start + count], buffer[:count], a, b)
+
+
+@numba.njit(cache=True, nogil=True)
+def _noisy_ranges(ranges: np.ndarray, rows: np.ndarray, noise: np.ndarray, a: float,
+                  b: float) -> None:
+    """``ranges[rows]`` += ``noise`` x (a + b x range), in place."""
+    for k in range(len(rows)):
+        measured = ranges[rows[k]]
+        ranges[rows[k]] = measured + noise[k] * (a + b * measured)
+
+
+class SpacingFilter:
+    """The laser scanner export's spacing filter: keeps the first return of every cube of
+    ``side`` metres across the stations, one station's returns after the other.
+
+    The kept cubes' keys live in an open-addressing hash set that grows with them (memory grows
+    with the kept cubes, not with the beams); a return's point is computed, keyed and looked up
+    in one pass, without an array of the station's points. The keys are those of
+    :class:`synthdet.voxels.VoxelFilter` (cube coordinates relative to ``origin``'s cube, 21
+    bits each), and returns too far for them (2**20 cubes away) are kept by their exact cube
+    coordinates, so the two filters keep the same returns.
+    """
+
+    def __init__(self, side: float, origin: np.ndarray):
+        self.side = float(side)
+        self.origin_key = np.floor(origin / side)
+        self.table = np.full(1 << 16, -1, dtype=np.int64)
+        self.count = 0
+        self.wide: set[tuple[int, int, int]] = set()  # cubes beyond the packed key range
+
+    def new_returns(self, station: np.ndarray, angles: tuple[np.ndarray, ...],
+                    ranges: np.ndarray, beams: np.ndarray, order: np.ndarray) -> np.ndarray:
+        """Indices (ascending, into ``beams``) of the returns in cubes not seen before, the
+        first in ``order`` of each (at the points :func:`_grid_points` computes)."""
+        keys = _cube_keys(station, *angles, ranges, beams, self.side, self.origin_key)
+        kept, far, self.table, self.count = _first_in_new_cubes(keys, order, self.table,
+                                                                self.count)
+        if len(far):  # points kilometres away: rare, kept exact
+            points = _grid_points(station, *angles, ranges, beams, True, far)
+            for index, point in zip(far.tolist(), points):
+                key = tuple(int(v) for v in (np.floor(point / self.side) - self.origin_key))
+                if key not in self.wide:
+                    self.wide.add(key)
+                    kept[index] = True
+        return np.flatnonzero(kept)
+
+
+@numba.njit(cache=True, nogil=True)
+def _cube_slot(key: np.int64, bits: int) -> int:
+    """A key's first slot in a hash table of 2**bits slots (Fibonacci hashing: the top bits of
+    the key times 2**64 / golden ratio)."""
+    return np.int64((np.uint64(key) * np.uint64(11400714819323198485)) >> np.uint64(64 - bits))
+
+
+@numba.njit(cache=True, nogil=True)
+def _add_cube(table: np.ndarray, bits: int, key: np.int64) -> bool:
+    """Put ``key`` (>= 0) into the hash set ``table`` (-1: a free slot); whether it was new."""
+    mask = (1 << bits) - 1
+    slot = _cube_slot(key, bits)
+    while True:
+        held = table[slot]
+        if held < 0:
+            table[slot] = key
+            return True
+        if held == key:
+            return False
+        slot = (slot + 1) & mask
+
+
+@numba.njit(cache=True, nogil=True)
+def _cube_keys(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: np.ndarray,
+               cos_azimuth: np.ndarray, sin_azimuth: np.ndarray, ranges: np.ndarray,
+               beams: np.ndarray, side: float, origin_key: np.ndarray) -> np.ndarray:
+    """The packed cube key (N,) of each return of ``beams``, at its point as
+    :func:`_grid_points` computes it, as :func:`synthdet.voxels._packed_keys` packs it: -1 for
+    a point 2**20 cubes or more away. In the returns' order, so the reads go forwards."""
+    columns = len(cos_azimuth)
+    keys = np.empty(len(beams), dtype=np.int64)
+    point = np.empty(3)
+    for index in range(len(beams)):
+        beam = beams[index]
+        measured = ranges[beam]
+        row = beam // columns
+        column = beam - row * columns
+        point[0] = station[0] + cos_elevation[row] * cos_azimuth[column] * measured
+        point[1] = station[1] + cos_elevation[row] * sin_azimuth[column] * measured
+        point[2] = station[2] + sin_elevation[row] * measured
+        key = np.int64(0)
+        for axis in range(3):
+            cube = np.int64(np.floor(point[axis] / side) - origin_key[axis])
+            if abs(cube) >= 2**20:
+                key = np.int64(-1)
+                break
+            key = (key << 21) | (cube + 2**20)
+        keys[index] = key
+    return keys
+
+
+@numba.njit(cache=True, nogil=True)
+def _first_in_new_cubes(keys: np.ndarray, order: np.ndarray, table: np.ndarray,
+                        count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The spacing filter's pass over one station's returns in ``order``: whether each return
+    (N,) is the first of a cube key not in the hash set ``table``, the returns (in ``order``)
+    without a packed key (-1), and the hash set (grown at half full) and its size after."""
+    kept = np.zeros(len(keys), dtype=np.bool_)
+    far = np.empty(len(order), dtype=np.int64)
+    far_count = 0
+    bits = 0
+    while (1 << bits) < len(table):
+        bits += 1
+    for k in range(len(order)):
+        index = order[k]
+        key = keys[index]
+        if key < 0:
+            far[far_count] = index
+            far_count += 1
+            continue
+        if 2 * (count + 1) > len(table):  # grow: rehash into four times the slots
+            bits += 2
+            grown = np.full(1 << bits, -1, dtype=np.int64)
+            for held in table:
+                if held >= 0:
+                    _add_cube(grown, bits, held)
+            table = grown
+        if _add_cube(table, bits, key):
+            kept[index] = True
+            count += 1
+    return kept, far[:far_count].copy(), table, count
 
 
 def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.random.Generator,
@@ -378,7 +528,7 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
     directions = _grid_directions(*angles)
     a, b = cfg['range_noise']
     spacing = cfg['point_spacing']
-    cubes = VoxelFilter(spacing, stations[0]) if spacing else None
+    cubes = SpacingFilter(spacing, stations[0]) if spacing else None
     points, triangles, owner, strays = [], [], [], []
     for index, station in enumerate(stations):
         origins = np.broadcast_to(station, directions.shape)
@@ -390,17 +540,14 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
                 rng, ranges.reshape(grid), triangle.reshape(grid), on_object, scanner.scene.part,
                 cfg['mixed_pixels'], cfg['edge_jump'])
         rows = np.flatnonzero(np.isfinite(ranges))
-        noise = rng.standard_normal(len(rows)) if a > 0 or b > 0 else np.zeros(0)
+        if a > 0 or b > 0:
+            _add_range_noise(rng, ranges, rows, a, b)
         kept = _NONE
         if cubes is not None:
             # the returns in a random order; the first in a cube is kept
             shuffled = rng.permutation(len(rows))
-            first = cubes.new_points(
-                _grid_points(station, *angles, ranges, rows, True, shuffled, noise, a, b))
-            kept = np.zeros(len(rows), dtype=bool)
-            kept[shuffled[first]] = True
-            kept = np.flatnonzero(kept)
-        xyz = _grid_points(station, *angles, ranges, rows, cubes is not None, kept, noise, a, b)
+            kept = cubes.new_returns(station, angles, ranges, rows, shuffled)
+        xyz = _grid_points(station, *angles, ranges, rows, cubes is not None, kept)
         if cubes is not None:
             rows = rows[kept]
         points.append(xyz)
