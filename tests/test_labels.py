@@ -375,6 +375,41 @@ def test_an_alternative_counts_only_when_switched_in(round_trip, tmp_path):
         assert_same_box(found, dict(table, **{'class': expected}))
 
 
+OLD_LAYOUT_SCRIPT = textwrap.dedent('''\
+    # Runs in freecadcmd: a part as synthdet built it before parts had their own dimensions,
+    # a link group whose parameter sheet holds the size cells.
+    import json, os
+    import FreeCAD as App
+    params = json.load(open(os.environ['SYNTHDET_TEST_PARAMS'], encoding='utf-8'))
+    doc = App.newDocument('Old')
+    part = doc.addObject('App::LinkGroup', 'Table001')
+    part.Label = 'table 1'
+    part.addProperty('App::PropertyString', 'DetectedClass', 'Synthdet', 'class')
+    part.DetectedClass = 'table'
+    part.Placement = App.Placement(App.Vector(1500, 2500, 100),
+                                   App.Rotation(App.Vector(0, 0, 1), 30))
+    sheet = doc.addObject('Spreadsheet::Sheet', 'Table001_Parameters')
+    for row, (alias, value) in enumerate((('length', '=1600 mm'), ('width', '=800 mm'),
+                                          ('height', '=750 mm')), start=1):
+        sheet.set(f'B{row}', value)
+        sheet.setAlias(f'B{row}', alias)
+    part.ElementList = [sheet]
+    doc.recompute()
+    doc.saveAs(params['out'])
+    json.dump({}, open(params['report'], 'w'))
+''')
+
+
+def test_a_document_of_the_former_layout_is_read_from_its_parameter_sheets(tmp_path):
+    old = tmp_path / 'old.FCStd'
+    run_freecad_script(tmp_path, OLD_LAYOUT_SCRIPT, {'out': str(old)})
+    [box] = labels_module.read_document(old)['boxes']
+    assert box['class'] == 'table' and box['label'] == 'table 1'
+    np.testing.assert_allclose(box['size'], [1.6, 0.8, 0.75], atol=1e-9)
+    np.testing.assert_allclose(box['center'], [1.5, 2.5, 0.1 + 0.375], atol=1e-9)
+    assert box['yaw'] == pytest.approx(math.radians(30))
+
+
 # --------------------------------------------------------------------------- input errors
 
 

@@ -2,7 +2,7 @@
 FreeCAD, GUI or headless).
 
 An added part is built like an imported detection (``library.add_detection``: the same
-parametric model, parameter sheet and ``Synthdet`` properties, score 1, source model
+parametric model, dimensions and ``Synthdet`` properties, score 1, source model
 ``added by hand``) with the class's typical size, standing on the room's floor (its base height
 bound to the room's ``floor_z`` cell). ``macro`` offers both in the GUI.
 """
