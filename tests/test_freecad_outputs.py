@@ -248,6 +248,33 @@ def test_a_detection_adds_one_object_named_by_synthdet(tmp_path):
     assert seen['restored'] == count and round(seen['edited']) == 1000 * 400 * 800
 
 
+def test_a_failing_second_write_of_the_archive_is_one_clear_error(tmp_path):
+    """FreeCAD's archive is written once more with the parts' shapes; when that write fails
+    (here its temporary name is taken by a folder), the save reports an incomplete document."""
+    script = tmp_path / 'save.py'
+    report = tmp_path / 'save.json'
+    script.write_text(textwrap.dedent(f'''\
+        import json, os, sys
+        sys.path.insert(0, {str(REPO / 'configurator' / 'freecad')!r})
+        sys.path.append({str(REPO)!r})
+        import FreeCAD as App
+        from synthdet_freecad import archive, editing
+        doc = App.newDocument('Blocked')
+        editing.add_part(doc, 'table', 1.0, 1.0)
+        path = {str(tmp_path / 'blocked.FCStd')!r}
+        try:
+            archive.save_copy(doc, path, check=lambda saved: os.mkdir(saved + '.shapes'))
+            error = None
+        except OSError as failure:
+            error = str(failure)
+        json.dump({{'error': error}}, open({str(report)!r}, 'w'))
+    '''), encoding='utf-8')
+    subprocess.run(['freecadcmd', str(script)], cwd=tmp_path, capture_output=True, timeout=120)
+    error = json.loads(report.read_text(encoding='utf-8'))['error']
+    assert error.startswith('FreeCAD could not write a complete document to') and \
+        'blocked.FCStd' in error
+
+
 @pytest.mark.slow
 def test_two_thousand_detections_all_become_objects(tmp_path):
     """No quadratic step left on synthdet's side: 2,000 detections, each one part."""

@@ -35,9 +35,19 @@ def detection_parts(doc) -> list:
     ]
 
 
-def save_copy(doc, path: str) -> None:
-    """Save ``doc`` to ``path`` (which it leaves complete or not at all: written under a name
-    of its own, then renamed) with every part's shape stored under the part's name."""
+def incomplete(path: str) -> OSError:
+    """The error of a document that could not be written whole."""
+    return OSError(f'FreeCAD could not write a complete document to {path!r} (disk full?); '
+                   'the previous document is kept')
+
+
+def save_copy(doc, path: str, check=None) -> None:
+    """Save ``doc`` to ``path`` with every part's shape stored under the part's name.
+
+    ``check(path)``, if given, runs on the archive FreeCAD wrote before it is written again
+    (FreeCAD reports some write errors only on its console). The second archive is written
+    beside ``path`` and renamed over it; a failure to write it is ``incomplete(path)``.
+    """
     parts = detection_parts(doc)
     for part in parts:
         part.setPropertyStatus('Shape', 'Transient')
@@ -46,37 +56,47 @@ def save_copy(doc, path: str) -> None:
     finally:
         for part in parts:
             part.setPropertyStatus('Shape', '-Transient')
+    if check is not None:
+        check(path)
     shapes = {part.Name: part.Shape for part in parts}
     temporary = f'{path}.shapes'  # beside ``path``, named after it: cleaned up with it
     try:
-        with zipfile.ZipFile(path) as source:
-            xml = reference_shapes(source.read(DOCUMENT_XML), set(shapes))
-            with zipfile.ZipFile(temporary, 'w', zipfile.ZIP_DEFLATED,
-                                 compresslevel=COMPRESSION_LEVEL) as target:
-                # Document.xml first, then the files in the order Document.xml names them:
-                # FreeCAD reads the archive front to back, each file when it is asked for
-                target.writestr(DOCUMENT_XML, xml)
-                written = {DOCUMENT_XML}
-                stored = set(source.namelist())
-                for match in FILE_REFERENCE.finditer(xml):
-                    name = match.group(1).decode('utf-8')
-                    if name in written:
-                        continue
-                    if name.endswith(SHAPE_SUFFIX) and name[:-len(SHAPE_SUFFIX)] in shapes:
-                        target.writestr(name, shapes[name[:-len(SHAPE_SUFFIX)]]
-                                        .exportBrepToString())
-                    elif name in stored:
-                        target.writestr(name, source.read(name))
-                    else:
-                        continue
-                    written.add(name)
-                for name in source.namelist():  # files no element names (none FreeCAD asks)
-                    if name not in written:
-                        target.writestr(name, source.read(name))
-        os.replace(temporary, path)
+        _rewrite(path, temporary, shapes)
+    except (OSError, zipfile.BadZipFile):
+        raise incomplete(path) from None
     finally:
-        if os.path.exists(temporary):
+        if os.path.isfile(temporary):
             os.remove(temporary)
+
+
+def _rewrite(path: str, temporary: str, shapes: dict) -> None:
+    """Write ``path``'s archive again as ``temporary`` with the ``shapes`` (part name ->
+    shape) stored and referenced, and rename it over ``path``."""
+    with zipfile.ZipFile(path) as source:
+        xml = reference_shapes(source.read(DOCUMENT_XML), set(shapes))
+        with zipfile.ZipFile(temporary, 'w', zipfile.ZIP_DEFLATED,
+                             compresslevel=COMPRESSION_LEVEL) as target:
+            # Document.xml first, then the files in the order Document.xml names them:
+            # FreeCAD reads the archive front to back, each file when it is asked for
+            target.writestr(DOCUMENT_XML, xml)
+            written = {DOCUMENT_XML}
+            stored = set(source.namelist())
+            for match in FILE_REFERENCE.finditer(xml):
+                name = match.group(1).decode('utf-8')
+                if name in written:
+                    continue
+                if name.endswith(SHAPE_SUFFIX) and name[:-len(SHAPE_SUFFIX)] in shapes:
+                    target.writestr(name, shapes[name[:-len(SHAPE_SUFFIX)]]
+                                    .exportBrepToString())
+                elif name in stored:
+                    target.writestr(name, source.read(name))
+                else:
+                    continue
+                written.add(name)
+            for name in source.namelist():  # files no element names (none FreeCAD asks)
+                if name not in written:
+                    target.writestr(name, source.read(name))
+    os.replace(temporary, path)
 
 
 def reference_shapes(xml: bytes, names: set[str]) -> bytes:

@@ -121,9 +121,10 @@ def save_atomically(doc, out: str, look) -> None:
     remove_stale_partials(out)
     partial = partial_path(out)
     try:
-        archive.save_copy(doc, partial)  # the parts' shapes stored in linear time
-        # FreeCAD reports some write errors only on its console
-        _check_complete(partial, read_members=False)
+        # the parts' shapes stored in linear time; FreeCAD reports some write errors only on
+        # its console, so its archive is checked first
+        archive.save_copy(doc, partial,
+                          check=lambda path: _check_complete(path, read_members=False))
         look.write_gui_document(partial, doc)
         _check_complete(partial)
         os.replace(partial, out)
@@ -137,14 +138,13 @@ def _check_complete(path: str, read_members: bool = True) -> None:
     """Raise ``OSError`` unless ``path`` is a whole FCStd archive: its directory lists
     ``Document.xml`` and, with ``read_members``, every member reads back intact."""
     try:
-        with zipfile.ZipFile(path) as archive:
-            complete = 'Document.xml' in archive.namelist() and \
-                (not read_members or archive.testzip() is None)
+        with zipfile.ZipFile(path) as stored:
+            complete = 'Document.xml' in stored.namelist() and \
+                (not read_members or stored.testzip() is None)
     except (OSError, zipfile.BadZipFile):
         complete = False
     if not complete:
-        raise OSError(f'FreeCAD could not write a complete document to {path!r} (disk full?); '
-                      'the previous document is kept')
+        raise archive.incomplete(path)
 
 
 def run_headless() -> None:
