@@ -43,7 +43,7 @@ SMOKE: dict[str, Smoke | str] = {
                '--repeats', '1', '--batch-rays', '4096'],
               r'scanner vs fastest bpy loop \(bpy \S+ loop\), 1 thread each, median of 1: '
               r'default sensor scans with glass ' + figure('scan') + r'x rays/s \(paper '
-              r'[\d.]+x, tls [\d.]+x, tablet [\d.]+x\); bare ray casting ' +
+              r'[\d.]+x(?:, \w+ [\d.]+x)*\); bare ray casting ' +
               figure('bare') + r'x; our scan / bare Embree cast ' + figure('bound') + 'x'),
     'bench_writer.py':
         Smoke(['--points', '2000', '--repeats', '1'],
