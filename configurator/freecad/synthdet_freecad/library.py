@@ -291,9 +291,11 @@ def model_shape(obj):
         if obj.StepModel is None:
             raise ValueError(f'{obj.Label}: its STEP model is gone')
         return step_shape(parameters, obj.StepModel)
-    builder = BUILDERS.get(BUILTIN_MODELS.get(obj.DetectedClass, ('', ''))[1]) \
-        if obj.CadModel == 'builtin' else None
-    return Part.makeCompound((builder or box_solids)(parameters))
+    if obj.CadModel == 'builtin' and obj.DetectedClass in BUILTIN_MODELS:
+        solids = BUILDERS[BUILTIN_MODELS[obj.DetectedClass][1]](parameters)
+    else:
+        solids = box_solids(parameters)
+    return Part.makeCompound(solids)
 
 
 class DetectionModel:
@@ -307,6 +309,7 @@ class DetectionModel:
         """Recompute: the model's solids, at the part's placement."""
         obj.Shape = model_shape(obj)
 
+    # the state FreeCAD stores: none (FreeCAD 0.20 asks __getstate__, later ones dumps)
     def __getstate__(self):
         return None
 
@@ -377,21 +380,32 @@ def add_detection(doc,
     part.DetectedYaw = math.degrees(placed.detection['yaw'])
     part.Orientation = placed.orientation
     part.StandsOn = placed.support.label if placed.support is not None else 'floor'
-    for prop, metres in (('Length', placed.length), ('Width', placed.width),
-                         ('Height', placed.height)):
-        part.addProperty('App::PropertyLength', prop, DIMENSIONS, f'{prop.lower()} (local '
-                         f'{"xyz"[("Length", "Width", "Height").index(prop)]} axis)')
+    for prop, axis, metres in (('Length', 'x', placed.length), ('Width', 'y', placed.width),
+                               ('Height', 'z', placed.height)):
+        part.addProperty('App::PropertyLength', prop, DIMENSIONS,
+                         f'{prop.lower()} (along the local {axis} axis)')
         setattr(part, prop, 1000.0 * metres)
     if kind == 'step':
         part.addProperty('App::PropertyLink', 'StepModel', 'Synthdet',
                          'the imported STEP model, scaled to the dimensions')
         part.StepModel = library_object
-    for prop, description, expression in DETAILS.get(builder, ()) if kind == 'builtin' else ():
+    elif kind == 'builtin':
+        _add_details(part, builder)
+    base = App.Vector(1000.0 * placed.x, 1000.0 * placed.y, 1000.0 * placed.base_z)
+    part.Placement = App.Placement(base,
+                                   App.Rotation(App.Vector(0, 0, 1), math.degrees(placed.yaw)))
+    return part, kind
+
+
+def _add_details(part, builder: str) -> None:
+    """The built-in model's detail properties (bound to the dimensions by expressions) and,
+    for the YuMi, its joint angles in the rest pose."""
+    for prop, description, expression in DETAILS.get(builder, ()):
         type_name = 'App::PropertyFloat' if prop == 'Scale' else 'App::PropertyLength'
         part.addProperty(type_name, prop, DIMENSIONS, f'{description} (follows the dimensions '
                          'until a value is typed)')
         part.setExpression(prop, expression)
-    if builder == 'yumi' and kind == 'builtin':
+    if builder == 'yumi':
         for side in ('right', 'left'):
             for joint in (1, 2, 3, 4, 5, 6, 7):
                 angle = YUMI_REST_DEG[joint] * (-1 if side == 'left' and joint in YUMI_MIRRORED
@@ -400,7 +414,3 @@ def add_detection(doc,
                 part.addProperty('App::PropertyAngle', prop, DIMENSIONS,
                                  f'{side} arm joint {joint} angle (ABB numbering)')
                 setattr(part, prop, angle)
-    base = App.Vector(1000.0 * placed.x, 1000.0 * placed.y, 1000.0 * placed.base_z)
-    part.Placement = App.Placement(base,
-                                   App.Rotation(App.Vector(0, 0, 1), math.degrees(placed.yaw)))
-    return part, kind
