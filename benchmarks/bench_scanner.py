@@ -26,23 +26,29 @@ loops (``Object`` and ``scene``) take the first ``--slow-rays`` rays. Each loop'
 checked against Embree's. All methods run on one thread (bpy's ray casts are single-threaded);
 Embree on all cores is printed beside it.
 
-Part 2, the sensor models at their defaults (``generator.sensors.scan_room``: the paper's
-crossing path with aimed object rays, the terrestrial laser scanner, the tablet), each a scan of
-``--scan-points`` labelled points, with Embree and with the ``BVHTree`` loop as the ray engine of
-the same scan code (glass passes included), one thread each, the median of ``--repeats`` scans
-going round the engines in turn. Rays per second count the rays a scan casts (``rays_cast``; its
-glass passes are extra work within them). Where the Embree scan's time goes is timed inside it:
-the first hits of its ray batches (casting), the glass passes (their casts and bookkeeping), the
-noise models (range-error draws and mixed pixels), the laser scanner's spacing filter, and the
-rest (ray generation, labelling); writing the room's files (``generator.writer.write_room``)
-is timed after the scan. The physical bound is the bare Embree cast of exactly the ray batches
-the scan cast, first hits and glass passes (recorded in one more scan): "our scan / bare cast"
-is what is left to win. The scans' process CPU seconds (medians, summed over the models) are
-printed too: on a busy machine they leave out the waits for a core, which wall times include.
+Part 2, the default sensor models at their defaults (``generator.sensors.scan_room``): the
+models the default configuration draws, those with a share above 0 in ``scanner.sensors`` (the
+paper's crossing path with aimed object rays, the terrestrial laser scanner, the tablet; the
+depth frame has the share 0 and is drawn only by profiles such as ``mixed_rooms``, so it is not
+timed; the output names the shares), each a scan of ``--scan-points`` labelled points, with
+Embree and with the ``BVHTree`` loop as the ray engine of the same scan code (glass passes
+included), one thread each, the median of ``--repeats`` scans going round the engines in turn.
+Rays per second count the rays a scan casts (``rays_cast``; its glass passes are extra work
+within them). Where the Embree scan's time goes is timed inside it: the first hits of its ray
+batches (casting), the glass passes (their casts and bookkeeping), the noise models (range-error
+draws and mixed pixels), the laser scanner's spacing filter
+(``generator.sensors.SpacingFilter``), and the rest (ray generation, labelling); writing the
+room's files (``generator.writer.write_room``) is timed after the scan. The physical bound is
+the bare Embree cast of exactly the ray batches the scan cast, first hits and glass passes
+(recorded in one more scan): "our scan / bare cast" is what is left to win. The scans' process
+CPU seconds (medians, summed over the models) are printed too: on a busy machine they leave out
+the waits for a core, which wall times include.
 
-The last line gives, one thread each: the rays per second of the default sensors' scans against
-the same scans on the ``BVHTree`` loop (over the three models, and per model), the bare ray
-casting ratio on the random rays, and our scan / bare cast.
+The machine's load average (1, 5, 15 minutes) is printed before and after: on a shared machine
+the wall times grow with it, the ratios less. The last line gives, one thread each: the rays per
+second of the default sensors' scans against the same scans on the ``BVHTree`` loop (over the
+three models, and per model), the bare ray casting ratio on the random rays, and our scan / bare
+cast.
 """
 import argparse
 import contextlib
@@ -260,7 +266,7 @@ class TimedRandom:
 @contextlib.contextmanager
 def timed_sensor_parts(seconds: Counter) -> Iterator[None]:
     """Time ``generator.sensors``' mixed pixels and spacing filter into ``seconds``."""
-    mixed_pixels, voxel_filter = sensors._mixed_pixels, sensors.VoxelFilter
+    mixed_pixels, spacing_filter = sensors._mixed_pixels, sensors.SpacingFilter
 
     def timed_mixed_pixels(*args, **kwargs):
         start = time.perf_counter()
@@ -268,19 +274,19 @@ def timed_sensor_parts(seconds: Counter) -> Iterator[None]:
         seconds['noise'] += time.perf_counter() - start
         return answer
 
-    class TimedVoxelFilter(voxel_filter):
+    class TimedSpacingFilter(spacing_filter):
 
-        def new_points(self, xyz: np.ndarray) -> np.ndarray:
+        def new_returns(self, *args, **kwargs) -> np.ndarray:
             start = time.perf_counter()
-            answer = super().new_points(xyz)
+            answer = super().new_returns(*args, **kwargs)
             seconds['spacing filter'] += time.perf_counter() - start
             return answer
 
-    sensors._mixed_pixels, sensors.VoxelFilter = timed_mixed_pixels, TimedVoxelFilter
+    sensors._mixed_pixels, sensors.SpacingFilter = timed_mixed_pixels, TimedSpacingFilter
     try:
         yield
     finally:
-        sensors._mixed_pixels, sensors.VoxelFilter = mixed_pixels, voxel_filter
+        sensors._mixed_pixels, sensors.SpacingFilter = mixed_pixels, spacing_filter
 
 
 def scan_once(scanner: Scanner, room: RoomGeometry, model: str, points: int, config: dict,
@@ -308,14 +314,22 @@ def bare_cast(batches: list) -> float:
     return time.perf_counter() - start
 
 
+def default_models(config: dict) -> list[str]:
+    """The sensor models the configuration draws (a share above 0), in the contract's order."""
+    shares = config['scanner']['sensors']
+    return [model for model in SENSOR_MODELS if float(shares.get(model, 0.0)) > 0]
+
+
 def time_sensor_scans(scene: TriangleScene, room: RoomGeometry, names: list[str], meta: dict,
-                      points: int, config: dict, repeats: int, out: Path) -> dict[str, dict]:
-    """Per sensor model: the Embree and ``BVHTree`` scans (median seconds, rays), the Embree
-    scan's parts (median seconds each), its writing time and the bare cast of its rays."""
+                      models: list[str], points: int, config: dict, repeats: int,
+                      out: Path) -> dict[str, dict]:
+    """Per sensor model of ``models``: the Embree and ``BVHTree`` scans (median seconds,
+    rays), the Embree scan's parts (median seconds each), its writing time and the bare cast of
+    its rays."""
     glass = (SEE_THROUGH, config['glass_transmission'])
     embree, loop = ProfiledScanner(scene, *glass), BVHTreeScanner(scene, *glass)
     results = {}
-    for model in SENSOR_MODELS:
+    for model in models:
         for scanner in (embree, loop):  # warm-up
             scan_once(scanner, room, model, min(points, 10_000), config, Counter())
         runs = {'embree': [], 'loop': [], 'parts': [], 'loop cpu': []}
@@ -354,11 +368,14 @@ def time_sensor_scans(scene: TriangleScene, room: RoomGeometry, names: list[str]
     return results
 
 
-def print_sensor_scans(results: dict[str, dict], points: int, repeats: int) -> float:
+def print_sensor_scans(results: dict[str, dict], shares: dict, points: int,
+                       repeats: int) -> float:
     """The per-model table and the time shares of the Embree scans; returns the ratio of the
     rays per second over all models."""
-    print(f'default sensor models, {points:,} labelled points each, glass passes, 1 thread, '
-          f'median of {repeats} (rays = the scan\'s rays; with glass passes: cast)')
+    mix = ', '.join(f'{model} {float(shares.get(model, 0.0)):g}' for model in SENSOR_MODELS)
+    print(f'default sensor models (the default configuration\'s mix: {mix}; a model of share 0 '
+          f'is not timed), {points:,} labelled points each, glass passes, 1 thread, median of '
+          f'{repeats} (rays = the scan\'s rays; with glass passes: cast)')
     print(f'{"model":<8}{"rays":>11}{"cast":>11}{"Embree s":>10}{"rays/s":>13}{"BVHTree s":>11}'
           f'{"rays/s":>12}{"ratio":>7}{"bare s":>8}{"scan/bare":>10}')
     for model, r in results.items():
@@ -409,6 +426,7 @@ def main() -> None:
     parser.add_argument(
         '--batch-rays', type=int, default=None, help='rays per cast (default: the generator\'s)')
     args = parser.parse_args()
+    print('load average (1, 5, 15 min) before: ' + ', '.join(f'{v:.2f}' for v in os.getloadavg()))
 
     for obj in list(bpy.data.objects):  # bpy's start-up cube, camera and light
         bpy.data.objects.remove(obj, do_unlink=True)
@@ -471,9 +489,12 @@ def main() -> None:
 
     geometry = room_geometry(layout.polygon, layout.height, layout.bays, triangles, classes)
     meta = {'format': ROOM_FORMAT, **layout_meta(layout)}
-    scans = time_sensor_scans(triangles, geometry, names, meta, args.scan_points,
-                              config['scanner'], args.repeats, Path(workspace.name))
-    scan_ratio = print_sensor_scans(scans, args.scan_points, args.repeats)
+    scans = time_sensor_scans(triangles, geometry, names, meta, default_models(config),
+                              args.scan_points, config['scanner'], args.repeats,
+                              Path(workspace.name))
+    scan_ratio = print_sensor_scans(scans, config['scanner']['sensors'], args.scan_points,
+                                    args.repeats)
+    print('load average (1, 5, 15 min) after: ' + ', '.join(f'{v:.2f}' for v in os.getloadavg()))
     per_model = ', '.join(f'{m} {r["loop"] / r["embree"]:.1f}x' for m, r in scans.items())
     bound = sum(r['embree'] for r in scans.values()) / sum(r['bare'] for r in scans.values())
     print(f'scanner vs fastest bpy loop ({fastest}), 1 thread each, median of {args.repeats}: '

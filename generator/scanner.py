@@ -226,11 +226,11 @@ def _returns(t_hit: np.ndarray, primitive: np.ndarray, kept: np.ndarray, movable
 
 @numba.njit(cache=True, nogil=True)
 def _return_points(origins: np.ndarray, directions: np.ndarray, t_hit: np.ndarray,
-                   rows: np.ndarray, noise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Points (N, 3) of ``rows`` at origin + direction x distance (the float32 hit distance as
-    float64, plus ``noise`` (N,) where given) and their origins as float32 (N, 3)."""
-    xyz = np.empty((len(rows), 3))
-    origin = np.empty((len(rows), 3), dtype=np.float32)
+                   rows: np.ndarray, noise: np.ndarray, xyz: np.ndarray,
+                   origin: np.ndarray) -> None:
+    """Write the points of ``rows`` at origin + direction x distance (the float32 hit distance
+    as float64, plus ``noise`` (N,) where given) into ``xyz`` (N, 3) and their origins into
+    ``origin`` (N, 3, float32)."""
     for k in range(len(rows)):
         ray = rows[k]
         distance = np.float64(t_hit[ray])
@@ -239,7 +239,6 @@ def _return_points(origins: np.ndarray, directions: np.ndarray, t_hit: np.ndarra
         for axis in range(3):
             xyz[k, axis] = origins[ray, axis] + directions[ray, axis] * distance
             origin[k, axis] = origins[ray, axis]
-    return xyz, origin
 
 
 class Scanner:
@@ -346,8 +345,11 @@ class Scanner:
         batch = int(config['batch_rays'])
         target_objects = int(round(object_ratio *
                                    n_points)) if self.object_scene is not None else 0
-        chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-        state = {'rays': 0, 'step': 0}
+        # the points in ray order, written in place batch by batch
+        xyz = np.empty((n_points, 3))
+        origin = np.empty((n_points, 3), dtype=np.float32)
+        tri = np.empty(n_points, dtype=np.int64)
+        state = {'rays': 0, 'step': 0, 'points': 0}
 
         aim = bool(config['aim_at_objects'])
 
@@ -375,14 +377,18 @@ class Scanner:
                 kept = (rng.random(batch) >= config['dropout']
                         if config['dropout'] > 0 else np.ones(0, dtype=bool))
                 # the returns' rows and labels (a miss has no primitive), at most the rest wanted
-                rows, tri = _returns(t_hit, prim, kept, self.movable_tri,
-                                     _NO_MAP if tri_map is None else tri_map, keep_movable,
-                                     wanted - got)
+                rows, labels = _returns(t_hit, prim, kept, self.movable_tri,
+                                        _NO_MAP if tri_map is None else tri_map, keep_movable,
+                                        wanted - got)
                 if len(rows) == 0:
                     continue
                 noise = (rng.normal(0.0, config['range_noise'], len(rows))
                          if config['range_noise'] > 0 else np.zeros(0))
-                chunks.append((*_return_points(origins, nominal, t_hit, rows, noise), tri))
+                first, last = state['points'], state['points'] + len(rows)
+                _return_points(origins, nominal, t_hit, rows, noise, xyz[first:last],
+                               origin[first:last])
+                tri[first:last] = labels
+                state['points'] = last
                 got += len(rows)
             return got
 
@@ -405,14 +411,13 @@ class Scanner:
         if got < remaining:
             warnings.warn(f'only {got_objects + got} of {n_points} points: most rays escape the '
                           f'scene (is the room closed?)')
-        xyz = np.concatenate([c[0] for c in chunks]) if chunks else np.zeros((0, 3))
-        origin = np.concatenate([c[1] for c in chunks]) if chunks else np.zeros((0, 3), np.float32)
-        tri = np.concatenate([c[2] for c in chunks]) if chunks else np.zeros(0, np.int64)
+        count = state['points']
+        xyz, origin, tri = xyz[:count], origin[:count], tri[:count]
         return ScanResult(
             xyz=xyz,
             rgb=np.take(self.scene.colors, tri, axis=0),
-            part=self.scene.part[tri].astype(np.int32),
-            triangle=tri.astype(np.int64),
+            part=self.scene.part[tri].astype(np.int32, copy=False),
+            triangle=tri,
             origin=origin,
             rays_cast=state['rays'],
             object_points=got_objects)

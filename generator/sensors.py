@@ -597,7 +597,7 @@ def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int,
     elif len(xyz) < n_points:
         warnings.warn(f'TLS: only {len(xyz)} of {n_points} points at an angular step of '
                       f'{step:.4g} deg')
-    return _result(scanner, xyz, triangle, stations[owner], rays, stray), step
+    return _result(scanner, xyz, triangle, stations.astype(np.float32)[owner], rays, stray), step
 
 
 def _push_clear(xy: np.ndarray, centre: np.ndarray, obstacles: np.ndarray, clearance: float,
@@ -736,13 +736,12 @@ def _tablet_returns(t_hit: np.ndarray, primitive: np.ndarray, rows: np.ndarray,
 
 @numba.njit(cache=True, nogil=True)
 def _tablet_points(origins: np.ndarray, directions: np.ndarray, rows: np.ndarray,
-                   measured: np.ndarray) -> np.ndarray:
-    """Points (N, 3) of ``rows`` at origin + direction x measured range."""
-    xyz = np.empty((len(rows), 3))
+                   measured: np.ndarray, xyz: np.ndarray) -> None:
+    """Write the points of ``rows`` at origin + direction x measured range into ``xyz``
+    (N, 3)."""
     for k in range(len(rows)):
         for axis in range(3):
             xyz[k, axis] = origins[rows[k], axis] + directions[rows[k], axis] * measured[k]
-    return xyz
 
 
 def cast_tablet(
@@ -768,7 +767,10 @@ def cast_tablet(
     up = np.cross(right, look)
     half = np.tan(np.radians(np.asarray(cfg['fov_deg'], dtype=np.float64)) / 2)
     near, far = cfg['min_range'], cfg['max_range']
-    points, triangles, owners = [], [], []
+    # the returns, written in place batch by batch
+    xyz = np.empty((n_points, 3))
+    triangle = np.empty(n_points, dtype=np.int64)
+    pose_of = np.empty(n_points, dtype=np.int64)
     got = rays = 0
     max_batches = max(64, 16 * n_points // batch + 64)
     for _ in range(max_batches):
@@ -784,14 +786,14 @@ def cast_tablet(
         rows, measured = _tablet_returns(t_hit, prim, rows, noise, loss, cfg['range_noise'],
                                          cfg['far_keep'], near, far, rng.random(len(rows)),
                                          n_points - got)
-        points.append(_tablet_points(origins, directions, rows, measured))
-        triangles.append(prim[rows].astype(np.int64))
-        owners.append(pose[rows])
+        _tablet_points(origins, directions, rows, measured, xyz[got:got + len(rows)])
+        triangle[got:got + len(rows)] = prim[rows]
+        pose_of[got:got + len(rows)] = pose[rows]
         got += len(rows)
     if got < n_points:
         warnings.warn(f'tablet: only {got} of {n_points} points after {rays} rays')
-    pose = np.concatenate(owners)
-    return _result(scanner, np.concatenate(points), np.concatenate(triangles), positions[pose],
+    pose = pose_of[:got]
+    return _result(scanner, xyz[:got], triangle[:got], positions.astype(np.float32)[pose],
                    rays), pose
 
 
@@ -987,7 +989,7 @@ def _result(scanner: Scanner,
         rgb=np.take(scene.colors, triangle, axis=0),
         part=scene.part[triangle].astype(np.int32, copy=False),
         triangle=triangle.astype(np.int64, copy=False),
-        origin=origin.astype(np.float32),
+        origin=origin.astype(np.float32, copy=False),
         rays_cast=int(rays),
         object_points=int((on_object if stray is None else on_object & ~stray).sum()),
         stray=stray)
