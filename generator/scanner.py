@@ -241,6 +241,18 @@ def _return_points(origins: np.ndarray, directions: np.ndarray, t_hit: np.ndarra
             origin[k, axis] = origins[ray, axis]
 
 
+@numba.njit(cache=True, nogil=True)
+def _glass_hits(t_hit: np.ndarray, primitive: np.ndarray, glass: np.ndarray) -> np.ndarray:
+    """Rows (ascending) of a batch whose hit (finite ``t_hit``) is on a ``glass`` triangle."""
+    rows = np.empty(len(t_hit), dtype=np.int64)
+    count = 0
+    for ray in range(len(t_hit)):
+        if np.isfinite(t_hit[ray]) and glass[primitive[ray]]:
+            rows[count] = ray
+            count += 1
+    return rows[:count].copy()
+
+
 class Scanner:
     """Casts the paper's ray scheme on a :class:`TriangleScene` with Embree scenes (embreex)."""
 
@@ -300,8 +312,7 @@ class Scanner:
         if rng is None or self.glass_transmission <= 0.0:
             return t_hit, primitive
         glass = self.glass_tri if raycaster is self.full_scene else self._object_glass_tri
-        rows = np.flatnonzero(np.isfinite(t_hit))
-        rows = rows[glass[primitive[rows]]]
+        rows = _glass_hits(t_hit, primitive, glass)
         rows = rows[rng.random(len(rows)) < self.glass_transmission]
         if not len(rows):
             return t_hit, primitive

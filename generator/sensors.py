@@ -435,6 +435,10 @@ def _cube_slot(key: np.int64, bits: int) -> int:
     return np.int64((np.uint64(key) * np.uint64(11400714819323198485)) >> np.uint64(64 - bits))
 
 
+# returns whose keys and slots the spacing filter reads ahead of inserting them
+_FILTER_BLOCK = 32
+
+
 @numba.njit(cache=True, nogil=True)
 def _add_cube(table: np.ndarray, bits: int, key: np.int64) -> bool:
     """Put ``key`` (>= 0) into the hash set ``table`` (-1: a free slot); whether it was new."""
@@ -491,23 +495,36 @@ def _first_in_new_cubes(keys: np.ndarray, order: np.ndarray, table: np.ndarray,
     bits = 0
     while (1 << bits) < len(table):
         bits += 1
-    for k in range(len(order)):
-        index = order[k]
-        key = keys[index]
-        if key < 0:
-            far[far_count] = index
-            far_count += 1
-            continue
-        if 2 * (count + 1) > len(table):  # grow: rehash into four times the slots
-            bits += 2
-            grown = np.full(1 << bits, -1, dtype=np.int64)
-            for held in table:
-                if held >= 0:
-                    _add_cube(grown, bits, held)
-            table = grown
-        if _add_cube(table, bits, key):
-            kept[index] = True
-            count += 1
+    # the returns go in blocks: first their keys and the keys in their first slots are read,
+    # each read independent of the others, so that the memory serves many at once; then the
+    # inserts, which skip a key found in its first slot (a key stays in the set)
+    block_keys = np.empty(_FILTER_BLOCK, dtype=np.int64)
+    first_held = np.empty(_FILTER_BLOCK, dtype=np.int64)
+    for start in range(0, len(order), _FILTER_BLOCK):
+        size = min(_FILTER_BLOCK, len(order) - start)
+        for j in range(size):
+            block_keys[j] = keys[order[start + j]]
+        for j in range(size):
+            if block_keys[j] >= 0:
+                first_held[j] = table[_cube_slot(block_keys[j], bits)]
+        for j in range(size):
+            index, key = order[start + j], block_keys[j]
+            if key < 0:
+                far[far_count] = index
+                far_count += 1
+                continue
+            if first_held[j] == key:  # in the set already (it stays there)
+                continue
+            if 2 * (count + 1) > len(table):  # grow: rehash into four times the slots
+                bits += 2
+                grown = np.full(1 << bits, -1, dtype=np.int64)
+                for held in table:
+                    if held >= 0:
+                        _add_cube(grown, bits, held)
+                table = grown
+            if _add_cube(table, bits, key):
+                kept[index] = True
+                count += 1
     return kept, far[:far_count].copy(), table, count
 
 
@@ -554,6 +571,8 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
         triangles.append(triangle[rows])
         owner.append(np.full(len(rows), index))
         strays.append(stray[rows])
+    if len(stations) == 1:  # no copies of one station's returns
+        return points[0], triangles[0], owner[0], strays[0]
     return (np.concatenate(points), np.concatenate(triangles), np.concatenate(owner),
             np.concatenate(strays))
 
