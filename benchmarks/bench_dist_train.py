@@ -4,17 +4,17 @@ threads (``tools/train.py``, ``make exp2-cpu``) vs 2 processes with 1 thread eac
 
     .venv/bin/python benchmarks/bench_dist_train.py [--rooms-per-area 4] [--points 1000000]
                                                     [--iters 16] [--warmup 4] [--seed 0]
-                                                    [--workers 2]
+                                                    [--workers 2] [--sample-points N]
 
 The generator writes ``--rooms-per-area`` rooms of ``--points`` points into areas 7, 8 and 9 of
 a temporary folder and ``tools/create_data.py`` converts them (``--workers`` processes each).
-Each setup then trains the exp2_cpu config (2 cm voxels, 40,000 sampled points, the mixed-sensor
-data of ``make exp2-cpu``) from the same seed for ``--iters`` iterations of 4 rooms, without
-validation, logging every iteration: one process takes the 4 rooms with ``OMP_NUM_THREADS=2``;
-two processes take 2 rooms each with ``OMP_NUM_THREADS=1`` and average their gradients. The time
-per iteration is the Runner's own (``time`` in ``vis_data/scalars.json``: loading, forward,
-backward, gradient exchange and optimiser step), its median over the iterations after the first
-``--warmup``.
+Each setup then trains the exp2_cpu config (2 cm voxels, 40,000 sampled points or
+``--sample-points``, the mixed-sensor data of ``make exp2-cpu``) from the same seed for
+``--iters`` iterations of 4 rooms, without validation, logging every iteration: one process
+takes the 4 rooms with ``OMP_NUM_THREADS=2``; two processes take 2 rooms each with
+``OMP_NUM_THREADS=1`` and average their gradients. The time per iteration is the Runner's own
+(``time`` in ``vis_data/scalars.json``: loading, forward, backward, gradient exchange and
+optimiser step), its median over the iterations after the first ``--warmup``.
 The last line is the speed-up of the two processes. It needs an idle machine: another job on
 the cores slows the two setups differently.
 """
@@ -63,14 +63,28 @@ def make_data(root: Path, rooms_per_area: int, points: int, seed: int, workers: 
                        stdout=subprocess.DEVNULL)
 
 
-def train(data: Path, work: Path, processes: int, threads: int, repeats: int,
-          seed: int) -> list[float]:
+def sample_options(num_points: int) -> list[str]:
+    """``--cfg-options`` that make every ``PointSample`` of the config's training datasets
+    sample ``num_points`` points (addressed by their index in each pipeline)."""
+    from mmengine.config import Config
+    cfg = Config.fromfile(REPO / CONFIG, import_custom_modules=False)
+    return [
+        f'train_dataloader.dataset.dataset.datasets.{index}.pipeline.{step}.num_points='
+        f'{num_points}'
+        for index, dataset in enumerate(cfg.train_dataloader.dataset.dataset.datasets)
+        for step, transform in enumerate(dataset.pipeline) if transform.type == 'PointSample'
+    ]
+
+
+def train(data: Path, work: Path, processes: int, threads: int, repeats: int, seed: int,
+          extra_options: list[str]) -> list[float]:
     """Train one setup and return the Runner's seconds per iteration, in order."""
     options = [
         f'{key}.data_root={data}/' for key in ('train_dataloader.dataset.dataset.datasets.0',
                                                'train_dataloader.dataset.dataset.datasets.1',
                                                'val_dataloader.dataset', 'test_dataloader.dataset')
     ]
+    options += extra_options
     options += [
         f'train_dataloader.batch_size={BATCH // processes}',
         f'train_dataloader.dataset.times={repeats}', 'train_cfg.max_epochs=1',
@@ -99,6 +113,10 @@ def main() -> None:
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument(
         '--workers', type=int, default=2, help='generator and converter processes for the data')
+    parser.add_argument(
+        '--sample-points',
+        type=int,
+        help='points each training room is sampled to (default: the config\'s 40,000)')
     args = parser.parse_args()
     train_rooms = args.rooms_per_area * len(TRAIN_ROOMS_AREAS)
     if (args.iters * BATCH) % train_rooms:
@@ -106,18 +124,23 @@ def main() -> None:
                      'training rooms (--rooms-per-area x 2)')
     if args.iters <= args.warmup:
         parser.error('--iters must be larger than --warmup')
+    if args.sample_points is not None and args.sample_points < 1:
+        parser.error('--sample-points must be >= 1')
     repeats = args.iters * BATCH // train_rooms
+    options = [] if args.sample_points is None else sample_options(args.sample_points)
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp) / 'data'
         make_data(data, args.rooms_per_area, args.points, args.seed, args.workers)
         for name, processes, threads in SETUPS:
             times = train(data,
-                          Path(tmp) / f'work_{processes}', processes, threads, repeats, args.seed)
+                          Path(tmp) / f'work_{processes}', processes, threads, repeats, args.seed,
+                          options)
             if len(times) != args.iters:
                 sys.exit(f'{name}: logged {len(times)} iterations, expected {args.iters}')
             results[name] = (processes, threads, statistics.median(times[args.warmup:]))
-    print(f'{CONFIG}, batch of {BATCH} rooms of {args.points} generated points, '
+    sampled = '' if args.sample_points is None else f' sampled to {args.sample_points}'
+    print(f'{CONFIG}, batch of {BATCH} rooms of {args.points} generated points{sampled}, '
           f'{args.iters} iterations, median of the last {args.iters - args.warmup}; '
           f'{os.cpu_count()} cores')
     print(f"{'setup':<22} {'processes':>9} {'threads':>8} {'rooms/proc':>10} "

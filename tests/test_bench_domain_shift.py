@@ -31,9 +31,11 @@ PROFILES = {
         }
     },
 }
+# the smallest run that still trains both models and tests each on both profiles: one room per
+# area, one iteration; 100 sampled points keep the detector's voxels (its cost) few
 TINY = [
-    '--rooms-train', '2', '--rooms-test', '1', '--iters', '1', '--points', '5000',
-    '--sample-points', '1000', '--seed', '3', '--test-profiles', 'paper', 'mixed',
+    '--rooms-train', '1', '--rooms-test', '1', '--iters', '1', '--points', '2000',
+    '--sample-points', '100', '--seed', '3', '--test-profiles', 'paper', 'mixed',
     '--progress-every', '5'
 ]
 

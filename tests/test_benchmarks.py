@@ -93,7 +93,7 @@ SMOKE: dict[str, Smoke | str] = {
               figure('tablet') + 'x'),
     'bench_dist_train.py':
         Smoke(['--rooms-per-area', '1', '--points', '5000', '--iters', '1', '--warmup', '0',
-               '--workers', '1'],
+               '--workers', '1', '--sample-points', '100'],
               r'2 processes x 1 thread vs 1 process x 2 threads: x' + figure('ratio') +
               r' faster per iteration of 4 rooms \(' + figure('two') + ' s vs ' +
               figure('one') + r' s\)',
