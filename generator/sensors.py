@@ -397,8 +397,9 @@ class SpacingFilter:
     ``side`` metres across the stations, one station's returns after the other.
 
     The kept cubes' keys live in an open-addressing hash set that grows with them (memory grows
-    with the kept cubes, not with the beams); a return's point is computed, keyed and looked up
-    in one pass, without an array of the station's points. The keys are those of
+    with the kept cubes, not with the beams). A station's returns are keyed in beam order (the
+    reads go forwards), then looked up in the station's random order, without an array of its
+    points. The keys are those of
     :class:`synthdet.voxels.VoxelFilter` (cube coordinates relative to ``origin``'s cube, 21
     bits each), and returns too far for them (2**20 cubes away) are kept by their exact cube
     coordinates, so the two filters keep the same returns.
