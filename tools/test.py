@@ -161,6 +161,8 @@ def main(argv: list[str] | None = None) -> dict:
         check_output_file(args.out, make_parents=True)
     if args.show_dir:
         check_output_dir(args.show_dir)
+    if args.tta:
+        use_test_time_augmentation(cfg)
     check_test_data(cfg)
     checkpoint = load_checkpoint_file(args.checkpoint)  # checked before the model is built
     cfg.load_from = None  # the weights come from the weights-only load below
@@ -169,8 +171,6 @@ def main(argv: list[str] | None = None) -> dict:
         add_metric(cfg, SynthdetBoxFit)
     if args.false_positives:
         add_metric(cfg, SynthdetFalsePositives)
-    if args.tta:
-        use_test_time_augmentation(cfg)
     test_set = select_sensor(cfg, args.sensor)
     runner = Runner.from_cfg(cfg)
     model = runner.model.module if is_model_wrapper(runner.model) else runner.model
