@@ -61,7 +61,7 @@ SMOKE: dict[str, Smoke | str] = {
               r'workers vs mmdet3d as shipped: ' + figure('shipped') + r'x; CPU-time '
               r'ratio \(1 process each\): ' + figure('cpu') + 'x'),
     'bench_model.py':
-        Smoke(['--points', '3000', '--iters', '1', '--threads', '1', '--in-process'],
+        Smoke(['--points', '500', '--iters', '1', '--threads', '1', '--in-process'],
               r'2 cm \+ fine level \(CPU seconds\): train x' + figure('train_2cm') +
               r' of 2 cm, x' + figure('train_1cm') + r' of 1 cm; inference x' +
               figure('infer_2cm') + r' of 2 cm, x' + figure('infer_1cm') + ' of 1 cm',
