@@ -37,7 +37,7 @@ Rays per second count the rays a scan casts (``rays_cast``; its glass passes are
 within them). Where the Embree scan's time goes is timed inside it: the first hits of its ray
 batches (casting), the glass passes (their casts and bookkeeping), the noise models (range-error
 draws and mixed pixels), the laser scanner's spacing filter
-(``generator.sensors.SpacingFilter``), and the rest (ray generation, labelling); writing the
+(``generator.tls.SpacingFilter``), and the rest (ray generation, labelling); writing the
 room's files (``generator.writer.write_room``) is timed after the scan. The physical bound is
 the bare Embree cast of exactly the ray batches the scan cast, first hits and glass passes
 (recorded in one more scan): "our scan / bare cast" is what is left to win. The scans' process
@@ -67,7 +67,7 @@ import numpy as np
 from mathutils import Vector
 from mathutils.bvhtree import BVHTree
 
-from generator import sensors
+from generator import tls
 from generator.assets.palette import METAL, SEE_THROUGH
 from generator.config import load_config
 from generator.layout import catalog_from_library, generate_layout, layout_meta
@@ -76,8 +76,8 @@ from generator.scanner import (
     ScanResult, Scanner, TriangleScene, _cast_slice, random_directions, sensor_path,
     triangles_of_colors)
 from generator.scene import COLLECTION, RoomScene, export_triangles
-from generator.sensors import (
-    RoomGeometry, label_stray_returns, room_geometry, scan_room)
+from generator.sensor_common import RoomGeometry, room_geometry
+from generator.sensors import label_stray_returns, scan_room
 from generator.writer import write_room
 from synthdet.contracts import ROOM_FORMAT, SENSOR_MODELS
 
@@ -265,8 +265,8 @@ class TimedRandom:
 
 @contextlib.contextmanager
 def timed_sensor_parts(seconds: Counter) -> Iterator[None]:
-    """Time ``generator.sensors``' mixed pixels and spacing filter into ``seconds``."""
-    mixed_pixels, spacing_filter = sensors._mixed_pixels, sensors.SpacingFilter
+    """Time ``generator.tls``' mixed pixels and spacing filter into ``seconds``."""
+    mixed_pixels, spacing_filter = tls._mixed_pixels, tls.SpacingFilter
 
     def timed_mixed_pixels(*args, **kwargs):
         start = time.perf_counter()
@@ -282,11 +282,11 @@ def timed_sensor_parts(seconds: Counter) -> Iterator[None]:
             seconds['spacing filter'] += time.perf_counter() - start
             return answer
 
-    sensors._mixed_pixels, sensors.SpacingFilter = timed_mixed_pixels, TimedSpacingFilter
+    tls._mixed_pixels, tls.SpacingFilter = timed_mixed_pixels, TimedSpacingFilter
     try:
         yield
     finally:
-        sensors._mixed_pixels, sensors.SpacingFilter = mixed_pixels, spacing_filter
+        tls._mixed_pixels, tls.SpacingFilter = mixed_pixels, spacing_filter
 
 
 def scan_once(scanner: Scanner, room: RoomGeometry, model: str, points: int, config: dict,

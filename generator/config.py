@@ -95,7 +95,7 @@ DEFAULTS: dict[str, Any] = {
         # every sensor model: probability that a ray passes glass (printer doors, cabinet fronts)
         # to the surface behind it, as a laser crosses clear glass; 0: glass is opaque (paper)
         'glass_transmission': 0.9,
-        'tls': {  # terrestrial laser scanner (generator/sensors.py)
+        'tls': {  # terrestrial laser scanner (generator/tls.py)
             'stations_per_cell': [1, 2],  # inclusive range of stations per grid cell / bay
             'height': [1.4, 1.7],  # tripod height, metres
             'wall_clearance': 0.5,  # station distance from its cell's sides, metres
@@ -113,7 +113,7 @@ DEFAULTS: dict[str, Any] = {
             'mixed_pixels': 0.5,  # share of the returns at depth edges that land in between
             'edge_jump': 0.1,  # depth step between neighbouring beams that makes an edge, metres
         },
-        'tablet': {  # handheld / tablet LiDAR (generator/sensors.py)
+        'tablet': {  # handheld / tablet LiDAR (generator/tablet.py)
             'poses': 512,  # device poses along the walk
             'height': [1.2, 1.6],  # hand height, metres
             'wall_distance': 1.0,  # walk this far from the cell's sides, metres
@@ -129,7 +129,7 @@ DEFAULTS: dict[str, Any] = {
             'dark_dropout': 0.7,  # probability that a return on a dark triangle is lost
             'shiny_dropout': 0.5,  # the same on shiny (metal palette) triangles
         },
-        'depth_frame': {  # one RGB-D camera frame (Kinect-like; generator/sensors.py)
+        'depth_frame': {  # one RGB-D camera frame (Kinect-like; generator/depth_frame.py)
             'height': [1.0, 1.6],  # camera height, metres
             'wall_distance': [0.2, 0.8],  # camera distance from the nearest wall, metres
             'object_clearance': 0.3,  # camera distance from any object's bounds, metres

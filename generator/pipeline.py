@@ -106,8 +106,8 @@ class RoomGenerator:
         from generator.assets.palette import METAL, SEE_THROUGH
         from generator.scanner import Scanner
         from generator.scene import export_triangles
-        from generator.sensors import (choose_sensor, label_stray_returns, room_geometry,
-                                       scan_room)
+        from generator.sensor_common import room_geometry
+        from generator.sensors import choose_sensor, label_stray_returns, scan_room
         from generator.writer import TMP_PREFIX, clean_stale, write_room
         from synthdet.contracts import ROOM_FORMAT
         start = time.perf_counter()

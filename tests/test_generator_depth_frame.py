@@ -1,4 +1,4 @@
-"""The depth-frame sensor (generator/sensors.py): one RGB-D camera frame per room, on real
+"""The depth-frame sensor (generator/depth_frame.py): one RGB-D camera frame per room, on real
 Embree. Hand-made box rooms for the frustum, the range window, what the frame sees and what it
 cannot, depth edges and sparse objects; small rooms from ``python -m generator`` for the
 meta.json record, the annotations and determinism; configuration errors."""
@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from generator.config import DEFAULTS, ConfigError, load_config
+from generator.depth_frame import DepthCamera, _depth_frame_returns, cast_depth_frame
 from generator.scanner import Scanner
-from generator.sensors import (ROOM_STRUCTURE, DepthCamera, RoomGeometry, _depth_frame_returns,
-                               cast_depth_frame, scan_room)
+from generator.sensor_common import ROOM_STRUCTURE, RoomGeometry
+from generator.sensors import scan_room
 from synthdet.geometry import distance_to_polygon
 from synthdet.point_text import read_point_file
 from tests.generator_runs import generate_rooms

@@ -1,7 +1,7 @@
-"""Sensor models (generator/sensors.py) on real Open3D/Embree: hand-made box rooms for the TLS grid,
-range noise and mixed pixels, the tablet's range window and dropouts, the paper profile's uniform
-directions; and small real rooms from ``python -m generator`` for the per-room mix and
-determinism."""
+"""Sensor models (generator/sensors.py, tls.py, tablet.py) on real Open3D/Embree: hand-made box
+rooms for the TLS grid, range noise and mixed pixels, the tablet's range window and dropouts, the
+paper profile's uniform directions; and small real rooms from ``python -m generator`` for the
+per-room mix and determinism."""
 import json
 import shutil
 from pathlib import Path
@@ -15,8 +15,11 @@ from generator.__main__ import main
 from generator.assets.palette import METAL, SEE_THROUGH
 from generator.config import DEFAULTS, ConfigError, load_config
 from generator.scanner import Scanner, TriangleScene
-from generator.sensors import (SENSOR_MODELS, RoomGeometry, cast_tablet, cast_tls, choose_sensor,
-                               room_geometry, scan_room, scan_tls, tls_grid)
+from generator.sensor_common import RoomGeometry, room_geometry
+from generator.sensors import choose_sensor, scan_room
+from generator.tablet import cast_tablet
+from generator.tls import cast_tls, scan_tls, tls_grid
+from synthdet.contracts import SENSOR_MODELS
 from synthdet.point_text import read_point_file
 from synthdet.voxels import cube_keys
 from tests.test_corners import corner_errors

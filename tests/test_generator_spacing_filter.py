@@ -2,8 +2,8 @@
 versions they replace: the same returns, the same numbers, the same generator state."""
 import numpy as np
 
-from generator.sensors import (SpacingFilter, _add_range_noise, _angle_tables, _grid_points,
-                               _uniform_at, tls_grid)
+from generator.tls import (SpacingFilter, _add_range_noise, _angle_tables, _grid_points,
+                           _uniform_at, tls_grid)
 from synthdet.voxels import VoxelFilter
 
 
