@@ -3,15 +3,26 @@ overlapping true boxes and plans a correction, and one whole run at a tiny scale
 real scan2cad, FreeCAD, labels, converter, Runner and evaluation (two training iterations)."""
 from __future__ import annotations
 
+import json
 import math
+import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from benchmarks.bench_real_scans import write_generated_scans
 from benchmarks.bench_teach import SEPARATION, correction_plan, separate_boxes
 from configurator.labels import check_overlaps
+from synthdet.contracts import LABELS_FORMAT, read_labels, write_labels
 from synthdet.geometry import box_corners_xy
+from synthdet.scan_io import write_scan
+from tests.room_scans import make_room
+from tests.s3dis_fixtures import write_synthetic_area
+from tests.tool_process import run_tool
 
 REPO = Path(__file__).resolve().parents[1]
 CLASSES = ['table', 'chair', 'sofa', 'yumi', '3dprinter']
@@ -82,3 +93,89 @@ def test_the_correction_keeps_matched_parts_deletes_the_rest_and_adds_the_missed
             for item in plan['edit']] == [('Chair001', [1.0, 1.0, 0.45])]
     assert [item['center'] for item in plan['add']] == [[3.0, 1.0, 0.375], [5.0, 1.0, 0.45]]
     assert all(set(item) == {'class', 'center', 'size', 'yaw'} for item in plan['add'])
+
+
+def exp2_cpu_checkpoint(path: Path) -> Path:
+    """configs/tr3d/exp2_cpu.py's model with its initial weights (seeded)."""
+    import torch
+    from mmdet3d.apis import init_model
+    from mmengine.config import Config
+    torch.manual_seed(0)
+    model = init_model(Config.fromfile(str(REPO / 'configs/tr3d/exp2_cpu.py')), None, 'cpu')
+    torch.save({
+        'state_dict': model.state_dict(),
+        'meta': {
+            'dataset_meta': {
+                'classes': CLASSES
+            }
+        }
+    }, path)
+    return path
+
+
+@pytest.mark.slow
+def test_a_whole_run_on_generated_rooms_prints_the_headline(tmp_path):
+    generated, data = tmp_path / 'generated', tmp_path / 'data'
+    for area in (7, 8, 9):
+        write_synthetic_area(generated, area, n_rooms=1, seed=area, points_per_object=300)
+    run_tool('tools/create_data.py', 's3dis', '--root-path', generated, '--out-dir', data)
+    before = sorted(path.name for path in data.rglob('*'))
+    scans = tmp_path / 'scans'
+    write_generated_scans(scans, 2)  # office_1 and lab_1, with their true boxes
+    bare = make_room('L', n_points=20_000, seed=4, furniture=3)  # none of the classes
+    write_scan(scans / 'bare_1.ply', bare.points)
+    write_labels(scans / 'bare_1.labels.json', {
+        'format': LABELS_FORMAT,
+        'scan': 'bare_1.ply',
+        'classes': CLASSES,
+        'boxes': []
+    })
+    busy = tmp_path / 'fine-tune.running'
+    checkpoint = exp2_cpu_checkpoint(tmp_path / 'initialised.pth')
+    command = [
+        'benchmarks/bench_teach.py',
+        scans,
+        '--train',
+        'office_1',
+        'bare_1',
+        '--config',
+        'configs/tr3d/exp2_cpu.py',
+        '--checkpoint',
+        checkpoint,
+        '--data',
+        data,
+        '--data-root',
+        tmp_path / 'teach_data',
+        '--work',
+        tmp_path / 'work',
+        '--iters',
+        2,
+        '--busy-file',
+        busy,
+        # the initial model scores every box about 0.5: a few dozen parts to correct
+        '--score-thr',
+        0.511
+    ]
+    done = subprocess.run([sys.executable, *map(str, command)],
+                          cwd=REPO,
+                          capture_output=True,
+                          text=True,
+                          timeout=900,
+                          env=dict(os.environ, OMP_NUM_THREADS='1'))
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    headline = HEADLINE.fullmatch(done.stdout.strip().splitlines()[-1])
+    assert headline, done.stdout[-2000:]
+    assert all(math.isfinite(float(value)) for value in headline.groups())
+    results = json.loads((tmp_path / 'work' / 'teach.json').read_text())
+    assert results['train'] == ['office_1', 'bare_1'] and results['held_out'] == ['lab_1']
+    office, empty = results['corrections']
+    assert office['labels'] == len(read_labels(scans / 'office_1.labels.json')['boxes']) > 0
+    assert empty['labels'] == 0
+    assert (tmp_path / 'work' / 'finetune' / 'iter_2.pth').is_file() and not busy.exists()
+    # the user area went into the run's data root; the generated data stayed as it was
+    assert sorted(path.name for path in data.rglob('*')) == before
+    assert (tmp_path / 'teach_data' / 's3dis_infos_Area_10.pkl').is_file()
+    assert (tmp_path / 'teach_data' / 's3dis_infos_Area_7.pkl').is_symlink()
+    for name in ('before', 'after'):
+        rows = results[name]['area9']['mAP@0.25']
+        assert np.isfinite(rows['mean']) and results[name]['held_out']['rooms'] == 1
