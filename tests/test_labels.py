@@ -375,6 +375,80 @@ def test_an_alternative_counts_only_when_switched_in(round_trip, tmp_path):
         assert_same_box(found, dict(table, **{'class': expected}))
 
 
+DELETE_WINNER_SCRIPT = textwrap.dedent('''\
+    # Runs in freecadcmd: deletes the table that has alternatives, as a user deletes a false
+    # detection (its alternatives stay hidden in the Alternatives group); saves that, then also
+    # shows the first alternative and saves that as a second document.
+    import json, os
+    import FreeCAD as App
+    params = json.load(open(os.environ['SYNTHDET_TEST_PARAMS'], encoding='utf-8'))
+    doc = App.openDocument(params['document'])
+    table = [o for o in doc.Objects if getattr(o, 'Alternatives', None)][0]
+    alternatives = list(table.Alternatives)
+    report = {'deleted': table.Label, 'alternatives': [o.Label for o in alternatives],
+              'hidden': [not o.Visibility for o in alternatives]}
+    doc.removeObject(table.Name)
+    doc.recompute()
+    doc.saveAs(params['deleted'])
+    alternatives[0].Visibility = True
+    doc.saveAs(params['shown'])
+    report['left'] = sorted(o.Label for o in doc.Objects if hasattr(o, 'DetectedClass'))
+    json.dump(report, open(params['report'], 'w'))
+''')
+
+
+def test_a_deleted_parts_alternatives_count_only_when_shown(round_trip, tmp_path):
+    """Deleting a part leaves its hidden alternatives listed by nobody: they stay out of the
+    labels, unless the user shows one (then that one counts)."""
+    table = next(box for box in round_trip['truth'] if box['class'] == 'table')
+    chair = next(box for box in round_trip['truth'] if box['class'] == 'chair')
+    detections = [{
+        'class': name,
+        'score': score,
+        'center': table['center'],
+        'size': table['size'],
+        'yaw': table['yaw']
+    } for name, score in (('table', 0.9), ('sofa', 0.6), ('bookcase', 0.5))]
+    detections.append({
+        'class': 'chair',
+        'score': 0.9,
+        'center': chair['center'],
+        'size': chair['size'],
+        'yaw': chair['yaw']
+    })
+    write_predictions(
+        tmp_path / 'pred.json', {
+            'format': 'synthdet.predictions/1',
+            'scan': 'factory_1.txt',
+            'model': 'truth',
+            'detections': detections
+        })
+    document = tmp_path / 'three.FCStd'
+    build_document(
+        round_trip['scan'],
+        tmp_path / 'pred.json',
+        document,
+        round_trip['root'] / 'corners.json',
+        timeout=300.0)
+    deleted, shown = tmp_path / 'deleted.FCStd', tmp_path / 'shown.FCStd'
+    report = run_freecad_script(tmp_path, DELETE_WINNER_SCRIPT, {
+        'document': str(document),
+        'deleted': str(deleted),
+        'shown': str(shown)
+    })
+    assert report['deleted'] == 'table 1' and report['hidden'] == [True, True]
+    assert [label.split()[0] for label in report['alternatives']] == ['sofa', 'bookcase']
+    assert report['left'] == sorted(report['alternatives'] + ['chair 1'])
+    kept = labels_module.read_document(deleted, timeout=300.0)['boxes']
+    assert [box['class'] for box in kept] == ['chair']
+    assert_same_box(kept[0], chair)
+    found = sorted(labels_module.read_document(shown, timeout=300.0)['boxes'],
+                   key=lambda box: box['class'])
+    assert [box['class'] for box in found] == ['chair', 'sofa']
+    assert_same_box(found[0], chair)
+    assert_same_box(found[1], dict(table, **{'class': 'sofa'}))
+
+
 OLD_LAYOUT_SCRIPT = textwrap.dedent('''\
     # Runs in freecadcmd: a part as synthdet built it before parts had their own dimensions,
     # a link group whose parameter sheet holds the size cells.

@@ -10,9 +10,12 @@ cells of its parameter sheet). Which parts count:
 - a part that is nobody's alternative counts, unless it is hidden while one of its
   alternatives is shown (the user switched to that alternative);
 - an alternative (listed in another part's ``Alternatives``) counts only when it is shown and
-  the part it is an alternative to is hidden.
+  the part it is an alternative to is hidden;
+- a part in the ``Alternatives`` group that no part lists (the part it was an alternative to
+  was deleted) counts only when it is shown.
 
-A deleted part is simply gone; a part added by hand (``editing.add_part``) is an ordinary part.
+A deleted part is simply gone (its alternatives follow the rule above); a part added by hand
+(``editing.add_part``) is an ordinary part.
 The room comes from the group carrying the ``Synthdet`` property ``CornerCount``: its
 parameter sheet (``floor_z``, ``height``) and its floor sketch (the corners, in order).
 """
@@ -32,6 +35,7 @@ SIZE_ALIASES = ('length', 'width', 'height')  # a parameter sheet's cells
 REVIEWED_KEY = 'SynthdetReviewed'  # document metadata (Document.Meta): 'true' once reviewed
 ENV_READ = 'SYNTHDET_READ'  # headless: the document to read (the result goes to SYNTHDET_RESULT)
 MAX_TILT_DEG = 0.5  # a part turned further off the vertical is not a box standing upright
+ALTERNATIVES_GROUP = 'Alternatives'  # the hidden group the document's alternatives are built in
 
 
 class NotSynthdet(ValueError):
@@ -61,12 +65,20 @@ def counted_parts(parts: list) -> list:
     counted = []
     for part in parts:
         winner = winner_of.get(part.Name)
-        if winner is None:
-            if part.Visibility or part.Name not in shown_alternative:
+        if winner is not None:
+            if part.Visibility and not winner.Visibility:
                 counted.append(part)
-        elif part.Visibility and not winner.Visibility:
+        elif _in_alternatives_group(part):
+            if part.Visibility:  # its part was deleted: hidden, it was never switched in
+                counted.append(part)
+        elif part.Visibility or part.Name not in shown_alternative:
             counted.append(part)
     return counted
+
+
+def _in_alternatives_group(part) -> bool:
+    return any(obj.Name == ALTERNATIVES_GROUP and obj.TypeId == 'App::DocumentObjectGroup'
+               for obj in part.InList)
 
 
 def part_children(part) -> list:
