@@ -3,6 +3,9 @@ SHELL := /bin/bash
 VENV ?= .venv
 PY := $(VENV)/bin/python
 PYTEST_ARGS ?=
+# test processes (pytest-xdist; one file's tests stay in one process, sharing its fixtures);
+# PYTEST_WORKERS=0 runs them all in this process
+PYTEST_WORKERS ?= 2
 
 .PHONY: setup test demo exp2-cpu bench
 
@@ -14,7 +17,7 @@ setup:
 # threads make MinkowskiEngine's CPU sums run in a varying order.
 test: export OMP_NUM_THREADS ?= 1
 test: setup
-	@$(PY) -m pytest $(PYTEST_ARGS); rc=$$?; \
+	@$(PY) -m pytest -n $(PYTEST_WORKERS) --dist loadfile $(PYTEST_ARGS); rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests (exit 5)"; fi; exit $$rc
 
 # The whole pipeline on small generated data (tools/demo.py; measured times in docs/results.md), ending
