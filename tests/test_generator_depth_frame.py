@@ -212,10 +212,11 @@ def test_same_seed_gives_the_same_frame_files(frame_rooms):
     _same_tree(work / 'out', work / 'again')
 
 
-def test_mixed_rooms_profile_draws_the_depth_frame():
-    profile = Path(__file__).resolve().parents[1] / 'generator' / 'profiles' / 'mixed_rooms.json'
-    sensors = load_config(profile)['scanner']['sensors']
+def test_the_depth_frame_profile_draws_it_and_mixed_rooms_does_not():
+    profiles = Path(__file__).resolve().parents[1] / 'generator' / 'profiles'
+    sensors = load_config(profiles / 'mixed_rooms_depth_frame.json')['scanner']['sensors']
     assert sensors['depth_frame'] == pytest.approx(0.25)
+    assert load_config(profiles / 'mixed_rooms.json')['scanner']['sensors']['depth_frame'] == 0.0
     assert DEFAULTS['scanner']['sensors']['depth_frame'] == 0.0
 
 
