@@ -339,29 +339,28 @@ SWITCH_SCRIPT = textwrap.dedent('''\
 ''')
 
 
+def _detection(box: dict, name: str, score: float) -> dict:
+    """A detection of class ``name`` on the true ``box``."""
+    return {'class': name, 'score': score, 'center': box['center'], 'size': box['size'],
+            'yaw': box['yaw']}
+
+
+def _document_of(round_trip: dict, detections: list[dict], document: Path) -> Path:
+    """The synthdet document of the round trip's room with ``detections`` as predictions."""
+    predictions = document.with_suffix('.pred.json')
+    write_predictions(predictions, {'format': 'synthdet.predictions/1', 'scan': 'factory_1.txt',
+                                    'model': 'truth', 'detections': detections})
+    build_document(round_trip['scan'], predictions, document, round_trip['root'] / 'corners.json',
+                   timeout=300.0)
+    return document
+
+
 def test_an_alternative_counts_only_when_switched_in(round_trip, tmp_path):
     table = next(box for box in round_trip['truth'] if box['class'] == 'table')
-    detections = [{
-        'class': name,
-        'score': score,
-        'center': table['center'],
-        'size': table['size'],
-        'yaw': table['yaw']
-    } for name, score in (('table', 0.9), ('sofa', 0.6))]
-    write_predictions(
-        tmp_path / 'pred.json', {
-            'format': 'synthdet.predictions/1',
-            'scan': 'factory_1.txt',
-            'model': 'truth',
-            'detections': detections
-        })
-    document = tmp_path / 'one.FCStd'
-    build_document(
-        round_trip['scan'],
-        tmp_path / 'pred.json',
-        document,
-        round_trip['root'] / 'corners.json',
-        timeout=300.0)
+    document = _document_of(
+        round_trip, [_detection(table, name, score) for name, score in (('table', 0.9),
+                                                                        ('sofa', 0.6))],
+        tmp_path / 'one.FCStd')
     switched = tmp_path / 'switched.FCStd'
     report = run_freecad_script(tmp_path, SWITCH_SCRIPT, {
         'document': str(document),
@@ -402,34 +401,10 @@ def test_a_deleted_parts_alternatives_count_only_when_shown(round_trip, tmp_path
     labels, unless the user shows one (then that one counts)."""
     table = next(box for box in round_trip['truth'] if box['class'] == 'table')
     chair = next(box for box in round_trip['truth'] if box['class'] == 'chair')
-    detections = [{
-        'class': name,
-        'score': score,
-        'center': table['center'],
-        'size': table['size'],
-        'yaw': table['yaw']
-    } for name, score in (('table', 0.9), ('sofa', 0.6), ('bookcase', 0.5))]
-    detections.append({
-        'class': 'chair',
-        'score': 0.9,
-        'center': chair['center'],
-        'size': chair['size'],
-        'yaw': chair['yaw']
-    })
-    write_predictions(
-        tmp_path / 'pred.json', {
-            'format': 'synthdet.predictions/1',
-            'scan': 'factory_1.txt',
-            'model': 'truth',
-            'detections': detections
-        })
-    document = tmp_path / 'three.FCStd'
-    build_document(
-        round_trip['scan'],
-        tmp_path / 'pred.json',
-        document,
-        round_trip['root'] / 'corners.json',
-        timeout=300.0)
+    detections = [_detection(table, name, score)
+                  for name, score in (('table', 0.9), ('sofa', 0.6), ('bookcase', 0.5))]
+    document = _document_of(round_trip, detections + [_detection(chair, 'chair', 0.9)],
+                            tmp_path / 'three.FCStd')
     deleted, shown = tmp_path / 'deleted.FCStd', tmp_path / 'shown.FCStd'
     report = run_freecad_script(tmp_path, DELETE_WINNER_SCRIPT, {
         'document': str(document),
