@@ -41,6 +41,8 @@ def files(tmp_path_factory) -> dict:
     checkpoints: a text file, a truncated checkpoint and one that runs code."""
     root = tmp_path_factory.mktemp('tool_messages')
     write_synthetic_area(root / 'raw', area=1, n_rooms=1, seed=5, points_per_object=200)
+    from projects.synthdet.datasets.s3dis_converter import convert_s3dis
+    convert_s3dis(root / 'raw', root / 'data', areas=[1])  # test.py reads its infos first
     from mmdet3d.apis import init_model
 
     from projects.synthdet.bootstrap import load_config
@@ -67,7 +69,8 @@ def files(tmp_path_factory) -> dict:
 def _tool_commands(checkpoint: Path, files: dict, out: Path) -> dict[str, list]:
     return {
         'predict': ['tools/predict.py', TINY, checkpoint, files['scan'], '--out', out / 'pred'],
-        'test': ['tools/test.py', TINY, checkpoint, '--work-dir', out / 'test'],
+        'test': ['tools/test.py', TINY, checkpoint, '--work-dir', out / 'test', '--cfg-options',
+                 f"test_dataloader.dataset.data_root={files['root'] / 'data'}/"],
         'resume': ['tools/train.py', TINY, '--work-dir', out / 'train', '--resume', checkpoint],
         'publish': ['tools/publish_model.py', checkpoint, out / 'published.pth'],
         'scan2cad': [
