@@ -10,7 +10,7 @@ model stands on the part's z = 0 plane, so a height edit keeps its feet in place
 is its local -y side. Edit a property, recompute, and the shape follows. The shape is stored
 in the document, so any FreeCAD shows it; rebuilding it needs this module loaded before the
 document opens (FreeCAD restores a proxy only from a module already loaded or an installed
-add-on): run the macro once in the session, or import ``synthdet_freecad.library``.
+add-on): run the macro once after FreeCAD starts, or import ``synthdet_freecad.library``.
 
 One object per detection keeps building fast: no expression per solid (FreeCAD sets each in
 about 80 microseconds) and one shape to store per detection, which ``archive.save_copy``
