@@ -22,6 +22,7 @@ import numpy as np
 from generator.scanner import ScanResult, Scanner
 from generator.sensor_common import (RoomGeometry, _cast_grid, _clearance, _depth_edges, _inset,
                                      _result)
+from synthdet.voxels import packed_key
 
 # an empty index array
 _NONE = np.zeros(0, dtype=np.int64)
@@ -234,7 +235,7 @@ def _cube_keys(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: np
                cos_azimuth: np.ndarray, sin_azimuth: np.ndarray, ranges: np.ndarray,
                beams: np.ndarray, side: float, origin_key: np.ndarray) -> np.ndarray:
     """The packed cube key (N,) of each return of ``beams``, at its point as
-    :func:`_grid_points` computes it, as :func:`synthdet.voxels._packed_keys` packs it: -1 for
+    :func:`_grid_points` computes it, as :func:`synthdet.voxels.packed_key` packs it: -1 for
     a point 2**20 cubes or more away. In the returns' order, so the reads go forwards."""
     columns = len(cos_azimuth)
     keys = np.empty(len(beams), dtype=np.int64)
@@ -247,14 +248,7 @@ def _cube_keys(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: np
         point[0] = station[0] + cos_elevation[row] * cos_azimuth[column] * measured
         point[1] = station[1] + cos_elevation[row] * sin_azimuth[column] * measured
         point[2] = station[2] + sin_elevation[row] * measured
-        key = np.int64(0)
-        for axis in range(3):
-            cube = np.int64(np.floor(point[axis] / side) - origin_key[axis])
-            if abs(cube) >= 2**20:
-                key = np.int64(-1)
-                break
-            key = (key << 21) | (cube + 2**20)
-        keys[index] = key
+        keys[index] = packed_key(point, side, origin_key)
     return keys
 
 

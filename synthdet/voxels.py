@@ -64,19 +64,24 @@ class VoxelFilter:
 
 
 @numba.njit(cache=True, nogil=True)
-def _packed_keys(xyz: np.ndarray, voxel: float, origin_key: np.ndarray) -> np.ndarray:
-    """One int64 key per point (N, 3): its voxel's integer coordinates relative to
+def packed_key(point: np.ndarray, voxel: float, origin_key: np.ndarray) -> np.int64:
+    """The int64 key of one point (3,): its voxel's integer coordinates relative to
     ``origin_key``, 21 bits each, packed; -1 for a point 2**20 voxels or more away."""
+    key = np.int64(0)
+    for axis in range(3):
+        index = np.int64(np.floor(point[axis] / voxel) - origin_key[axis])
+        if abs(index) >= 2**20:
+            return np.int64(-1)
+        key = (key << 21) | (index + 2**20)
+    return key
+
+
+@numba.njit(cache=True, nogil=True)
+def _packed_keys(xyz: np.ndarray, voxel: float, origin_key: np.ndarray) -> np.ndarray:
+    """:func:`packed_key` of every point (N, 3)."""
     packed = np.empty(len(xyz), dtype=np.int64)
     for i in range(len(xyz)):
-        key = np.int64(0)
-        for axis in range(3):
-            index = np.int64(np.floor(xyz[i, axis] / voxel) - origin_key[axis])
-            if abs(index) >= 2**20:
-                key = np.int64(-1)
-                break
-            key = (key << 21) | (index + 2**20)
-        packed[i] = key
+        packed[i] = packed_key(xyz[i], voxel, origin_key)
     return packed
 
 
