@@ -52,7 +52,7 @@ from configurator.freecad_cli import run_freecad_process
 from configurator.labels import OVERLAP_TOLERANCE, read_document
 from projects.synthdet.config_helpers import area_info_file
 from projects.synthdet.evaluation.real_scans import (
-    IOU_THR, LabelledScan, box_array, find_labelled_scans, format_result, rotated_iou_3d)
+    IOU_THR, LabelledScan, assign_greedy, box_array, find_labelled_scans, format_result)
 from synthdet.contracts import read_labels
 from synthdet.geometry import box_corners_xy
 from synthdet.info_files import RAW_DIR
@@ -213,31 +213,23 @@ def separate_boxes(boxes: list[dict]) -> tuple[list[dict], list[str]]:
     return boxes, cuts
 
 
-def assign_greedy(parts: list[dict], truth: list[dict]) -> dict[int, int]:
+def assign_parts(parts: list[dict], truth: list[dict]) -> dict[int, int]:
     """Which true box each part takes: per class, parts in document order, each the unmatched
     true box of its class it overlaps most, at 3D IoU >= ``IOU_THR`` (the evaluation's rule)."""
     taken: dict[int, int] = {}
     for name in dict.fromkeys(box['class'] for box in parts):
         mine = [i for i, box in enumerate(parts) if box['class'] == name]
         theirs = [j for j, box in enumerate(truth) if box['class'] == name]
-        if not theirs:
-            continue
-        ious = rotated_iou_3d(
-            box_array([parts[i] for i in mine]), box_array([truth[j] for j in theirs]))
-        matched = np.zeros(len(theirs), dtype=bool)
-        for row, part in zip(ious, mine):
-            candidates = np.where(matched, -1.0, row)
-            best = int(np.argmax(candidates))
-            if candidates[best] >= IOU_THR:
-                matched[best] = True
-                taken[part] = theirs[best]
+        assigned = assign_greedy(box_array([truth[j] for j in theirs]),
+                                 box_array([parts[i] for i in mine]))
+        taken.update((part, theirs[j]) for part, j in zip(mine, assigned) if j >= 0)
     return taken
 
 
 def correction_plan(parts: list[dict], truth: list[dict]) -> dict:
     """What a user changes: the parts to keep and their target boxes (every other part is
     deleted), and the true boxes to add."""
-    taken = assign_greedy(parts, truth)
+    taken = assign_parts(parts, truth)
     boxes = [{key: box[key] for key in ('class', 'center', 'size', 'yaw')} for box in truth]
     return {
         'edit': [{

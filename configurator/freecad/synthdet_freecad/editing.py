@@ -24,15 +24,6 @@ DEFAULT_SIZE = (1.0, 1.0, 1.0)
 ADDABLE_CLASSES = tuple(DEFAULT_SIZES)
 
 
-def _room_sheet(doc):
-    for group in doc.Objects:
-        if 'CornerCount' in group.PropertiesList:
-            for child in labels.part_children(group):
-                if child.TypeId == 'Spreadsheet::Sheet' and child.getCellFromAlias('floor_z'):
-                    return child
-    return None
-
-
 def add_part(doc,
              class_name: str,
              x: float,
@@ -44,7 +35,7 @@ def add_part(doc,
     if not class_name or not class_name.strip():
         raise ValueError('a part needs a class name')
     length, width, height = size or DEFAULT_SIZES.get(class_name, DEFAULT_SIZE)
-    sheet = _room_sheet(doc)
+    sheet = labels.room_sheet(doc)
     floor_z = floor_height(doc)
     count = sum(1 for part in labels.synthdet_parts(doc) if part.DetectedClass == class_name)
     detection = {
@@ -93,5 +84,5 @@ def is_reviewed(doc) -> bool:
 
 def floor_height(doc) -> float:
     """The room's floor height in metres (0 without a room)."""
-    sheet = _room_sheet(doc)
+    sheet = labels.room_sheet(doc)
     return sheet.get('floor_z').Value / 1000.0 if sheet is not None else 0.0

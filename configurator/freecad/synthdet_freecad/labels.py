@@ -142,21 +142,27 @@ def part_box(doc, part) -> dict:
     }
 
 
+def _room_children(doc) -> list:
+    """The objects of the room group (the ``Synthdet`` property CornerCount); [] without one."""
+    groups = [obj for obj in doc.Objects if _synthdet_property(obj, 'CornerCount')]
+    return part_children(groups[0]) if groups else []
+
+
+def room_sheet(doc):
+    """The room's parameter sheet (the one with a ``floor_z`` cell), or None."""
+    return next((child for child in _room_children(doc) if child.TypeId == 'Spreadsheet::Sheet'
+                 and child.getCellFromAlias('floor_z')), None)
+
+
 def room_outline(doc) -> dict | None:
     """The room's corners (metres, sketch order), floor and ceiling heights, or None."""
-    groups = [obj for obj in doc.Objects if _synthdet_property(obj, 'CornerCount')]
-    if not groups:
+    sheet = room_sheet(doc)
+    sketches = [c for c in _room_children(doc) if c.TypeId == 'Sketcher::SketchObject']
+    if sheet is None or not sketches:
         return None
-    children = part_children(groups[0])
-    sheets = [
-        c for c in children if c.TypeId == 'Spreadsheet::Sheet' and c.getCellFromAlias('floor_z')
-    ]
-    sketches = [c for c in children if c.TypeId == 'Sketcher::SketchObject']
-    if not sheets or not sketches:
-        return None
-    floor_z = sheets[0].get('floor_z')
+    floor_z = sheet.get('floor_z')
     floor_z = (floor_z.Value if hasattr(floor_z, 'Value') else float(floor_z)) / 1000.0
-    height = _millimetres(sheets[0], 'height', 'room') / 1000.0
+    height = _millimetres(sheet, 'height', 'room') / 1000.0
     sketch = sketches[0]
     placement = sketch.getGlobalPlacement()
     corners = []

@@ -142,21 +142,29 @@ def rotated_iou_3d(boxes_a: np.ndarray,
     return rotated_iou_tensor(*tensors).cpu().numpy()
 
 
-def match_greedy(truth: np.ndarray, detections: np.ndarray, iou_thr: float = IOU_THR,
-                 device: str | torch.device = 'cpu') -> np.ndarray:
-    """Which of ``detections`` ``(N, 7)``, in order of decreasing score, are found: each takes
-    the unmatched true box ``(M, 7)`` it overlaps most and is found at IoU >= ``iou_thr``."""
-    found = np.zeros(len(detections), dtype=bool)
+def assign_greedy(truth: np.ndarray, detections: np.ndarray, iou_thr: float = IOU_THR,
+                  device: str | torch.device = 'cpu') -> np.ndarray:
+    """The true box ``(M, 7)`` each of ``detections`` ``(N, 7)`` takes, in their order (of
+    decreasing score): the unmatched one it overlaps most, at IoU >= ``iou_thr``; -1 for none."""
+    taken = np.full(len(detections), -1, dtype=np.int64)
     if len(truth) == 0 or len(detections) == 0:
-        return found
+        return taken
     ious = rotated_iou_3d(detections, truth, device)
     matched = np.zeros(len(truth), dtype=bool)
     for index, row in enumerate(ious):
         candidates = np.where(matched, -1.0, row)
         best = int(np.argmax(candidates))
         if candidates[best] >= iou_thr:
-            matched[best] = found[index] = True
-    return found
+            matched[best] = True
+            taken[index] = best
+    return taken
+
+
+def match_greedy(truth: np.ndarray, detections: np.ndarray, iou_thr: float = IOU_THR,
+                 device: str | torch.device = 'cpu') -> np.ndarray:
+    """Which of ``detections`` ``(N, 7)``, in order of decreasing score, are found
+    (:func:`assign_greedy`)."""
+    return assign_greedy(truth, detections, iou_thr, device) >= 0
 
 
 def table_classes(model_classes: Sequence[str]) -> list[str]:
