@@ -413,6 +413,10 @@ def _validate_sensors(scanner: dict[str, Any], source: str) -> None:
          ('wall_clearance', 'object_clearance', 'min_range', 'max_range', 'edge_jump')),
         ('tablet', ('height', ), ('wall_look', 'far_keep', 'dark_dropout', 'shiny_dropout'),
          ('wall_distance', 'min_range', 'max_range', 'range_noise', 'sway_deg', 'dark_luminance')),
+        ('depth_frame', ('height', 'wall_distance', 'pitch_deg', 'horizontal_fov_deg',
+                         'vertical_fov_deg', 'max_range'),
+         ('aim_at_objects', 'edge_dropout', 'dark_dropout', 'shiny_dropout'),
+         ('object_clearance', 'min_range', 'edge_jump', 'dark_luminance')),
     ):
         where = f'scanner.{sensor}'
         view = {where: scanner[sensor]}  # _number and _range name the key by its full path
@@ -424,7 +428,10 @@ def _validate_sensors(scanner: dict[str, Any], source: str) -> None:
         for key in lengths:
             if _number(view, where, key, source) < 0:
                 raise ConfigError(f'{source}: "{where}.{key}" must not be negative')
-        if scanner[sensor]['min_range'] >= scanner[sensor]['max_range']:
+        nearest_far = scanner[sensor]['max_range']  # a number, or the depth frame's drawn range
+        if isinstance(nearest_far, (list, tuple)):
+            nearest_far = nearest_far[0]
+        if scanner[sensor]['min_range'] >= nearest_far:
             raise ConfigError(f'{source}: "{where}.min_range" must be below "{where}.max_range"')
     tls, tablet = scanner['tls'], scanner['tablet']
     if tls['stations_per_cell'][0] < 1:
@@ -467,20 +474,9 @@ def _validate_sensors(scanner: dict[str, Any], source: str) -> None:
 
 
 def _validate_depth_frame(frame: dict[str, Any], source: str) -> None:
-    """The depth frame's parameters."""
+    """The depth frame's parameters beyond the ranges, probabilities and lengths of
+    :func:`_validate_sensors`."""
     where = 'scanner.depth_frame'
-    view = {where: frame}  # _number and _range name the key by its full path
-    for key in ('height', 'wall_distance', 'pitch_deg', 'horizontal_fov_deg', 'vertical_fov_deg',
-                'max_range'):
-        _range(view, where, key, source)
-    for key in ('aim_at_objects', 'edge_dropout', 'dark_dropout', 'shiny_dropout'):
-        if not 0.0 <= _number(view, where, key, source) <= 1.0:
-            raise ConfigError(f'{source}: "{where}.{key}" is outside [0, 1]')
-    for key in ('object_clearance', 'min_range', 'edge_jump', 'dark_luminance'):
-        if _number(view, where, key, source) < 0:
-            raise ConfigError(f'{source}: "{where}.{key}" must not be negative')
-    if frame['min_range'] >= frame['max_range'][0]:
-        raise ConfigError(f'{source}: "{where}.min_range" must be below "{where}.max_range"')
     if frame['pitch_deg'][1] > 90:
         raise ConfigError(f'{source}: "{where}.pitch_deg" must stay within [0, 90] degrees')
     for key in ('horizontal_fov_deg', 'vertical_fov_deg'):
