@@ -22,7 +22,7 @@ import numpy as np
 from generator.scanner import ScanResult, Scanner
 from generator.sensor_common import (RoomGeometry, _cast_grid, _clearance, _depth_edges, _inset,
                                      _result)
-from synthdet.voxels import packed_key
+from synthdet.voxels import hash_slot, packed_key
 
 # an empty index array
 _NONE = np.zeros(0, dtype=np.int64)
@@ -204,13 +204,6 @@ class SpacingFilter:
         return np.flatnonzero(kept)
 
 
-@numba.njit(cache=True, nogil=True)
-def _cube_slot(key: np.int64, bits: int) -> int:
-    """A key's first slot in a hash table of 2**bits slots (Fibonacci hashing: the top bits of
-    the key times 2**64 / golden ratio)."""
-    return np.int64((np.uint64(key) * np.uint64(11400714819323198485)) >> np.uint64(64 - bits))
-
-
 # returns whose keys and slots the spacing filter reads ahead of inserting them
 _FILTER_BLOCK = 32
 
@@ -219,7 +212,7 @@ _FILTER_BLOCK = 32
 def _add_cube(table: np.ndarray, bits: int, key: np.int64) -> bool:
     """Put ``key`` (>= 0) into the hash set ``table`` (-1: a free slot); whether it was new."""
     mask = (1 << bits) - 1
-    slot = _cube_slot(key, bits)
+    slot = hash_slot(key, bits)
     while True:
         held = table[slot]
         if held < 0:
@@ -275,7 +268,7 @@ def _first_in_new_cubes(keys: np.ndarray, order: np.ndarray, table: np.ndarray,
             block_keys[j] = keys[order[start + j]]
         for j in range(size):
             if block_keys[j] >= 0:
-                first_held[j] = table[_cube_slot(block_keys[j], bits)]
+                first_held[j] = table[hash_slot(block_keys[j], bits)]
         for j in range(size):
             index, key = order[start + j], block_keys[j]
             if key < 0:

@@ -86,6 +86,13 @@ def _packed_keys(xyz: np.ndarray, voxel: float, origin_key: np.ndarray) -> np.nd
 
 
 @numba.njit(cache=True, nogil=True)
+def hash_slot(key: np.int64, bits: int) -> int:
+    """A key's first slot in a hash table of 2**bits slots (Fibonacci hashing: the top bits of
+    the key times 2**64 / golden ratio)."""
+    return np.int64((np.uint64(key) * np.uint64(11400714819323198485)) >> np.uint64(64 - bits))
+
+
+@numba.njit(cache=True, nogil=True)
 def _first_of_each(keys: np.ndarray) -> np.ndarray:
     """Ascending indices of the first occurrence of every distinct value of ``keys`` (int64),
     in one pass through an open-addressing hash table (the same indices as ``np.unique``'s
@@ -98,9 +105,7 @@ def _first_of_each(keys: np.ndarray) -> np.ndarray:
     first = np.empty(len(keys), dtype=np.int64)
     count = 0
     for i in range(len(keys)):
-        # Fibonacci hashing: the top bits of the key times 2**64 / golden ratio
-        slot = np.int64((np.uint64(keys[i]) * np.uint64(11400714819323198485)) >>
-                        np.uint64(64 - bits))
+        slot = hash_slot(keys[i], bits)
         while True:
             held = slot_of[slot]
             if held < 0:
