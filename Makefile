@@ -72,8 +72,9 @@ EXP2_DATA_OPTIONS = $(foreach key,train_dataloader.dataset.dataset.datasets.0 \
 EXP2_OPTIONS ?=
 EXP2_CFG_OPTIONS = $(EXP2_DATA_OPTIONS) $(EXP2_OPTIONS)
 # a folder of your own labelled scans (X.ply with X.labels.json beside it, docs/evaluation.md):
-# when set, the run ends with their evaluation by the final checkpoint (tools/eval_scans.py)
-# into $(EXP2_WORK)/real_scans, e.g. make exp2-cpu REAL_SCANS=~/labelled-scans
+# when set, the run ends with their evaluation by the final checkpoint (tools/eval_scans.py),
+# one pass into $(EXP2_WORK)/real_scans and with --tta into $(EXP2_WORK)/real_scans_tta,
+# e.g. make exp2-cpu REAL_SCANS=~/labelled-scans
 REAL_SCANS ?=
 exp2-cpu: export OMP_NUM_THREADS = $(EXP2_THREADS)
 exp2-cpu: setup
@@ -98,6 +99,8 @@ exp2-cpu: setup
 ifneq ($(strip $(REAL_SCANS)),)
 	$(PY) tools/eval_scans.py $(EXP2_CONFIG) $$(cat $(EXP2_WORK)/last_checkpoint) $(REAL_SCANS) \
 	    --out $(EXP2_WORK)/real_scans --cfg-options $(EXP2_CFG_OPTIONS)
+	$(PY) tools/eval_scans.py $(EXP2_CONFIG) $$(cat $(EXP2_WORK)/last_checkpoint) $(REAL_SCANS) \
+	    --tta --out $(EXP2_WORK)/real_scans_tta --cfg-options $(EXP2_CFG_OPTIONS)
 endif
 
 # Every benchmarks/bench_*.py, one after the other; each full output is kept in

@@ -401,7 +401,9 @@ def test_make_exp2_cpu_ends_with_the_evaluation_of_real_scans() -> None:
         return proc.stdout.replace('\\\n', ' ').strip().splitlines()
 
     assert not any('eval_scans.py' in line for line in dry_run())
-    last = dry_run('REAL_SCANS=labelled/').pop()
-    assert last.startswith('.venv/bin/python tools/eval_scans.py configs/tr3d/exp2_cpu.py '
-                           '$(cat work_dirs/exp2_cpu/last_checkpoint) labelled/ ')
-    assert '--out work_dirs/exp2_cpu/real_scans' in last
+    one_pass, with_tta = dry_run('REAL_SCANS=labelled/')[-2:]
+    for line in (one_pass, with_tta):
+        assert line.startswith('.venv/bin/python tools/eval_scans.py configs/tr3d/exp2_cpu.py '
+                               '$(cat work_dirs/exp2_cpu/last_checkpoint) labelled/ ')
+    assert '--out work_dirs/exp2_cpu/real_scans ' in one_pass and '--tta' not in one_pass
+    assert '--tta --out work_dirs/exp2_cpu/real_scans_tta ' in with_tta
