@@ -170,24 +170,33 @@ _NO_MAP = np.zeros(0, dtype=np.int64)
 
 
 @numba.njit(cache=True, nogil=True)
-def _path_origins(path: np.ndarray, start: int, count: int) -> np.ndarray:
-    """``count`` sensor positions (count, 3) from ``path``, going round it from ``start``."""
-    origins = np.empty((count, 3))
-    for ray in range(count):
-        origins[ray] = path[(start + ray) % len(path)]
-    return origins
+def _path_rays(path: np.ndarray, start: int, draws: np.ndarray, origins: np.ndarray,
+               directions: np.ndarray, cast_origins: np.ndarray,
+               cast_directions: np.ndarray) -> None:
+    """Write a batch of uniform rays: origins (N, 3) going round ``path`` from ``start``, unit
+    directions (N, 3) of the normal ``draws`` (N, 3) as :func:`random_directions` computes
+    them, and their float32 copies, which Embree casts."""
+    for ray in range(len(draws)):
+        x, y, z = draws[ray, 0], draws[ray, 1], draws[ray, 2]
+        norm = np.sqrt((x * x + y * y) + z * z)
+        directions[ray, 0], directions[ray, 1], directions[ray, 2] = x / norm, y / norm, z / norm
+        step = (start + ray) % len(path)
+        for axis in range(3):
+            origins[ray, axis] = path[step, axis]
+            cast_origins[ray, axis] = origins[ray, axis]
+            cast_directions[ray, axis] = directions[ray, axis]
 
 
 @numba.njit(cache=True, nogil=True)
 def _aimed_rays(path: np.ndarray, start: int, target: np.ndarray, low: np.ndarray,
-                extent: np.ndarray, uniform: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Origins (N, 3) going round ``path`` from ``start`` and unit directions (N, 3) towards
-    ``low + uniform * extent`` of each ray's ``target`` bounds: the per-component arithmetic of
-    ``(point - origin) / (row_norms + 1e-12)``, in the same order."""
-    count = len(target)
-    origins = np.empty((count, 3))
-    directions = np.empty((count, 3))
-    for ray in range(count):
+                extent: np.ndarray, uniform: np.ndarray, origins: np.ndarray,
+                directions: np.ndarray, cast_origins: np.ndarray,
+                cast_directions: np.ndarray) -> None:
+    """Write a batch of aimed rays: origins (N, 3) going round ``path`` from ``start``, unit
+    directions (N, 3) towards ``low + uniform * extent`` of each ray's ``target`` bounds (the
+    per-component arithmetic of ``(point - origin) / (row_norms + 1e-12)``, in the same order),
+    and their float32 copies, which Embree casts."""
+    for ray in range(len(target)):
         step = (start + ray) % len(path)
         box = target[ray]
         x = (low[box, 0] + uniform[ray, 0] * extent[box, 0]) - path[step, 0]
@@ -195,8 +204,10 @@ def _aimed_rays(path: np.ndarray, start: int, target: np.ndarray, low: np.ndarra
         z = (low[box, 2] + uniform[ray, 2] * extent[box, 2]) - path[step, 2]
         norm = np.sqrt((x * x + y * y) + z * z) + 1e-12
         directions[ray, 0], directions[ray, 1], directions[ray, 2] = x / norm, y / norm, z / norm
-        origins[ray] = path[step]
-    return origins, directions
+        for axis in range(3):
+            origins[ray, axis] = path[step, axis]
+            cast_origins[ray, axis] = origins[ray, axis]
+            cast_directions[ray, axis] = directions[ray, axis]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -363,6 +374,10 @@ class Scanner:
         state = {'rays': 0, 'step': 0, 'points': 0}
 
         aim = bool(config['aim_at_objects'])
+        # one batch's rays (float64, and the float32 copies Embree casts), reused by every batch
+        origins, nominal = np.empty((batch, 3)), np.empty((batch, 3))
+        rays = (origins, nominal, np.empty((batch, 3), dtype=np.float32),
+                np.empty((batch, 3), dtype=np.float32))
 
         def collect(raycaster, tri_map, wanted, keep_movable, max_batches, aimed=False):
             got = 0
@@ -373,17 +388,16 @@ class Scanner:
                 state['step'] = int((state['step'] + batch) % len(path))
                 if aimed:  # towards a random point of a random object's bounds (area-weighted)
                     target = rng.choice(len(self.targets), size=batch, p=self.target_weight)
-                    origins, nominal = _aimed_rays(path, start, target, self.target_lo,
-                                                   self.target_extent, rng.random((batch, 3)))
+                    _aimed_rays(path, start, target, self.target_lo, self.target_extent,
+                                rng.random((batch, 3)), *rays)
                 else:
-                    origins = _path_origins(path, start, batch)
-                    nominal = random_directions(rng, batch)
-                cast_dirs = nominal
+                    _path_rays(path, start, rng.standard_normal((batch, 3)), *rays)
+                cast_origins, cast_dirs = rays[2:]
                 if config['angular_jitter'] > 0:
                     cast_dirs = nominal + rng.standard_normal(
                         (batch, 3)) * config['angular_jitter']
                     cast_dirs /= row_norms(cast_dirs)
-                t_hit, prim = self.cast(raycaster, origins, cast_dirs, rng)
+                t_hit, prim = self.cast(raycaster, cast_origins, cast_dirs, rng)
                 state['rays'] += batch
                 kept = (rng.random(batch) >= config['dropout']
                         if config['dropout'] > 0 else np.ones(0, dtype=bool))

@@ -111,20 +111,25 @@ def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
 
 @numba.njit(cache=True, nogil=True)
 def _tablet_rays(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up: np.ndarray,
-                 pose: np.ndarray, pixel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Origins and unit directions (N, 3) of rays through ``pixel`` (N, 2: right, up offsets on
-    the image plane at distance 1) of each ray's ``pose``."""
-    origins = np.empty((len(pose), 3))
-    directions = np.empty((len(pose), 3))
+                 pose: np.ndarray, uniform: np.ndarray, half: np.ndarray, origins: np.ndarray,
+                 directions: np.ndarray, cast_origins: np.ndarray,
+                 cast_directions: np.ndarray) -> None:
+    """Write the rays of a batch: origins and unit directions (N, 3) through the pixels
+    ``(uniform * 2 - 1) * half`` (``uniform`` (N, 2): right, up offsets on the image plane at
+    distance 1) of each ray's ``pose``, and their float32 copies, which Embree casts."""
     for ray in range(len(pose)):
         p = pose[ray]
-        x = look[p, 0] + pixel[ray, 0] * right[p, 0] + pixel[ray, 1] * up[p, 0]
-        y = look[p, 1] + pixel[ray, 0] * right[p, 1] + pixel[ray, 1] * up[p, 1]
-        z = look[p, 2] + pixel[ray, 0] * right[p, 2] + pixel[ray, 1] * up[p, 2]
+        across = (uniform[ray, 0] * 2 - 1) * half[0]
+        above = (uniform[ray, 1] * 2 - 1) * half[1]
+        x = look[p, 0] + across * right[p, 0] + above * up[p, 0]
+        y = look[p, 1] + across * right[p, 1] + above * up[p, 1]
+        z = look[p, 2] + across * right[p, 2] + above * up[p, 2]
         norm = np.sqrt((x * x + y * y) + z * z)
         directions[ray, 0], directions[ray, 1], directions[ray, 2] = x / norm, y / norm, z / norm
-        origins[ray] = positions[p]
-    return origins, directions
+        for axis in range(3):
+            origins[ray, axis] = positions[p, axis]
+            cast_origins[ray, axis] = origins[ray, axis]
+            cast_directions[ray, axis] = directions[ray, axis]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -153,13 +158,16 @@ def _tablet_returns(t_hit: np.ndarray, primitive: np.ndarray, rows: np.ndarray,
 
 
 @numba.njit(cache=True, nogil=True)
-def _tablet_points(origins: np.ndarray, directions: np.ndarray, rows: np.ndarray,
-                   measured: np.ndarray, xyz: np.ndarray) -> None:
-    """Write the points of ``rows`` at origin + direction x measured range into ``xyz``
-    (N, 3)."""
+def _tablet_points(origins: np.ndarray, directions: np.ndarray, primitive: np.ndarray,
+                   pose: np.ndarray, rows: np.ndarray, measured: np.ndarray, xyz: np.ndarray,
+                   triangle: np.ndarray, pose_of: np.ndarray) -> None:
+    """Write the returns of ``rows``: points at origin + direction x measured range into
+    ``xyz`` (N, 3), their triangles and poses into ``triangle`` and ``pose_of`` (N,)."""
     for k in range(len(rows)):
+        ray = rows[k]
         for axis in range(3):
-            xyz[k, axis] = origins[rows[k], axis] + directions[rows[k], axis] * measured[k]
+            xyz[k, axis] = origins[ray, axis] + directions[ray, axis] * measured[k]
+        triangle[k], pose_of[k] = primitive[ray], pose[ray]
 
 
 def cast_tablet(
@@ -189,25 +197,29 @@ def cast_tablet(
     xyz = np.empty((n_points, 3))
     triangle = np.empty(n_points, dtype=np.int64)
     pose_of = np.empty(n_points, dtype=np.int64)
+    # one batch's rays, reused by every batch
+    origins, directions = np.empty((batch, 3)), np.empty((batch, 3))
+    cast_origins = np.empty((batch, 3), dtype=np.float32)
+    cast_directions = np.empty((batch, 3), dtype=np.float32)
     got = rays = 0
     max_batches = max(64, 16 * n_points // batch + 64)
     for _ in range(max_batches):
         if got >= n_points:
             break
         pose = rng.integers(len(positions), size=batch)
-        pixel = (rng.random((batch, 2)) * 2 - 1) * half
-        origins, directions = _tablet_rays(positions, look, right, up, pose, pixel)
-        t_hit, prim = scanner.cast(scanner.full_scene, origins, directions, rng)
+        _tablet_rays(positions, look, right, up, pose, rng.random((batch, 2)), half, origins,
+                     directions, cast_origins, cast_directions)
+        t_hit, prim = scanner.cast(scanner.full_scene, cast_origins, cast_directions, rng)
         rays += batch
         rows = np.flatnonzero(np.isfinite(t_hit))
         noise = rng.standard_normal(len(rows))
         rows, measured = _tablet_returns(t_hit, prim, rows, noise, loss, cfg['range_noise'],
                                          cfg['far_keep'], near, far, rng.random(len(rows)),
                                          n_points - got)
-        _tablet_points(origins, directions, rows, measured, xyz[got:got + len(rows)])
-        triangle[got:got + len(rows)] = prim[rows]
-        pose_of[got:got + len(rows)] = pose[rows]
-        got += len(rows)
+        end = got + len(rows)
+        _tablet_points(origins, directions, prim, pose, rows, measured, xyz[got:end],
+                       triangle[got:end], pose_of[got:end])
+        got = end
     if got < n_points:
         warnings.warn(f'tablet: only {got} of {n_points} points after {rays} rays')
     pose = pose_of[:got]

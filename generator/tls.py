@@ -310,14 +310,16 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
     cubes = SpacingFilter(spacing, stations[0]) if spacing else None
     points, triangles, owner, strays = [], [], [], []
     for index, station in enumerate(stations):
-        origins = np.broadcast_to(station, directions.shape)
+        # the station as the float32 rays Embree casts, without a copy per beam
+        origins = np.broadcast_to(station.astype(np.float32), directions.shape)
         ranges, triangle = _cast_grid(scanner, origins, directions, batch, rng,
                                       cfg['min_range'], cfg['max_range'])
-        stray = np.zeros(ranges.size, dtype=bool)
         if cfg['mixed_pixels'] > 0:
             ranges, triangle, stray = _mixed_pixels(
                 rng, ranges.reshape(grid), triangle.reshape(grid), on_object, scanner.scene.part,
                 cfg['mixed_pixels'], cfg['edge_jump'])
+        else:
+            stray = np.zeros(ranges.size, dtype=bool)
         rows = np.flatnonzero(np.isfinite(ranges))
         if a > 0 or b > 0:
             _add_range_noise(rng, ranges, rows, a, b)
@@ -373,7 +375,10 @@ def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int,
         finer = math.ceil(360.0 / step * math.sqrt(n_points / max(len(xyz), 1)) * 1.02)
         step = max(finest, 360.0 / max(finer, int(round(360.0 / step)) + 1))
     if len(xyz) > n_points:
-        keep = np.sort(rng.choice(len(xyz), n_points, replace=False))
+        # the drawn returns (distinct) in ascending order, without sorting them
+        chosen = np.zeros(len(xyz), dtype=bool)
+        chosen[rng.choice(len(xyz), n_points, replace=False)] = True
+        keep = np.flatnonzero(chosen)
         xyz, triangle, owner, stray = xyz[keep], triangle[keep], owner[keep], stray[keep]
     elif len(xyz) < n_points:
         warnings.warn(f'TLS: only {len(xyz)} of {n_points} points at an angular step of '
