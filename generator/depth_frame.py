@@ -108,8 +108,9 @@ def _depth_frame_returns(scanner: Scanner, camera: DepthCamera, columns: int, ro
     triangles (N,), in pixel order."""
     directions = depth_frame_rays(camera, columns, rows)
     origins = np.broadcast_to(camera.position, directions.shape)
-    ranges, triangle = _cast_grid(scanner, origins, directions, batch, rng, cfg['min_range'],
-                                  camera.max_range)
+    ranges, triangle = _cast_grid(
+        scanner, lambda start, stop: (origins[start:stop], directions[start:stop]),
+        len(directions), batch, rng, cfg['min_range'], camera.max_range)
     # a lost column after each row: no depth edge across the image's left and right borders
     grid_ranges = np.full((rows, columns + 1), np.inf)
     grid_ranges[:, :columns] = ranges.reshape(rows, columns)

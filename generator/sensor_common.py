@@ -8,7 +8,7 @@ jump, on different parts, one of them an object (not room structure): the laser 
 them.
 """
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numba
 import numpy as np
@@ -64,18 +64,18 @@ def _inset(cell: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
     return low + margin, high - margin
 
 
-def _cast_grid(scanner: Scanner, origins: np.ndarray, directions: np.ndarray, batch: int,
-               rng: np.random.Generator, min_range: float,
+def _cast_grid(scanner: Scanner, rays: Callable[[int, int], tuple[np.ndarray, np.ndarray]],
+               size: int, batch: int, rng: np.random.Generator, min_range: float,
                max_range: float) -> tuple[np.ndarray, np.ndarray]:
-    """First hits of many rays in batches: ranges (float64; inf for a miss and outside
+    """First hits of ``size`` rays in batches, ``rays(start, stop)`` giving the origins and
+    directions of rays start to stop: ranges (float64; inf for a miss and outside
     [min_range, max_range]) and triangle index (int32, half the memory of int64; 0 for a miss,
     so that per-triangle lookups of a whole grid stay in bounds; the range tells)."""
-    ranges = np.empty(len(origins))
-    triangle = np.empty(len(origins), np.int32)
-    for start in range(0, len(origins), batch):
-        stop = start + batch
-        t_hit, primitive = scanner.cast(scanner.full_scene, origins[start:stop],
-                                        directions[start:stop], rng)
+    ranges = np.empty(size)
+    triangle = np.empty(size, np.int32)
+    for start in range(0, size, batch):
+        stop = min(start + batch, size)
+        t_hit, primitive = scanner.cast(scanner.full_scene, *rays(start, stop), rng)
         _store_hits(t_hit, primitive, min_range, max_range, ranges[start:stop],
                     triangle[start:stop])
     return ranges, triangle
