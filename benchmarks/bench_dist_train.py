@@ -5,6 +5,7 @@ threads (``tools/train.py``, ``make exp2-cpu``) vs 2 processes with 1 thread eac
     .venv/bin/python benchmarks/bench_dist_train.py [--rooms-per-area 4] [--points 1000000]
                                                     [--iters 16] [--warmup 4] [--seed 0]
                                                     [--workers 2] [--sample-points N]
+                                                    [--fork-tools]
 
 The generator writes ``--rooms-per-area`` rooms of ``--points`` points into areas 7, 8 and 9 of
 a temporary folder and ``tools/create_data.py`` converts them (``--workers`` processes each).
@@ -16,7 +17,10 @@ takes the 4 rooms with ``OMP_NUM_THREADS=2``; two processes take 2 rooms each wi
 (``time`` in ``vis_data/scalars.json``: loading, forward, backward, gradient exchange and
 optimiser step), its median over the iterations after the first ``--warmup``.
 The last line is the speed-up of the two processes. It needs an idle machine: another job on
-the cores slows the two setups differently.
+the cores slows the two setups differently. ``--fork-tools`` (a quick check of the benchmark)
+runs every tool forked from one process that imported the stack once
+(``benchmarks/tool_runs.py``), the two training processes started with the environment
+torchrun gives them instead of through ``tools/dist_train.sh``: no start-up per process.
 """
 import argparse
 import json
@@ -26,7 +30,10 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
+
+from benchmarks.tool_runs import run_tool, start_tool
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIG = 'configs/tr3d/exp2_cpu.py'
@@ -43,9 +50,14 @@ def free_port() -> int:
         return sock.getsockname()[1]
 
 
-def make_data(root: Path, rooms_per_area: int, points: int, seed: int, workers: int) -> None:
+def make_data(root: Path,
+              rooms_per_area: int,
+              points: int,
+              seed: int,
+              workers: int,
+              forked: bool = False) -> None:
     """Generate areas 7-9 into ``root`` and convert them to info pickles, as ``make exp2-cpu``
-    (``workers`` processes each)."""
+    (``workers`` processes each; ``forked``: the tools forked, see ``--fork-tools``)."""
     raw = root / 'Stanford3dDataset_v1.2_Aligned_Version'
     for command in (
         [
@@ -57,10 +69,15 @@ def make_data(root: Path, rooms_per_area: int, points: int, seed: int, workers: 
             8, 9, '--workers', workers
         ],
     ):
-        subprocess.run([sys.executable, *map(str, command)],
-                       cwd=REPO,
-                       check=True,
-                       stdout=subprocess.DEVNULL)
+        if not forked:
+            subprocess.run([sys.executable, *map(str, command)],
+                           cwd=REPO,
+                           check=True,
+                           stdout=subprocess.DEVNULL)
+            continue
+        done = run_tool(command, forked=True)
+        if done.returncode != 0:
+            sys.exit(f'{command[1]} failed (exit {done.returncode}):\n{done.stderr[-4000:]}')
 
 
 def sample_options(num_points: int) -> list[str]:
@@ -76,9 +93,16 @@ def sample_options(num_points: int) -> list[str]:
     ]
 
 
-def train(data: Path, work: Path, processes: int, threads: int, repeats: int, seed: int,
-          extra_options: list[str]) -> list[float]:
-    """Train one setup and return the Runner's seconds per iteration, in order."""
+def train(data: Path,
+          work: Path,
+          processes: int,
+          threads: int,
+          repeats: int,
+          seed: int,
+          extra_options: list[str],
+          forked: bool = False) -> list[float]:
+    """Train one setup and return the Runner's seconds per iteration, in order (``forked``:
+    see ``--fork-tools``)."""
     options = [
         f'{key}.data_root={data}/' for key in ('train_dataloader.dataset.dataset.datasets.0',
                                                'train_dataloader.dataset.dataset.datasets.1',
@@ -90,21 +114,54 @@ def train(data: Path, work: Path, processes: int, threads: int, repeats: int, se
         f'train_dataloader.dataset.times={repeats}', 'train_cfg.max_epochs=1',
         'train_cfg.val_begin=2', 'default_hooks.logger.interval=1', f'randomness.seed={seed}'
     ]
-    if processes == 1:
-        command = [sys.executable, 'tools/train.py', CONFIG]
+    if forked:
+        train_forked(work, processes, threads, options)
     else:
-        command = ['bash', 'tools/dist_train.sh', CONFIG, str(processes)]
-    command += ['--work-dir', str(work), '--cfg-options', *options]
-    env = dict(
-        os.environ, OMP_NUM_THREADS=str(threads), PYTHON=sys.executable, PORT=str(free_port()))
-    run = subprocess.run(command, cwd=REPO, env=env, capture_output=True, text=True)
-    if run.returncode != 0:
-        sys.exit(f'{" ".join(command[:3])} failed (exit {run.returncode}):\n{run.stderr[-4000:]}')
+        if processes == 1:
+            command = [sys.executable, 'tools/train.py', CONFIG]
+        else:
+            command = ['bash', 'tools/dist_train.sh', CONFIG, str(processes)]
+        command += ['--work-dir', str(work), '--cfg-options', *options]
+        env = dict(
+            os.environ, OMP_NUM_THREADS=str(threads), PYTHON=sys.executable,
+            PORT=str(free_port()))
+        run = subprocess.run(command, cwd=REPO, env=env, capture_output=True, text=True)
+        if run.returncode != 0:
+            sys.exit(f'{" ".join(command[:3])} failed (exit {run.returncode}):\n'
+                     f'{run.stderr[-4000:]}')
     scalars = next(work.glob('*/vis_data/scalars.json')).read_text().splitlines()
     return [json.loads(line)['time'] for line in scalars if '"time"' in line]
 
 
-def main() -> None:
+def train_forked(work: Path, processes: int, threads: int, options: list[str]) -> None:
+    """``tools/train.py`` forked (``benchmarks/tool_runs.py``): one process, or one per rank
+    with the environment torchrun gives each and mmengine's pytorch launcher."""
+    command = ['tools/train.py', CONFIG, '--work-dir', str(work), '--cfg-options', *options]
+    env = dict(os.environ, OMP_NUM_THREADS=str(threads))
+    if processes > 1:
+        command += ['--launcher', 'pytorch']
+        env.update(MASTER_ADDR='127.0.0.1', MASTER_PORT=str(free_port()),
+                   WORLD_SIZE=str(processes), LOCAL_WORLD_SIZE=str(processes))
+    work.mkdir(parents=True, exist_ok=True)
+    logs = [work / f'rank_{rank}.log' for rank in range(processes)]
+    ranks = [
+        start_tool(command,
+                   log,
+                   env=dict(env, RANK=str(rank), LOCAL_RANK=str(rank)) if processes > 1 else env,
+                   forked=True) for rank, log in enumerate(logs)
+    ]
+    while any(rank.poll() is None for rank in ranks):  # a failed rank stops its peers
+        if any(rank.returncode for rank in ranks):
+            for rank in ranks:
+                rank.terminate()
+        time.sleep(0.2)
+    for log, code in zip(logs, (rank.returncode for rank in ranks)):
+        if code != 0:
+            sys.exit(f'tools/train.py ({log.stem}) failed (exit {code}):\n'
+                     f'{log.read_text(errors="replace")[-4000:]}')
+
+
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--rooms-per-area', type=int, default=4)
     parser.add_argument('--points', type=int, default=1_000_000)
@@ -117,7 +174,12 @@ def main() -> None:
         '--sample-points',
         type=int,
         help='points each training room is sampled to (default: the config\'s 40,000)')
-    args = parser.parse_args()
+    parser.add_argument(
+        '--fork-tools',
+        action='store_true',
+        help='run the tools forked from one process that imported the stack once (a quick '
+        'check of the benchmark: no start-up per process)')
+    args = parser.parse_args(argv)
     train_rooms = args.rooms_per_area * len(TRAIN_ROOMS_AREAS)
     if (args.iters * BATCH) % train_rooms:
         parser.error(f'--iters x {BATCH} rooms must be a multiple of the {train_rooms} '
@@ -131,11 +193,12 @@ def main() -> None:
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp) / 'data'
-        make_data(data, args.rooms_per_area, args.points, args.seed, args.workers)
+        make_data(data, args.rooms_per_area, args.points, args.seed, args.workers,
+                  args.fork_tools)
         for name, processes, threads in SETUPS:
             times = train(data,
                           Path(tmp) / f'work_{processes}', processes, threads, repeats, args.seed,
-                          options)
+                          options, args.fork_tools)
             if len(times) != args.iters:
                 sys.exit(f'{name}: logged {len(times)} iterations, expected {args.iters}')
             results[name] = (processes, threads, statistics.median(times[args.warmup:]))

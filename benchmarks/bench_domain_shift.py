@@ -4,7 +4,7 @@ held-out generator profiles (docs/results.md "Domain shift").
 Usage: python benchmarks/bench_domain_shift.py [--work-dir work_dirs/domain_shift]
            [--rooms-train 50] [--rooms-test 20] [--iters 250] [--points 1000000] [--seed 0]
            [--sample-points 40000] [--jobs 2] [--profiles-dir generator/profiles]
-           [--test-profiles paper tls ...] [--progress-every 60]
+           [--test-profiles paper tls ...] [--progress-every 60] [--fork-tools]
 
 Steps, each a tool of the project run as a subprocess with ``OMP_NUM_THREADS=1`` (its output in
 ``WORK/logs/<step>.log``), ``--jobs`` of them at a time; a step whose outputs exist is skipped,
@@ -29,7 +29,9 @@ The defaults (40 training rooms per model, 10 test rooms per profile, 500,000 po
 2 cores, of which training 40 min (the two models side by side, about 12 s per iteration each).
 Held out: for the paper model every test profile but ``paper``; for the mixed model every
 single-profile test area (all but ``mixed``, its in-domain test). The last line compares the
-worst held-out mAP@0.25 of the two models.
+worst held-out mAP@0.25 of the two models. ``--fork-tools`` runs every tool forked from one
+process that imported the stack once (``benchmarks/tool_runs.py``): the same steps without a
+start-up per tool, for the benchmark's smoke run.
 """
 from __future__ import annotations
 
@@ -43,6 +45,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from benchmarks.tool_runs import ForkedTool, start_tool
 from projects.synthdet.config_helpers import area_info_file, with_num_points
 from synthdet.info_files import RAW_DIR
 from tools.demo import StepError, claim_work_dir
@@ -87,7 +90,7 @@ class Job:
     name: str
     args: list[str]
     log: Path
-    process: subprocess.Popen | None = None
+    process: subprocess.Popen | ForkedTool | None = None
     started: float = 0.0
     shown: str = field(default='', repr=False)
 
@@ -119,13 +122,14 @@ def last_log_line(log: Path) -> str:
     return lines[-1][:160] if lines else ''
 
 
-def run_jobs(jobs: list[Job], parallel: int, progress_every: float) -> None:
-    """Run ``jobs``, ``parallel`` at a time, with one OpenMP thread each; print when each starts
-    and ends and, every ``progress_every`` seconds, the newest log line of each running one.
-    Raises ``StepError`` naming the log of the first job that fails (after the others end)."""
+def run_jobs(jobs: list[Job], parallel: int, progress_every: float, forked: bool = False) -> None:
+    """Run ``jobs``, ``parallel`` at a time, with one OpenMP thread each (``forked``: forked
+    from one process that imported the stack, ``benchmarks/tool_runs.py``); print when each
+    starts and ends and, every ``progress_every`` seconds, the newest log line of each running
+    one. Raises ``StepError`` naming the log of the first job that fails (after the others end)."""
     waiting, running, failed = list(jobs), [], []
     try:
-        _run_until_done(waiting, running, failed, parallel, progress_every)
+        _run_until_done(waiting, running, failed, parallel, progress_every, forked)
     finally:  # interrupted: stop the jobs still running
         for job in running:
             job.process.terminate()
@@ -137,7 +141,7 @@ def run_jobs(jobs: list[Job], parallel: int, progress_every: float) -> None:
 
 
 def _run_until_done(waiting: list[Job], running: list[Job], failed: list[Job], parallel: int,
-                    progress_every: float) -> None:
+                    progress_every: float, forked: bool) -> None:
     env = dict(os.environ, OMP_NUM_THREADS='1', PYTHONUNBUFFERED='1', PYTHONWARNINGS='ignore')
     last_shown = time.monotonic()
     while waiting or running:
@@ -145,11 +149,8 @@ def _run_until_done(waiting: list[Job], running: list[Job], failed: list[Job], p
             job = waiting.pop(0)
             job.log.parent.mkdir(parents=True, exist_ok=True)
             command = [sys.executable, *job.args]
-            with open(job.log, 'w') as log:
-                log.write('$ ' + ' '.join(command) + '\n')
-                log.flush()
-                job.process = subprocess.Popen(
-                    command, cwd=REPO, stdout=log, stderr=subprocess.STDOUT, env=env)
+            job.log.write_text('$ ' + ' '.join(command) + '\n')
+            job.process = start_tool(job.args, job.log, env=env, forked=forked)
             job.started = time.monotonic()
             running.append(job)
             print(f'[domain shift] {job.name}: started (log {job.log})', flush=True)
@@ -166,7 +167,10 @@ def _run_until_done(waiting: list[Job], running: list[Job], failed: list[Job], p
                     f'{seconds:.0f} s',
                     flush=True)
             else:
-                print(f'[domain shift] {job.name}: done in {seconds:.0f} s', flush=True)
+                cpu = getattr(job.process, 'cpu_seconds', None)  # known for forked tools
+                print(f'[domain shift] {job.name}: done in {seconds:.0f} s' +
+                      ('' if cpu is None else f' ({cpu:.1f} CPU s)'),
+                      flush=True)
         if time.monotonic() - last_shown >= progress_every:
             last_shown = time.monotonic()
             for job in running:
@@ -187,13 +191,15 @@ class DomainShift:
                  profiles_dir: Path,
                  test_profiles: list[str],
                  jobs: int = 2,
-                 progress_every: float = 60.0) -> None:
+                 progress_every: float = 60.0,
+                 fork_tools: bool = False) -> None:
         self.work = work_dir.resolve()
         self.settings = settings
         self.profiles_dir = profiles_dir.resolve()  # the tools run from the repository
         self.test_profiles = test_profiles
         self.jobs = jobs
         self.progress_every = progress_every
+        self.fork_tools = fork_tools
         self.data = self.work / 'data'
         self.raw = self.data / RAW_DIR
         self.logs = self.work / 'logs'
@@ -248,7 +254,7 @@ class DomainShift:
             return
         print(f'[domain shift] {step}: {len(jobs)} job(s), {self.jobs} at a time', flush=True)
         start = time.monotonic()
-        run_jobs(jobs, self.jobs, self.progress_every)
+        run_jobs(jobs, self.jobs, self.progress_every, self.fork_tools)
         self.durations[step] = round(time.monotonic() - start, 1)
         print(f'[domain shift] {step}: done in {self.durations[step]:.0f} s', flush=True)
 
@@ -582,6 +588,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         type=float,
         default=60.0,
         help='seconds between progress lines of running steps')
+    parser.add_argument(
+        '--fork-tools',
+        action='store_true',
+        help='run the tools forked from one process that imported the stack once (a quick '
+        'check of the benchmark: no start-up per tool)')
     args = parser.parse_args(argv)
     for name in ('rooms_train', 'rooms_test', 'iters', 'points', 'sample_points', 'jobs'):
         if getattr(args, name) < 1:
@@ -594,7 +605,8 @@ def main(argv: list[str] | None = None) -> int:
     settings = Settings(args.rooms_train, args.rooms_test, args.iters, args.points,
                         args.sample_points, args.seed)
     bench = DomainShift(args.work_dir, settings, args.profiles_dir,
-                        list(dict.fromkeys(args.test_profiles)), args.jobs, args.progress_every)
+                        list(dict.fromkeys(args.test_profiles)), args.jobs, args.progress_every,
+                        args.fork_tools)
     try:
         results = bench.run_all()
     except StepError as error:

@@ -3,6 +3,7 @@
     .venv/bin/python benchmarks/bench_hall.py --checkpoint work_dirs/demo/train/epoch_N.pth
         [--config work_dirs/demo/exp2_cpu_demo.py] [--points 30000000] [--hall-size 40 25]
         [--rooms 15] [--room-points 1000000] [--score-thr 0.3] [--seed 0] [--keep DIR]
+        [--fork-tools]
 
 1. ``python -m generator`` makes one hall (``hall`` section of the generator config, fixed
    size ``--hall-size``) of ``--points`` points and ``--rooms`` rooms of the default
@@ -20,6 +21,9 @@
 
 Last line: ``hall <N>M points -> FCStd: <s> s, peak <G> GB; windowed recall <r> vs room recall
 <r>``. The goals: windowed recall at least 0.95 of room recall, peak under 8 GB.
+``--fork-tools`` (a quick check of the benchmark) runs the tools forked from one process that
+imported the stack once (``benchmarks/tool_runs.py``): no start-up per tool; the peak is then
+the forked scan2cad's (the imported stack included) or its FreeCAD's, the larger.
 """
 import argparse
 import json
@@ -32,11 +36,11 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.tool_runs import run_tool
 from synthdet.contracts import read_predictions
 from synthdet.ply import read_ply_vertices
 from synthdet.scan_io import write_las_chunks
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
 
 IOU = 0.25
 CHUNK = 2_000_000
@@ -47,7 +51,7 @@ PEAK_WRAPPER = ('import resource, subprocess, sys\n'
                 'sys.exit(code)\n')
 
 
-def parse_args() -> argparse.Namespace:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--checkpoint', type=Path, required=True, help='trained model (make demo)')
     parser.add_argument(
@@ -59,7 +63,12 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument('--score-thr', type=float, default=0.3)
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--keep', type=Path, help='work here and keep the files')
-    return parser.parse_args()
+    parser.add_argument(
+        '--fork-tools',
+        action='store_true',
+        help='run the tools forked from one process that imported the stack once (a quick '
+        'check of the benchmark: no start-up per tool)')
+    return parser.parse_args(argv)
 
 
 def default_config(checkpoint: Path) -> Path:
@@ -70,20 +79,26 @@ def default_config(checkpoint: Path) -> Path:
     return found[0]
 
 
-def run(*command: str) -> subprocess.CompletedProcess:
-    """Run a command from the repository root; stop with its output when it fails."""
-    done = subprocess.run([str(c) for c in command], cwd=REPO_ROOT, capture_output=True, text=True)
+def run(*args: str | Path, forked: bool = False) -> subprocess.CompletedProcess:
+    """Run ``python ARGS`` from the repository root (``forked``: see ``--fork-tools``); stop
+    with its output when it fails."""
+    done = run_tool(args, forked=forked)
     if done.returncode:
-        raise SystemExit(f'{" ".join(map(str, command))} failed:\n{done.stderr[-3000:]}')
+        raise SystemExit(f'{" ".join(map(str, args))} failed:\n{done.stderr[-3000:]}')
     return done
 
 
-def generate(out: Path, area: int, count: int, points: int, seed: int,
-             config: Path | None) -> list[Path]:
+def generate(out: Path,
+             area: int,
+             count: int,
+             points: int,
+             seed: int,
+             config: Path | None,
+             forked: bool = False) -> list[Path]:
     """Generate rooms (or a hall) with PLY labels; returns the room folders."""
     extra = ['--config', str(config)] if config else []
-    run(sys.executable, '-m', 'generator', '--out', out, '--areas', str(area), '--rooms-per-area',
-        str(count), '--points', str(points), '--seed', str(seed), '--ply', '--quiet', *extra)
+    run('-m', 'generator', '--out', out, '--areas', str(area), '--rooms-per-area', str(count),
+        '--points', str(points), '--seed', str(seed), '--ply', '--quiet', *extra, forked=forked)
     return sorted(p for p in (out / f'Area_{area}').iterdir() if p.is_dir())
 
 
@@ -147,8 +162,8 @@ def write_hall_laz(room: Path, laz: Path) -> int:
     return write_las_chunks(laz, chunks())
 
 
-def main() -> None:
-    args = parse_args()
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
     checkpoint = args.checkpoint.resolve()
     if not checkpoint.is_file():
         raise SystemExit(f'{checkpoint}: checkpoint not found (make demo writes one under '
@@ -167,8 +182,10 @@ def main() -> None:
                 'depth': [depth, depth]
             }}))
         start = time.perf_counter()
-        [hall] = generate(work / 'hall', 1, 1, args.points, args.seed, hall_config)
-        rooms = generate(work / 'rooms', 9, args.rooms, args.room_points, args.seed, None)
+        [hall] = generate(work / 'hall', 1, 1, args.points, args.seed, hall_config,
+                          args.fork_tools)
+        rooms = generate(work / 'rooms', 9, args.rooms, args.room_points, args.seed, None,
+                         args.fork_tools)
         print(f'generated the hall ({width:g} x {depth:g} m, {args.points:,} points) and '
               f'{len(rooms)} rooms in {time.perf_counter() - start:.0f} s')
         laz = work / 'hall.laz'
@@ -178,20 +195,38 @@ def main() -> None:
         out = work / 'cad' / 'hall.FCStd'
         out.parent.mkdir(exist_ok=True)
         start = time.perf_counter()
-        done = run(sys.executable, '-c', PEAK_WRAPPER, sys.executable, 'tools/scan2cad.py', laz,
-                   '--config', config, '--checkpoint', checkpoint, '--out', out, '--score-thr',
-                   str(args.score_thr), '--seed', str(args.seed))
+        scan2cad = [
+            'tools/scan2cad.py', laz, '--config', config, '--checkpoint', checkpoint, '--out',
+            out, '--score-thr',
+            str(args.score_thr), '--seed',
+            str(args.seed)
+        ]
+        if args.fork_tools:
+            done = run(*scan2cad, forked=True)
+            output, peak_kb = done.stdout, done.peak_kb
+        else:
+            done = run('-c', PEAK_WRAPPER, sys.executable, *scan2cad)
+            parts = done.stdout.split('peak_kb')
+            output, peak_kb = parts[0], parts[-1]
         seconds = time.perf_counter() - start
-        peak_gb = int(done.stdout.split('peak_kb')[-1]) / 1e6
-        print(done.stdout.split('peak_kb')[0].rstrip())
+        peak_gb = int(peak_kb) / 1e6
+        print(output.rstrip())
         hall_found, hall_total = recall(
             truth_boxes(hall, classes),
             read_predictions(str(out.with_suffix('.pred.json')))['detections'], args.score_thr)
 
         predictions = work / 'room_predictions'
-        run(sys.executable, 'tools/predict.py', config, checkpoint,
-            *[room / f'{room.name}.ply' for room in rooms], '--out', predictions, '--score-thr',
-            str(args.score_thr), '--seed', str(args.seed))
+        run('tools/predict.py',
+            config,
+            checkpoint,
+            *[room / f'{room.name}.ply' for room in rooms],
+            '--out',
+            predictions,
+            '--score-thr',
+            str(args.score_thr),
+            '--seed',
+            str(args.seed),
+            forked=args.fork_tools)
         room_found = room_total = 0
         for room in rooms:
             detections = read_predictions(str(predictions /

@@ -2,12 +2,13 @@
 
     .venv/bin/python benchmarks/bench_real_scans.py SCANS_DIR --checkpoint CKPT
         [--config configs/tr3d/exp2_cpu.py] [--score-thr 0.3] [--compare-thr 0.5]
-        [--device cpu] [--keep DIR]
+        [--device cpu] [--keep DIR] [--fork-tools]
     .venv/bin/python benchmarks/bench_real_scans.py --generate 2 --checkpoint CKPT ...
 
 ``--generate N`` evaluates N small generated rooms (``tests/s3dis_fixtures.py``) written as
 labelled PLY scans in a temporary folder instead: a check of the benchmark itself, not a
-measure of a model on real rooms.
+measure of a model on real rooms. ``--fork-tools`` runs ``tools/eval_scans.py`` forked from a
+process that imported the stack once (``benchmarks/tool_runs.py``): no start-up of its own.
 
 1. ``tools/eval_scans.py`` evaluates every labelled scan of SCANS_DIR (``X.ply`` with
    ``X.labels.json`` beside it, docs/evaluation.md) in its own process, as a user runs it, at
@@ -23,12 +24,12 @@ phantom.
 """
 import argparse
 import json
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+from benchmarks.tool_runs import run_tool
 from projects.synthdet.evaluation.real_scans import (
     evaluate_detections, labels_path, summary_line)
 from synthdet.contracts import LABELS_FORMAT, read_labels, read_predictions
@@ -39,7 +40,7 @@ from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
-def parse_args() -> argparse.Namespace:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('scans', type=Path, nargs='?', help='folder of labelled scans')
     parser.add_argument('--generate', type=int, help='evaluate N generated rooms instead')
@@ -49,7 +50,12 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument('--compare-thr', type=float, default=0.5, help='shown beside it')
     parser.add_argument('--device', default='cpu')
     parser.add_argument('--keep', type=Path, help='write the evaluation here and keep it')
-    args = parser.parse_args()
+    parser.add_argument(
+        '--fork-tools',
+        action='store_true',
+        help='run tools/eval_scans.py forked from a process that imported the stack once (a '
+        'quick check of the benchmark: no start-up of its own)')
+    args = parser.parse_args(argv)
     if (args.scans is None) == (args.generate is None):
         parser.error('give a folder of labelled scans or --generate N, not both')
     return args
@@ -74,10 +80,12 @@ def write_generated_scans(folder: Path, rooms: int, seed: int = 0) -> None:
 def evaluate(args: argparse.Namespace, out: Path, lowest: float) -> tuple[dict, float]:
     """Run tools/eval_scans.py at the lowest threshold; its figures and wall time."""
     start = time.perf_counter()
-    done = subprocess.run([
-        sys.executable, 'tools/eval_scans.py', args.config, args.checkpoint, args.scans, '--out',
-        out, '--score-thr', str(lowest), '--device', args.device
-    ], cwd=REPO_ROOT, capture_output=True, text=True)
+    done = run_tool([
+        'tools/eval_scans.py', args.config, args.checkpoint, args.scans, '--out', out,
+        '--score-thr',
+        str(lowest), '--device', args.device
+    ],
+                    forked=args.fork_tools)
     seconds = time.perf_counter() - start
     if done.returncode != 0:
         sys.exit(f'tools/eval_scans.py failed ({done.returncode}): {done.stderr.strip()}')
@@ -85,8 +93,8 @@ def evaluate(args: argparse.Namespace, out: Path, lowest: float) -> tuple[dict, 
     return json.loads((out / 'real_scans.json').read_text()), seconds
 
 
-def main() -> None:
-    args = parse_args()
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
     thresholds = sorted({args.score_thr, args.compare_thr})
     with tempfile.TemporaryDirectory() as scratch:
         out = args.keep or Path(scratch) / 'out'

@@ -6,6 +6,7 @@ Usage: python benchmarks/bench_teach.py SCANS_DIR --train ROOM [ROOM ...]
            --config configs/tr3d/exp2_cpu.py --checkpoint CKPT --data GENERATED_ROOT
            --data-root DATA_ROOT --work WORK [--finetune-config configs/tr3d/teach_finetune.py]
            [--iters N] [--score-thr 0.3] [--busy-file FILE] [--freecadcmd freecadcmd]
+           [--fork-tools]
 
 SCANS_DIR holds labelled scans (``X.<suffix>`` with ``X.labels.json`` beside it); ``--train``
 names the training rooms by their stem, every other labelled scan is held out. GENERATED_ROOT
@@ -32,7 +33,9 @@ file, into DATA_ROOT, which also receives the user rooms' area 10.
 Prints a table and ends with the line ``teach: held-out recall A -> B at IoU 0.25, false
 positives per room C -> D, area 9 mAP@0.25 E -> F (N training rooms, M held-out rooms,
 fine-tune T min)``; all figures go to ``WORK/teach.json``. Exit code 2 for bad input, 1 for a
-step that fails (one line naming it).
+step that fails (one line naming it). ``--fork-tools`` runs the Python tools forked from one
+process that imported the stack once (``benchmarks/tool_runs.py``): the same steps without a
+start-up per tool, for the benchmark's smoke run.
 """
 from __future__ import annotations
 
@@ -41,13 +44,13 @@ import json
 import math
 import os
 import resource
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks.tool_runs import start_tool
 from configurator.freecad_cli import run_freecad_process
 from configurator.labels import OVERLAP_TOLERANCE, read_document
 from projects.synthdet.config_helpers import area_info_file
@@ -297,19 +300,20 @@ def _box_difference(first: dict, second: dict) -> float:
 # --------------------------------------------------------------------------- the steps
 
 
-def run_step(what: str, command: list[str], log: Path) -> None:
-    """Run ``python <command>`` from the repository root, its output into ``log``."""
+def run_step(what: str, command: list[str], log: Path, forked: bool = False) -> float:
+    """Run ``python <command>`` from the repository root, its output into ``log``; ``forked``:
+    forked from one process that imported the stack (``benchmarks/tool_runs.py``). Returns
+    the CPU seconds (user and system) of the step's processes."""
     env = dict(os.environ, OMP_NUM_THREADS=os.environ.get('OMP_NUM_THREADS', '1'))
     log.parent.mkdir(parents=True, exist_ok=True)
-    with log.open('w', encoding='utf-8') as stream:
-        done = subprocess.run([sys.executable, *command],
-                              cwd=REPO,
-                              env=env,
-                              stdout=stream,
-                              stderr=subprocess.STDOUT)
-    if done.returncode != 0:
+    log.write_bytes(b'')
+    cpu_start = _children_cpu_seconds()
+    process = start_tool(command, log, env=env, forked=forked)
+    code = process.wait()
+    if code != 0:
         tail = log.read_text(encoding='utf-8', errors='replace').strip().splitlines()[-1:]
-        raise StepFailed(f'{what} failed (exit {done.returncode}, {log}): {" ".join(tail)}')
+        raise StepFailed(f'{what} failed (exit {code}, {log}): {" ".join(tail)}')
+    return process.cpu_seconds if forked else _children_cpu_seconds() - cpu_start
 
 
 def room_name(scan: Path) -> str:
@@ -383,9 +387,10 @@ def fine_tune(args: argparse.Namespace, options: list[str]) -> dict:
         command += iteration_options(args.iters)
     if args.busy_file:
         args.busy_file.write_text(f'fine-tune in {work} since {time.ctime()}\n')
-    start, cpu_start = time.perf_counter(), _children_cpu_seconds()
+    start = time.perf_counter()
     try:
-        run_step('the fine-tune (tools/train.py)', command, args.work / 'logs' / 'train.log')
+        cpu_seconds = run_step('the fine-tune (tools/train.py)', command,
+                               args.work / 'logs' / 'train.log', args.fork_tools)
     finally:
         if args.busy_file:
             args.busy_file.unlink(missing_ok=True)
@@ -393,7 +398,7 @@ def fine_tune(args: argparse.Namespace, options: list[str]) -> dict:
     done = {
         'checkpoint': (work / 'last_checkpoint').read_text().strip(),
         'seconds': seconds,
-        'cpu_seconds': _children_cpu_seconds() - cpu_start
+        'cpu_seconds': cpu_seconds
     }
     record.write_text(json.dumps(done))
     return {**done, 'reused': False}
@@ -418,8 +423,13 @@ def evaluate_held_out(config: Path, checkpoint: Path, scans: list[LabelledScan],
     return result
 
 
-def test_area(config: Path, checkpoint: Path, options: list[str], work: Path) -> dict:
-    """``tools/test.py`` on generated area 9: its Table 3 rows."""
+def test_area(config: Path,
+              checkpoint: Path,
+              options: list[str],
+              work: Path,
+              forked: bool = False) -> dict:
+    """``tools/test.py`` on generated area 9 (``forked``: see :func:`run_step`): its Table 3
+    rows."""
     table = work / 'table3.json'
     run_step(f'tools/test.py of {checkpoint.name}', [
         'tools/test.py',
@@ -428,7 +438,7 @@ def test_area(config: Path, checkpoint: Path, options: list[str], work: Path) ->
         str(work), '--out',
         str(table), '--cfg-options', f'test_dataloader.dataset.ann_file='
         f'{area_info_file(TEST_AREA)}', *options
-    ], work / 'test.log')
+    ], work / 'test.log', forked)
     return json.loads(table.read_text())['rows']
 
 
@@ -553,6 +563,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('--score-thr', type=float, default=0.3)
     parser.add_argument('--busy-file', type=Path, help='a file present while the fine-tune runs')
     parser.add_argument('--freecadcmd', default='freecadcmd')
+    parser.add_argument(
+        '--fork-tools',
+        action='store_true',
+        help='run the Python tools forked from one process that imported the stack once (a '
+        'quick check of the benchmark: no start-up per tool)')
     return parser.parse_args(argv)
 
 
@@ -584,7 +599,7 @@ def make_user_area(args: argparse.Namespace, train: list[LabelledScan]) -> list[
             str(args.checkpoint), '--out',
             str(document), '--score-thr',
             str(args.score_thr), '--freecadcmd', args.freecadcmd
-        ], args.work / 'logs' / f'scan2cad_{stem}.log')
+        ], args.work / 'logs' / f'scan2cad_{stem}.log', args.fork_tools)
         parts = read_document(document, args.freecadcmd)['boxes']
         truth, cuts = separate_boxes(item.labels['boxes'])
         plan = correction_plan(parts, truth)
@@ -596,7 +611,7 @@ def make_user_area(args: argparse.Namespace, train: list[LabelledScan]) -> list[
             str(raw), '--area',
             str(USER_AREA), '--room',
             room_name(item.scan), '--freecadcmd', args.freecadcmd
-        ], args.work / 'logs' / f'labels_{stem}.log')
+        ], args.work / 'logs' / f'labels_{stem}.log', args.fork_tools)
         written = read_labels(raw / f'{stem}.labels.json')['boxes']
         deviation = labels_deviation(written, truth)
         if deviation > LABELS_TOLERANCE:
@@ -626,7 +641,7 @@ def make_user_area(args: argparse.Namespace, train: list[LabelledScan]) -> list[
         str(raw.parent), '--out-dir',
         str(args.data_root), '--areas',
         str(USER_AREA)
-    ], args.work / 'logs' / 'create_data.log')
+    ], args.work / 'logs' / 'create_data.log', args.fork_tools)
     return done
 
 
@@ -654,7 +669,7 @@ def run(args: argparse.Namespace) -> dict:
         held = evaluate_held_out(config, model, held_out, args.work / 'eval' / name,
                                  args.score_thr)
         rows = test_area(config, model, data_root_options(config, args.data_root),
-                         args.work / 'area9' / name)
+                         args.work / 'area9' / name, args.fork_tools)
         results[name] = {'held_out': held, 'area9': rows}
     results['goals'] = goals(results)
     return results

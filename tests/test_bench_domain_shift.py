@@ -1,11 +1,11 @@
 """The domain-shift benchmark (benchmarks/bench_domain_shift.py): its configs, its report, and
-one whole run at a tiny scale through the real generator, converter, Runner and test tool."""
+one whole run at a tiny scale through the real generator, converter, Runner and test tool (run
+in this process, its tools forked from one process that imported the stack: ``--fork-tools``)."""
 from __future__ import annotations
 
 import json
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -160,22 +160,10 @@ def bench_args(work: Path, profiles: Path, *extra: str) -> list[str]:
     return ['--work-dir', str(work), '--profiles-dir', str(profiles), *TINY, *extra]
 
 
-def run_bench(work: Path, profiles: Path, *extra: str) -> subprocess.CompletedProcess:
-    """The benchmark as a user runs it: its own process from the repository root."""
-    return subprocess.run(
-        [sys.executable, 'benchmarks/bench_domain_shift.py', *bench_args(work, profiles, *extra)],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=1500)
-
-
-def rerun_bench(capsys, work: Path, profiles: Path,
-                *extra: str) -> subprocess.CompletedProcess:
-    """The benchmark's ``main`` in this process (its tools still run as processes), for the
-    reruns that start no tool or stop before the first: one interpreter start-up less each."""
+def run_bench(capsys, work: Path, profiles: Path, *extra: str) -> subprocess.CompletedProcess:
+    """The benchmark's ``main`` in this process, its tools forked (``--fork-tools``)."""
     capsys.readouterr()
-    code = main(bench_args(work, profiles, *extra))
+    code = main(bench_args(work, profiles, '--fork-tools', *extra))
     out, err = capsys.readouterr()
     return subprocess.CompletedProcess(['bench_domain_shift', *extra], code, out, err)
 
@@ -187,7 +175,7 @@ def test_tiny_run_trains_both_models_tests_every_profile_and_resumes(tmp_path, c
     for name, profile in PROFILES.items():
         (profiles / f'{name}.json').write_text(json.dumps(profile))
     work = tmp_path / 'work'
-    proc = run_bench(work, profiles)
+    proc = run_bench(capsys, work, profiles)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     lines = proc.stdout.strip().splitlines()
     assert LAST_LINE.fullmatch(lines[-1]), lines[-1]
@@ -222,19 +210,19 @@ def test_tiny_run_trains_both_models_tests_every_profile_and_resumes(tmp_path, c
     for model in TRAIN_AREAS:
         assert (work / 'models' / model / 'iter_1.pth').is_file()
     # a second run finds every output and prints the same result
-    again = rerun_bench(capsys, work, profiles)
+    again = run_bench(capsys, work, profiles)
     assert again.returncode == 0, again.stderr[-3000:]
     assert again.stdout.count('outputs exist, skipped') == 4
     assert again.stdout.strip().splitlines()[-1] == lines[-1]
     # other settings in the same work folder are refused, naming the settings file
-    other = rerun_bench(capsys, work, profiles, '--iters', '2')
+    other = run_bench(capsys, work, profiles, '--iters', '2')
     assert other.returncode == 1 and 'settings.json' in other.stderr
     # a model trained from another version of its config template is refused, not reused
     written = work / 'models' / MIXED / f'domain_shift_{MIXED}.py'
     text = written.read_text()
     assert 'lr=0.001,' in text
     written.write_text(text.replace('lr=0.001,', 'lr=0.002,'))
-    stale = rerun_bench(capsys, work, profiles)
+    stale = run_bench(capsys, work, profiles)
     assert stale.returncode == 1 and f'{written}: this work dir' in stale.stderr
     written.write_text(text)
     # rooms whose annotations give an object points off it (the labelling of an older
@@ -247,6 +235,6 @@ def test_tiny_run_trains_both_models_tests_every_profile_and_resumes(tmp_path, c
     wall = (annotations / 'wall_1.txt').read_text()
     with open(annotations / f'{obj}.txt', 'a') as annotation:
         annotation.write(wall)
-    refused = rerun_bench(capsys, work, profiles)
+    refused = run_bench(capsys, work, profiles)
     assert refused.returncode == 1, refused.stdout[-2000:]
     assert f'{room.name}/{obj}' in refused.stderr and 'outside their boxes' in refused.stderr

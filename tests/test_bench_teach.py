@@ -1,21 +1,20 @@
 """The measured fine-tune on corrected rooms (benchmarks/bench_teach.py): how it separates
 overlapping true boxes and plans a correction, and one whole run at a tiny scale through the
-real scan2cad, FreeCAD, labels, converter, Runner and evaluation (two training iterations)."""
+real scan2cad, FreeCAD, labels, converter, Runner and evaluation (two training iterations; the
+benchmark's ``main`` in this process, its tools forked from one process that imported the stack:
+``--fork-tools``)."""
 from __future__ import annotations
 
 import json
 import math
-import os
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from benchmarks.bench_real_scans import write_generated_scans
-from benchmarks.bench_teach import SEPARATION, correction_plan, separate_boxes
+from benchmarks.bench_teach import SEPARATION, correction_plan, main, separate_boxes
 from configurator.labels import check_overlaps
 from synthdet.contracts import LABELS_FORMAT, read_labels, write_labels
 from synthdet.geometry import box_corners_xy
@@ -114,7 +113,7 @@ def exp2_cpu_checkpoint(path: Path) -> Path:
 
 
 @pytest.mark.slow
-def test_a_whole_run_on_generated_rooms_prints_the_headline(tmp_path):
+def test_a_whole_run_on_generated_rooms_prints_the_headline(tmp_path, capsys, monkeypatch):
     generated, data = tmp_path / 'generated', tmp_path / 'data'
     for area in (7, 8, 9):
         write_synthetic_area(generated, area, n_rooms=1, seed=area, points_per_object=300)
@@ -133,7 +132,6 @@ def test_a_whole_run_on_generated_rooms_prints_the_headline(tmp_path):
     busy = tmp_path / 'fine-tune.running'
     checkpoint = exp2_cpu_checkpoint(tmp_path / 'initialised.pth')
     command = [
-        'benchmarks/bench_teach.py',
         scans,
         '--train',
         'office_1',
@@ -154,17 +152,17 @@ def test_a_whole_run_on_generated_rooms_prints_the_headline(tmp_path):
         busy,
         # the initial model scores every box about 0.5: a few dozen parts to correct
         '--score-thr',
-        0.511
+        0.511,
+        '--fork-tools'
     ]
-    done = subprocess.run([sys.executable, *map(str, command)],
-                          cwd=REPO,
-                          capture_output=True,
-                          text=True,
-                          timeout=900,
-                          env=dict(os.environ, OMP_NUM_THREADS='1'))
-    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
-    headline = HEADLINE.fullmatch(done.stdout.strip().splitlines()[-1])
-    assert headline, done.stdout[-2000:]
+    monkeypatch.setenv('OMP_NUM_THREADS', '1')
+    monkeypatch.chdir(REPO)
+    capsys.readouterr()
+    code = main([str(item) for item in command])
+    out, err = capsys.readouterr()
+    assert code == 0, out[-3000:] + err[-3000:]
+    headline = HEADLINE.fullmatch(out.strip().splitlines()[-1])
+    assert headline, out[-2000:]
     assert all(math.isfinite(float(value)) for value in headline.groups())
     results = json.loads((tmp_path / 'work' / 'teach.json').read_text())
     assert results['train'] == ['office_1', 'bare_1'] and results['held_out'] == ['lab_1']

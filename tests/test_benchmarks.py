@@ -1,18 +1,23 @@
-"""Every benchmark in ``benchmarks/`` runs at its smallest size, as its own process with the
-project's interpreter: it exits 0 and ends with its headline line in the documented format
-with finite figures. A changed signature that a benchmark uses then fails here, not in the
-docs. A new ``benchmarks/bench_<name>.py`` needs an entry in ``SMOKE``, keyed by its file name."""
+"""Every benchmark in ``benchmarks/`` runs at its smallest size from its command line: it exits
+0 and ends with its headline line in the documented format with finite figures. A changed
+signature that a benchmark uses then fails here, not in the docs. A new
+``benchmarks/bench_<name>.py`` needs an entry in ``SMOKE``, keyed by its file name.
+
+The benchmarks run one after the other in this test process, each as ``python
+benchmarks/bench_<name>.py ARGS`` runs it (the script's ``__main__`` path, with its arguments
+in ``sys.argv``), so that the stack is imported once, not once per benchmark; the tools they
+start are forked from one process that imported it (``--fork-tools``,
+``benchmarks/tool_runs.py``). One light benchmark also runs as a process of its own."""
 from __future__ import annotations
 
 import json
 import math
 import os
 import re
+import runpy
 import subprocess
 import sys
 import tempfile
-from collections.abc import Iterator
-from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import NamedTuple
 
@@ -75,7 +80,7 @@ SMOKE: dict[str, Smoke | str] = {
     # an untrained model: only its surest boxes, so that the FreeCAD document stays small
     'bench_hall.py':
         Smoke(['--points', '30000', '--hall-size', '8', '7', '--rooms', '1',
-               '--room-points', '10000', '--score-thr', '0.9', '--config',
+               '--room-points', '10000', '--score-thr', '0.9', '--fork-tools', '--config',
                'configs/tr3d/tiny.py', '--checkpoint'],
               r'hall ' + figure('points') + r'M points -> FCStd: ' + figure('seconds') +
               r' s, peak ' + figure('peak') + r' GB; windowed recall ' + figure('hall') +
@@ -93,7 +98,7 @@ SMOKE: dict[str, Smoke | str] = {
               figure('tablet') + 'x'),
     'bench_dist_train.py':
         Smoke(['--rooms-per-area', '1', '--points', '5000', '--iters', '1', '--warmup', '0',
-               '--workers', '1', '--sample-points', '100'],
+               '--workers', '1', '--sample-points', '100', '--fork-tools'],
               r'2 processes x 1 thread vs 1 process x 2 threads: x' + figure('ratio') +
               r' faster per iteration of 4 rooms \(' + figure('two') + ' s vs ' +
               figure('one') + r' s\)',
@@ -104,7 +109,8 @@ SMOKE: dict[str, Smoke | str] = {
               r' GB in \d+ s vs read-all ' + figure('whole') + r' GB in \d+ s: ' +
               figure('ratio') + 'x less memory'),
     'bench_real_scans.py':
-        Smoke(['--generate', '1', '--config', 'configs/tr3d/tiny.py', '--checkpoint'],
+        Smoke(['--generate', '1', '--fork-tools', '--config', 'configs/tr3d/tiny.py',
+               '--checkpoint'],
               r'real scans: recall ' + figure('recall') + r' at IoU 0\.25, ' +
               figure('fp') + r' false positives per room, ' + figure('phantoms') +
               r' phantom yumi/3d printer \(' + figure('rooms') + r' rooms\)',
@@ -148,51 +154,72 @@ def tiny_checkpoint(folder: Path) -> Path:
     return path
 
 
-def smoke_run(name: str, checkpoint: Future | None) -> subprocess.CompletedProcess:
-    """Run one benchmark at its smallest size as its own process with one OpenMP thread."""
-    smoke = SMOKE[name]
-    args = [*smoke.args, str(checkpoint.result())] if smoke.with_model else smoke.args
-    return subprocess.run([sys.executable, f'benchmarks/{name}', *args],
-                          cwd=REPO,
-                          env=dict(os.environ, OMP_NUM_THREADS='1'),
-                          capture_output=True,
-                          text=True,
-                          timeout=600)
+def run_script(script: Path, args: list[str], capfd) -> tuple[int, str, str]:
+    """``python SCRIPT ARGS`` in this process (its ``__main__`` path, from the repository root):
+    its exit code and the text it wrote to standard output and standard error."""
+    capfd.readouterr()
+    argv, cwd = sys.argv, os.getcwd()
+    sys.argv = [str(script), *args]
+    os.chdir(REPO)
+    try:
+        runpy.run_path(str(script), run_name='__main__')
+        code = 0
+    except SystemExit as stop:  # as the interpreter maps it to an exit code
+        if stop.code is None or isinstance(stop.code, int):
+            code = stop.code or 0
+        else:
+            print(stop.code, file=sys.stderr)
+            code = 1
+    finally:
+        sys.argv = argv
+        os.chdir(cwd)
+    out, err = capfd.readouterr()
+    return code, out, err
 
 
 @pytest.fixture(scope='module')
-def smoke_runs(request, tmp_path_factory) -> Iterator[dict[str, Future]]:
-    """The smoke runs of the selected tests, started at once, two at a time (the benchmarks run
-    one thread each; a 2-core machine then does the set in about half the wall time), slowest
-    first, those that need the tiny checkpoint last: it is made in this process meanwhile."""
-    selected = [
-        item.callspec.params['name'] for item in request.session.items
-        if item.originalname == 'test_benchmark_smoke_run'
-    ]
-    names = sorted(selected, key=lambda name: (not SMOKE[name].slow, SMOKE[name].with_model))
-    with ThreadPoolExecutor(max_workers=1) as maker, ThreadPoolExecutor(max_workers=2) as runs:
-        checkpoint = None
-        if any(SMOKE[name].with_model for name in names):
-            checkpoint = maker.submit(tiny_checkpoint, tmp_path_factory.mktemp('model'))
-        try:
-            yield {name: runs.submit(smoke_run, name, checkpoint) for name in names}
-        finally:  # a failed test leaves the runs not started yet
-            runs.shutdown(cancel_futures=True)
+def checkpoint(tmp_path_factory) -> Path:
+    return tiny_checkpoint(tmp_path_factory.mktemp('model'))
+
+
+def check_headline(name: str, code: int, out: str, err: str) -> None:
+    """Exit 0 and the last line in the documented format, its figures finite."""
+    assert code == 0, out[-2000:] + err[-4000:]
+    lines = [line for line in out.splitlines() if line.strip()]
+    assert lines, err[-2000:]
+    headline = re.fullmatch(SMOKE[name].headline, lines[-1].strip())
+    assert headline, f'last line not in the documented format: {lines[-1]!r}'
+    for key, value in headline.groupdict().items():
+        assert math.isfinite(float(value.replace(',', ''))), f'{key} = {value}'
 
 
 @pytest.mark.parametrize('name', [
     pytest.param(name, marks=[pytest.mark.slow] if smoke.slow else [])
     for name, smoke in SMOKE.items() if isinstance(smoke, Smoke)
 ])
-def test_benchmark_smoke_run(name, smoke_runs):
-    done = smoke_runs[name].result()
-    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-4000:]
-    lines = [line for line in done.stdout.splitlines() if line.strip()]
-    assert lines, done.stderr[-2000:]
-    headline = re.fullmatch(SMOKE[name].headline, lines[-1].strip())
-    assert headline, f'last line not in the documented format: {lines[-1]!r}'
-    for key, value in headline.groupdict().items():
-        assert math.isfinite(float(value.replace(',', ''))), f'{key} = {value}'
+def test_benchmark_smoke_run(name, request, capfd, monkeypatch):
+    smoke = SMOKE[name]
+    args = [*smoke.args, str(request.getfixturevalue('checkpoint'))] if smoke.with_model \
+        else smoke.args
+    monkeypatch.setenv('OMP_NUM_THREADS', '1')
+    check_headline(name, *run_script(REPO / 'benchmarks' / name, args, capfd))
+
+
+@pytest.mark.parametrize('name', sorted(SMOKE))
+def test_every_benchmark_answers_help_from_its_command_line(name, capfd):
+    code, out, err = run_script(REPO / 'benchmarks' / name, ['--help'], capfd)
+    assert code == 0 and out.startswith('usage: '), out[-2000:] + err[-2000:]
+
+
+def test_a_light_benchmark_runs_as_its_own_process():
+    """The command line as a user types it (the interpreter's own start-up and ``sys.path``)."""
+    name = 'bench_writer.py'
+    done = subprocess.run([sys.executable, f'benchmarks/{name}', *SMOKE[name].args],
+                          cwd=REPO,
+                          capture_output=True,
+                          text=True,
+                          timeout=300)
+    check_headline(name, done.returncode, done.stdout, done.stderr)
 
 
 def test_the_page_names_command_machine_and_date_and_no_path_of_the_machine(tmp_path):
