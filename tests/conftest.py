@@ -1,4 +1,4 @@
-"""Session-wide test set-up.
+"""Test set-up shared by the whole suite.
 
 - OpenMP threads spin while waiting by default; on the 2 shared cores of a CI machine that makes
   MinkowskiEngine's CPU kernels several times slower. Passive waiting must be set before the
