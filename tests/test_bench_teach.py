@@ -1,6 +1,6 @@
 """The measured fine-tune on corrected rooms (benchmarks/bench_teach.py): how it separates
 overlapping true boxes and plans a correction, and one whole run at a tiny scale through the
-real scan2cad, FreeCAD, labels, converter, Runner and evaluation (two training iterations; the
+real scan2cad, FreeCAD, labels, converter, Runner and evaluation (one training iteration; the
 benchmark's ``main`` in this process, its tools forked from one process that imported the stack:
 ``--fork-tools``)."""
 from __future__ import annotations
@@ -15,13 +15,13 @@ import pytest
 
 from benchmarks.bench_real_scans import write_generated_scans
 from benchmarks.bench_teach import SEPARATION, correction_plan, main, separate_boxes
+from benchmarks.tool_runs import run_tool
 from configurator.labels import check_overlaps
 from synthdet.contracts import LABELS_FORMAT, read_labels, write_labels
 from synthdet.geometry import box_corners_xy
 from synthdet.scan_io import write_scan
 from tests.room_scans import make_room
 from tests.s3dis_fixtures import write_synthetic_area
-from tests.tool_process import run_tool
 
 REPO = Path(__file__).resolve().parents[1]
 CLASSES = ['table', 'chair', 'sofa', 'yumi', '3dprinter']
@@ -94,6 +94,20 @@ def test_the_correction_keeps_matched_parts_deletes_the_rest_and_adds_the_missed
     assert all(set(item) == {'class', 'center', 'size', 'yaw'} for item in plan['add'])
 
 
+# teach_finetune.py with the user's area once in the training set instead of `user_repeat`
+# times: every repeat is a dataset the Runner builds (a few tenths of a CPU second each)
+ONE_REPEAT_FINETUNE = """_base_ = ['{base}']
+from projects.synthdet.config_helpers import area_datasets  # noqa: E402
+
+train_dataloader = dict(
+    dataset=dict(
+        dataset=dict(
+            datasets=area_datasets(
+                dict(_base_.train_area_dataset, pipeline=_base_.train_pipeline),
+                [*_base_.train_area, _base_.user_area], _base_.metainfo))))
+"""
+
+
 def exp2_cpu_checkpoint(path: Path) -> Path:
     """configs/tr3d/exp2_cpu.py's model with its initial weights (seeded)."""
     import torch
@@ -117,7 +131,9 @@ def test_a_whole_run_on_generated_rooms_prints_the_headline(tmp_path, capsys, mo
     generated, data = tmp_path / 'generated', tmp_path / 'data'
     for area in (7, 8, 9):
         write_synthetic_area(generated, area, n_rooms=1, seed=area, points_per_object=300)
-    run_tool('tools/create_data.py', 's3dis', '--root-path', generated, '--out-dir', data)
+    converted = run_tool(['tools/create_data.py', 's3dis', '--root-path', generated, '--out-dir',
+                          data], forked=True)
+    assert converted.returncode == 0, converted.stderr[-3000:]
     before = sorted(path.name for path in data.rglob('*'))
     scans = tmp_path / 'scans'
     write_generated_scans(scans, 2)  # office_1 and lab_1, with their true boxes
@@ -131,6 +147,9 @@ def test_a_whole_run_on_generated_rooms_prints_the_headline(tmp_path, capsys, mo
     })
     busy = tmp_path / 'fine-tune.running'
     checkpoint = exp2_cpu_checkpoint(tmp_path / 'initialised.pth')
+    finetune = tmp_path / 'teach_finetune_one_repeat.py'
+    finetune.write_text(
+        ONE_REPEAT_FINETUNE.format(base=REPO / 'configs' / 'tr3d' / 'teach_finetune.py'))
     command = [
         scans,
         '--train',
@@ -146,8 +165,10 @@ def test_a_whole_run_on_generated_rooms_prints_the_headline(tmp_path, capsys, mo
         tmp_path / 'teach_data',
         '--work',
         tmp_path / 'work',
+        '--finetune-config',
+        finetune,
         '--iters',
-        2,
+        1,
         '--busy-file',
         busy,
         # the initial model scores every box about 0.5: a few dozen parts to correct
@@ -169,7 +190,7 @@ def test_a_whole_run_on_generated_rooms_prints_the_headline(tmp_path, capsys, mo
     office, empty = results['corrections']
     assert office['labels'] == len(read_labels(scans / 'office_1.labels.json')['boxes']) > 0
     assert empty['labels'] == 0
-    assert (tmp_path / 'work' / 'finetune' / 'iter_2.pth').is_file() and not busy.exists()
+    assert (tmp_path / 'work' / 'finetune' / 'iter_1.pth').is_file() and not busy.exists()
     # the user area went into the run's data root; the generated data stayed as it was
     assert sorted(path.name for path in data.rglob('*')) == before
     assert (tmp_path / 'teach_data' / 's3dis_infos_Area_10.pkl').is_file()
