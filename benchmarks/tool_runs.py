@@ -31,13 +31,14 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 # imported once by the fork server: what the tools the benchmarks run import (bpy first)
 PRELOAD = ('bpy', 'torch', 'MinkowskiEngine', 'mmengine.runner', 'mmdet3d.apis',
-           'mmdet3d.datasets', 'mmdet3d.models', 'mmdet3d.engine', 'mmdet3d.evaluation',
-           'projects.synthdet.models', 'projects.synthdet.datasets.synthdet_s3dis',
+           'mmdet3d.datasets', 'mmdet3d.engine', 'mmdet3d.evaluation', 'mmdet3d.models',
+           'mmdet3d.structures', 'mmdet3d.visualization', 'projects.synthdet.models',
+           'projects.synthdet.datasets.synthdet_s3dis',
            'projects.synthdet.evaluation.indoor_metric',
            'projects.synthdet.datasets.s3dis_converter', 'projects.synthdet.bootstrap',
            'projects.synthdet.inference.detector', 'projects.synthdet.evaluation.real_scans',
-           'generator.pipeline', 'configurator.corners', 'configurator.labels',
-           'synthdet.scan_io', 'benchmarks.tool_runs')
+           'generator.pipeline', 'configurator.corners', 'configurator.labels', 'synthdet.scan_io',
+           'benchmarks.tool_runs')
 
 
 class ForkedTool:

@@ -35,7 +35,7 @@ def figure(name: str) -> str:
 class Smoke(NamedTuple):
     """The smallest arguments of a benchmark and the regex of its last line; ``with_model``:
     the arguments end with a checkpoint of the tiny config's model, made for the run; ``slow``:
-    over 30 s even at this size (processes that load the detector or train it)."""
+    about 30 s even at this size (three trainings)."""
     args: list[str]
     headline: str
     with_model: bool = False
@@ -69,8 +69,7 @@ SMOKE: dict[str, Smoke | str] = {
         Smoke(['--points', '500', '--iters', '1', '--threads', '1', '--in-process'],
               r'2 cm \+ fine level \(CPU seconds\): train x' + figure('train_2cm') +
               r' of 2 cm, x' + figure('train_1cm') + r' of 1 cm; inference x' +
-              figure('infer_2cm') + r' of 2 cm, x' + figure('infer_1cm') + ' of 1 cm',
-              slow=True),
+              figure('infer_2cm') + r' of 2 cm, x' + figure('infer_1cm') + ' of 1 cm'),
     'bench_corners.py':
         Smoke(['--rooms', '1', '--points', '5000', '--timing-rooms', '0', '--generate',
                '0'],
@@ -85,8 +84,7 @@ SMOKE: dict[str, Smoke | str] = {
               r'hall ' + figure('points') + r'M points -> FCStd: ' + figure('seconds') +
               r' s, peak ' + figure('peak') + r' GB; windowed recall ' + figure('hall') +
               ' vs room recall ' + figure('rooms'),
-              with_model=True,
-              slow=True),
+              with_model=True),
     'bench_sensors.py':
         Smoke(['--rooms', '1', '--points', '5000', '--repeats', '1'],
               r'sensors: slowest \S+ ' + figure('seconds') + r' s per 1M-point room \(' +
@@ -114,8 +112,7 @@ SMOKE: dict[str, Smoke | str] = {
               r'real scans: recall ' + figure('recall') + r' at IoU 0\.25, ' +
               figure('fp') + r' false positives per room, ' + figure('phantoms') +
               r' phantom yumi/3d printer \(' + figure('rooms') + r' rooms\)',
-              with_model=True,
-              slow=True),
+              with_model=True),
     'bench_freecad.py':
         Smoke(['--sizes', '12', '24'],
               r'freecad documents: ' + figure('count') + r' detections ' + figure('seconds') +
