@@ -34,12 +34,10 @@ def figure(name: str) -> str:
 
 class Smoke(NamedTuple):
     """The smallest arguments of a benchmark and the regex of its last line; ``with_model``:
-    the arguments end with a checkpoint of the tiny config's model, made for the run; ``slow``:
-    about 30 s even at this size (three trainings)."""
+    the arguments end with a checkpoint of the tiny config's model, made for the run."""
     args: list[str]
     headline: str
     with_model: bool = False
-    slow: bool = False
 
 
 SMOKE: dict[str, Smoke | str] = {
@@ -99,8 +97,7 @@ SMOKE: dict[str, Smoke | str] = {
                '--workers', '1', '--sample-points', '100', '--fork-tools'],
               r'2 processes x 1 thread vs 1 process x 2 threads: x' + figure('ratio') +
               r' faster per iteration of 4 rooms \(' + figure('two') + ' s vs ' +
-              figure('one') + r' s\)',
-              slow=True),
+              figure('one') + r' s\)'),
     'bench_scan_io.py':
         Smoke(['--points', '20000', '--room-points', '5000', '--chunk', '5000'],
               r'scan_io \d+M-point LAZ: streamed load_scan peak ' + figure('streamed') +
@@ -176,6 +173,7 @@ def run_script(script: Path, args: list[str], capfd) -> tuple[int, str, str]:
 
 @pytest.fixture(scope='module')
 def checkpoint(tmp_path_factory) -> Path:
+    """The tiny config's checkpoint, made once for the benchmarks that load a model."""
     return tiny_checkpoint(tmp_path_factory.mktemp('model'))
 
 
@@ -190,10 +188,7 @@ def check_headline(name: str, code: int, out: str, err: str) -> None:
         assert math.isfinite(float(value.replace(',', ''))), f'{key} = {value}'
 
 
-@pytest.mark.parametrize('name', [
-    pytest.param(name, marks=[pytest.mark.slow] if smoke.slow else [])
-    for name, smoke in SMOKE.items() if isinstance(smoke, Smoke)
-])
+@pytest.mark.parametrize('name', [name for name, run in SMOKE.items() if isinstance(run, Smoke)])
 def test_benchmark_smoke_run(name, request, capfd, monkeypatch):
     smoke = SMOKE[name]
     args = [*smoke.args, str(request.getfixturevalue('checkpoint'))] if smoke.with_model \
