@@ -108,6 +108,14 @@ NOTES = {
         'engines the same time; the `scan/bare` column shows how far each Embree scan is from '
         'its bare cast.'
     ],
+    'convert': [
+        '',
+        'The ratio swings from run to run on the 2-core VM: five runs of the command above on '
+        'an otherwise idle machine (2026-12-06, 1-minute load 0.8-1.4) gave 3.3x, 2.1x, 3.1x, '
+        '2.2x and 4.6x at one process each. The swing is in synthdet\'s one-worker run (0.7 to '
+        '1.7 s for the same rooms), which runs in the benchmark\'s own process after '
+        'mmdet3d\'s.'
+    ],
     'domain_shift': [
         '',
         'Not re-run with the regeneration of this page (about 1.5 h of training): the output '
