@@ -188,6 +188,19 @@ def _path_rays(path: np.ndarray, start: int, draws: np.ndarray, origins: np.ndar
 
 
 @numba.njit(cache=True, nogil=True)
+def store_ray(ray: int, origin: np.ndarray, x: float, y: float, z: float, norm: float,
+              origins: np.ndarray, directions: np.ndarray, cast_origins: np.ndarray,
+              cast_directions: np.ndarray) -> None:
+    """Write row ``ray`` of a batch: ``origin``, the direction ``(x, y, z) / norm``, and their
+    float32 copies, which Embree casts."""
+    directions[ray, 0], directions[ray, 1], directions[ray, 2] = x / norm, y / norm, z / norm
+    for axis in range(3):
+        origins[ray, axis] = origin[axis]
+        cast_origins[ray, axis] = origins[ray, axis]
+        cast_directions[ray, axis] = directions[ray, axis]
+
+
+@numba.njit(cache=True, nogil=True)
 def _aimed_rays(path: np.ndarray, start: int, target: np.ndarray, low: np.ndarray,
                 extent: np.ndarray, uniform: np.ndarray, origins: np.ndarray,
                 directions: np.ndarray, cast_origins: np.ndarray,
@@ -202,12 +215,9 @@ def _aimed_rays(path: np.ndarray, start: int, target: np.ndarray, low: np.ndarra
         x = (low[box, 0] + uniform[ray, 0] * extent[box, 0]) - path[step, 0]
         y = (low[box, 1] + uniform[ray, 1] * extent[box, 1]) - path[step, 1]
         z = (low[box, 2] + uniform[ray, 2] * extent[box, 2]) - path[step, 2]
-        norm = np.sqrt((x * x + y * y) + z * z) + 1e-12
-        directions[ray, 0], directions[ray, 1], directions[ray, 2] = x / norm, y / norm, z / norm
-        for axis in range(3):
-            origins[ray, axis] = path[step, axis]
-            cast_origins[ray, axis] = origins[ray, axis]
-            cast_directions[ray, axis] = directions[ray, axis]
+        store_ray(ray, path[step], x, y, z,
+                  np.sqrt((x * x + y * y) + z * z) + 1e-12, origins, directions, cast_origins,
+                  cast_directions)
 
 
 @numba.njit(cache=True, nogil=True)

@@ -13,7 +13,7 @@ from typing import Any, Mapping, Sequence
 import numba
 import numpy as np
 
-from generator.scanner import ScanResult, Scanner, row_norms
+from generator.scanner import ScanResult, Scanner, row_norms, store_ray
 from generator.sensor_common import RoomGeometry, _clearance, _inset, _result, _surface_loss
 from synthdet.geometry import points_in_polygon
 
@@ -124,12 +124,8 @@ def _tablet_rays(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up:
         x = look[p, 0] + across * right[p, 0] + above * up[p, 0]
         y = look[p, 1] + across * right[p, 1] + above * up[p, 1]
         z = look[p, 2] + across * right[p, 2] + above * up[p, 2]
-        norm = np.sqrt((x * x + y * y) + z * z)
-        directions[ray, 0], directions[ray, 1], directions[ray, 2] = x / norm, y / norm, z / norm
-        for axis in range(3):
-            origins[ray, axis] = positions[p, axis]
-            cast_origins[ray, axis] = origins[ray, axis]
-            cast_directions[ray, axis] = directions[ray, axis]
+        store_ray(ray, positions[p], x, y, z, np.sqrt((x * x + y * y) + z * z), origins,
+                  directions, cast_origins, cast_directions)
 
 
 @numba.njit(cache=True, nogil=True)
