@@ -33,7 +33,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.tool_runs import run_tool, start_tool
+from benchmarks.tool_runs import add_fork_tools_option, run_tool, start_tool
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIG = 'configs/tr3d/exp2_cpu.py'
@@ -174,11 +174,7 @@ def main(argv: list[str] | None = None) -> None:
         '--sample-points',
         type=int,
         help='points each training room is sampled to (default: the config\'s 40,000)')
-    parser.add_argument(
-        '--fork-tools',
-        action='store_true',
-        help='run the tools forked from one process that imported the stack once (a quick '
-        'check of the benchmark: no start-up per process)')
+    add_fork_tools_option(parser)
     args = parser.parse_args(argv)
     train_rooms = args.rooms_per_area * len(TRAIN_ROOMS_AREAS)
     if (args.iters * BATCH) % train_rooms:

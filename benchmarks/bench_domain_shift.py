@@ -45,7 +45,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from benchmarks.tool_runs import ForkedTool, start_tool
+from benchmarks.tool_runs import ForkedTool, add_fork_tools_option, start_tool
 from projects.synthdet.config_helpers import area_info_file, with_num_points
 from synthdet.info_files import RAW_DIR
 from tools.demo import StepError, claim_work_dir
@@ -588,11 +588,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         type=float,
         default=60.0,
         help='seconds between progress lines of running steps')
-    parser.add_argument(
-        '--fork-tools',
-        action='store_true',
-        help='run the tools forked from one process that imported the stack once (a quick '
-        'check of the benchmark: no start-up per tool)')
+    add_fork_tools_option(parser)
     args = parser.parse_args(argv)
     for name in ('rooms_train', 'rooms_test', 'iters', 'points', 'sample_points', 'jobs'):
         if getattr(args, name) < 1:

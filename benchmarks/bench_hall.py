@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.tool_runs import run_tool
+from benchmarks.tool_runs import add_fork_tools_option, run_tool
 from synthdet.contracts import read_predictions
 from synthdet.ply import read_ply_vertices
 from synthdet.scan_io import write_las_chunks
@@ -63,11 +63,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('--score-thr', type=float, default=0.3)
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--keep', type=Path, help='work here and keep the files')
-    parser.add_argument(
-        '--fork-tools',
-        action='store_true',
-        help='run the tools forked from one process that imported the stack once (a quick '
-        'check of the benchmark: no start-up per tool)')
+    add_fork_tools_option(parser)
     return parser.parse_args(argv)
 
 

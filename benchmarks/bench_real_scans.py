@@ -29,7 +29,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.tool_runs import run_tool
+from benchmarks.tool_runs import add_fork_tools_option, run_tool
 from projects.synthdet.evaluation.real_scans import (
     evaluate_detections, labels_path, summary_line)
 from synthdet.contracts import LABELS_FORMAT, read_labels, read_predictions
@@ -50,11 +50,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('--compare-thr', type=float, default=0.5, help='shown beside it')
     parser.add_argument('--device', default='cpu')
     parser.add_argument('--keep', type=Path, help='write the evaluation here and keep it')
-    parser.add_argument(
-        '--fork-tools',
-        action='store_true',
-        help='run tools/eval_scans.py forked from a process that imported the stack once (a '
-        'quick check of the benchmark: no start-up of its own)')
+    add_fork_tools_option(parser)
     args = parser.parse_args(argv)
     if (args.scans is None) == (args.generate is None):
         parser.error('give a folder of labelled scans or --generate N, not both')

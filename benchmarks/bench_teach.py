@@ -50,7 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.tool_runs import start_tool
+from benchmarks.tool_runs import add_fork_tools_option, start_tool
 from configurator.freecad_cli import run_freecad_process
 from configurator.labels import OVERLAP_TOLERANCE, read_document
 from projects.synthdet.config_helpers import area_info_file
@@ -563,11 +563,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('--score-thr', type=float, default=0.3)
     parser.add_argument('--busy-file', type=Path, help='a file present while the fine-tune runs')
     parser.add_argument('--freecadcmd', default='freecadcmd')
-    parser.add_argument(
-        '--fork-tools',
-        action='store_true',
-        help='run the Python tools forked from one process that imported the stack once (a '
-        'quick check of the benchmark: no start-up per tool)')
+    add_fork_tools_option(parser)
     return parser.parse_args(argv)
 
 

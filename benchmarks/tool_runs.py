@@ -14,6 +14,7 @@ the tool's value is also set through ``torch.set_num_threads``.
 """
 from __future__ import annotations
 
+import argparse
 import atexit
 import json
 import logging
@@ -144,6 +145,15 @@ def _run_in_child(args: list[str], env: dict[str, str], stdout: str, stderr: str
                 'peak_kb': max(u.ru_maxrss for u in usage),
                 'cpu_seconds': sum(u.ru_utime + u.ru_stime for u in usage)
             }))
+
+
+def add_fork_tools_option(parser: argparse.ArgumentParser) -> None:
+    """Add ``--fork-tools`` to a benchmark's ``parser``: its tools run forked (see above)."""
+    parser.add_argument(
+        '--fork-tools',
+        action='store_true',
+        help='run the tools forked from one process that imported the stack once (a quick '
+        'check of the benchmark: no start-up per tool)')
 
 
 def start_tool(args: Sequence[str | os.PathLike],
