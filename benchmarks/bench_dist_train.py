@@ -69,13 +69,7 @@ def make_data(root: Path,
             8, 9, '--workers', workers
         ],
     ):
-        if not forked:
-            subprocess.run([sys.executable, *map(str, command)],
-                           cwd=REPO,
-                           check=True,
-                           stdout=subprocess.DEVNULL)
-            continue
-        done = run_tool(command, forked=True)
+        done = run_tool(command, forked=forked)
         if done.returncode != 0:
             sys.exit(f'{command[1]} failed (exit {done.returncode}):\n{done.stderr[-4000:]}')
 
