@@ -20,6 +20,7 @@ from configurator.labels import check_overlaps
 from synthdet.contracts import LABELS_FORMAT, read_labels, write_labels
 from synthdet.geometry import box_corners_xy
 from synthdet.scan_io import write_scan
+from tests.checkpoints import initial_checkpoint
 from tests.room_scans import make_room
 from tests.s3dis_fixtures import write_synthetic_area
 
@@ -108,24 +109,6 @@ train_dataloader = dict(
 """
 
 
-def exp2_cpu_checkpoint(path: Path) -> Path:
-    """configs/tr3d/exp2_cpu.py's model with its initial weights (seeded)."""
-    import torch
-    from mmdet3d.apis import init_model
-    from mmengine.config import Config
-    torch.manual_seed(0)
-    model = init_model(Config.fromfile(str(REPO / 'configs/tr3d/exp2_cpu.py')), None, 'cpu')
-    torch.save({
-        'state_dict': model.state_dict(),
-        'meta': {
-            'dataset_meta': {
-                'classes': CLASSES
-            }
-        }
-    }, path)
-    return path
-
-
 @pytest.mark.slow
 def test_a_whole_run_on_generated_rooms_prints_the_headline(tmp_path, capsys, monkeypatch):
     generated, data = tmp_path / 'generated', tmp_path / 'data'
@@ -146,7 +129,8 @@ def test_a_whole_run_on_generated_rooms_prints_the_headline(tmp_path, capsys, mo
         'boxes': []
     })
     busy = tmp_path / 'fine-tune.running'
-    checkpoint = exp2_cpu_checkpoint(tmp_path / 'initialised.pth')
+    checkpoint = initial_checkpoint(REPO / 'configs/tr3d/exp2_cpu.py',
+                                    tmp_path / 'initialised.pth', CLASSES)
     finetune = tmp_path / 'teach_finetune_one_repeat.py'
     finetune.write_text(
         ONE_REPEAT_FINETUNE.format(base=REPO / 'configs' / 'tr3d' / 'teach_finetune.py'))

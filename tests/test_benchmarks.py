@@ -23,6 +23,8 @@ from typing import NamedTuple
 
 import pytest
 
+from tests.checkpoints import initial_checkpoint
+
 REPO = Path(__file__).resolve().parents[1]
 NUMBER = r'(?P<{}>[-+]?\d[\d,]*(?:\.\d+)?)'  # a figure as the benchmarks print it
 
@@ -133,21 +135,6 @@ def test_every_benchmark_has_a_smoke_run():
             assert name in (REPO / smoke).read_text(), name
 
 
-def tiny_checkpoint(folder: Path) -> Path:
-    """A checkpoint of ``configs/tr3d/tiny.py``'s model with its initial weights (seeded)."""
-    import torch
-    from mmdet3d.apis import init_model
-    from mmengine.config import Config
-    torch.manual_seed(0)
-    config = Config.fromfile(str(REPO / 'configs/tr3d/tiny.py'))
-    model = init_model(config, None, device='cpu')
-    path = folder / 'initialised.pth'
-    classes = list(config.test_dataloader.dataset.metainfo['classes'])
-    torch.save({'state_dict': model.state_dict(), 'meta': {'dataset_meta': {'classes': classes}}},
-               path)
-    return path
-
-
 def run_script(script: Path, args: list[str], capfd) -> tuple[int, str, str]:
     """``python SCRIPT ARGS`` in this process (its ``__main__`` path, from the repository root):
     its exit code and the text it wrote to standard output and standard error."""
@@ -174,7 +161,8 @@ def run_script(script: Path, args: list[str], capfd) -> tuple[int, str, str]:
 @pytest.fixture(scope='module')
 def checkpoint(tmp_path_factory) -> Path:
     """The tiny config's checkpoint, made once for the benchmarks that load a model."""
-    return tiny_checkpoint(tmp_path_factory.mktemp('model'))
+    return initial_checkpoint(REPO / 'configs/tr3d/tiny.py',
+                              tmp_path_factory.mktemp('model') / 'initialised.pth')
 
 
 def check_headline(name: str, code: int, out: str, err: str) -> None:

@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import torch
 from shapely.geometry import Polygon
 
 from projects.synthdet.evaluation.real_scans import (
@@ -25,6 +24,7 @@ from synthdet.contracts import (LABELS_FORMAT, SchemaError, read_labels, validat
                                 write_labels)
 from synthdet.geometry import box_corners_xy
 from synthdet.scan_io import read_scan, write_scan
+from tests.checkpoints import initial_checkpoint
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
 from tests.test_makefile import exp2_dry_run
 
@@ -262,13 +262,7 @@ def scans(tmp_path_factory: pytest.TempPathFactory) -> dict:
             [box(b['class'], c, s, yaw) for b, c, s in zip(boxes, centers, sizes)], scan=name))
     write_scan(folder / 'unlabelled.ply', points)
 
-    from mmdet3d.apis import init_model
-    from mmengine.config import Config
-    torch.manual_seed(0)
-    model = init_model(Config.fromfile(str(TINY)), None, device='cpu')
-    checkpoint = root / 'initialised.pth'
-    torch.save({'state_dict': model.state_dict(),
-                'meta': {'dataset_meta': {'classes': CLASSES}}}, checkpoint)
+    checkpoint = initial_checkpoint(TINY, root / 'initialised.pth', CLASSES)
     return dict(root=root, folder=folder, checkpoint=checkpoint)
 
 

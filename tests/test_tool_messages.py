@@ -19,6 +19,7 @@ import pytest
 import torch
 
 from synthdet.contracts import SchemaError, read_corners, read_predictions
+from tests.checkpoints import initial_checkpoint
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
 from tests.test_faults import REPO, TINY, TINY_CLASSES, _OpensMarker, assert_clean_error, run
 
@@ -43,13 +44,7 @@ def files(tmp_path_factory) -> dict:
     write_synthetic_area(root / 'raw', area=1, n_rooms=1, seed=5, points_per_object=200)
     from projects.synthdet.datasets.s3dis_converter import convert_s3dis
     convert_s3dis(root / 'raw', root / 'data', areas=[1])  # test.py reads its infos first
-    from mmdet3d.apis import init_model
-
-    from projects.synthdet.bootstrap import load_config
-    model = init_model(load_config(TINY), None, device='cpu')
-    untrained = root / 'untrained.pth'
-    torch.save({'meta': {'dataset_meta': {'classes': TINY_CLASSES}},
-                'state_dict': model.state_dict()}, untrained)
+    untrained = initial_checkpoint(TINY, root / 'untrained.pth', TINY_CLASSES)
     text = root / 'notes.pth'
     text.write_text('these are my notes, not a checkpoint\n')
     truncated = root / 'truncated.pth'
