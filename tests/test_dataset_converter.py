@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from projects.synthdet.datasets.s3dis_converter import (S3DIS_DIR, S3DISLayoutError,
-                                                        UnknownClassWarning, convert_s3dis)
+from projects.synthdet.datasets.s3dis_converter import (S3DIS_DIR, WRITE_PIECE_BYTES,
+                                                        S3DISLayoutError, UnknownClassWarning,
+                                                        _write_bin, convert_s3dis)
 from synthdet.classes import DETECTION_CLASSES, SEMANTIC_CLASSES
 from synthdet.point_text import _POW10, PointFileError, _parse_fast, max_rows, read_point_file
 from tests.s3dis_fixtures import write_synthetic_area
@@ -118,6 +119,36 @@ def test_workers_give_identical_outputs(converted, tmp_path):
     assert pickle.loads((tmp_path / 's3dis_infos_Area_7.pkl').read_bytes()) == \
         pickle.loads((root / 's3dis_infos_Area_7.pkl').read_bytes())
     assert not (tmp_path / 's3dis_infos_Area_2.pkl').exists()
+
+
+def test_a_room_after_a_larger_one_converts_as_it_does_alone(tmp_path):
+    """The room arrays are reused from room to room: nothing of a larger room converted before
+    may reach a smaller room's outputs."""
+    write_synthetic_area(tmp_path / 'big', 7, n_rooms=1, seed=8, points_per_object=900)
+    write_synthetic_area(tmp_path / 'small', 7, n_rooms=1, seed=9, points_per_object=100)
+    both = tmp_path / 'both' / S3DIS_DIR / 'Area_7'
+    both.mkdir(parents=True)
+    for source, room in (('big', 'room_1'), ('small', 'room_2')):  # natural order: big first
+        (both / room).symlink_to(tmp_path / source / S3DIS_DIR / 'Area_7' / 'office_1')
+    convert_s3dis(tmp_path / 'both', tmp_path / 'out_both', workers=1)
+    convert_s3dis(tmp_path / 'small', tmp_path / 'out_small', workers=1)
+    together = _load_room(tmp_path / 'out_both', 'Area_7_room_2')
+    alone = _load_room(tmp_path / 'out_small', 'Area_7_office_1')
+    assert len(together[0]) < len(_load_room(tmp_path / 'out_both', 'Area_7_room_1')[0])
+    for ours, reference in zip(together, alone):
+        assert ours.tobytes() == reference.tobytes()
+    infos = [
+        pickle.loads((tmp_path / out / 's3dis_infos_Area_7.pkl').read_bytes())['data_list']
+        for out in ('out_both', 'out_small')
+    ]
+    assert infos[0][1]['instances'] == infos[1][0]['instances']
+
+
+@pytest.mark.parametrize('num_bytes', [0, 8, WRITE_PIECE_BYTES, 3 * WRITE_PIECE_BYTES + 24])
+def test_bin_files_hold_the_array_bytes_whatever_their_size(tmp_path, num_bytes):
+    array = np.arange(num_bytes // 8, dtype=np.int64)
+    _write_bin(array, tmp_path / 'mask.bin')
+    assert (tmp_path / 'mask.bin').read_bytes() == array.tobytes()
 
 
 def test_missing_area_and_layout_errors(converted, tmp_path):
