@@ -21,7 +21,9 @@ in a pool of ``--workers`` processes (what a user would write to parallelise it)
 threads) is timed too. Every configuration runs once untimed (warm-up), then ``--repeats``
 times, alternating; the best wall time of each is kept. Each run writes into empty output
 folders (the previous run's files removed before its timer starts), as a first conversion
-does. The last line gives the wall-time
+does. The table gives each configuration's best wall time, its CPU seconds and their
+system part (page faults, copies into the page cache: on a virtual machine whose free memory
+goes back to its host, the part that varies from run to run). The last line gives the wall-time
 ratios at equal parallelism (the headline), synthdet's own parallelism against mmdet3d as
 shipped and the ratio of CPU seconds (mmdet3d / synthdet, one process each) beside them.
 
@@ -87,20 +89,26 @@ def mmdet3d_collect_room(anno_path: str, out_filename: str) -> list[str]:
 
 
 class Timer:
-    """Wall time and CPU time of this process, its threads and its finished child processes."""
+    """Wall time, CPU time and its system part, of this process, its threads and its finished
+    child processes."""
 
     def __enter__(self) -> 'Timer':
-        self.wall, self.cpu = -time.perf_counter(), -self._cpu()
+        self.wall = -time.perf_counter()
+        self.cpu, self.sys = (-seconds for seconds in self._cpu_and_sys())
         return self
 
     def __exit__(self, *exc) -> None:
         self.wall += time.perf_counter()
-        self.cpu += self._cpu()
+        cpu, sys_cpu = self._cpu_and_sys()
+        self.cpu += cpu
+        self.sys += sys_cpu
 
     @staticmethod
-    def _cpu() -> float:
+    def _cpu_and_sys() -> tuple[float, float]:
+        own = resource.getrusage(resource.RUSAGE_SELF)
         children = resource.getrusage(resource.RUSAGE_CHILDREN)
-        return time.process_time() + children.ru_utime + children.ru_stime
+        sys_cpu = own.ru_stime + children.ru_stime
+        return own.ru_utime + children.ru_utime + sys_cpu, sys_cpu
 
 
 def run_mmdet3d(root: Path, collect_processes: int,
@@ -262,10 +270,10 @@ def main() -> None:
     print(f'{args.rooms} rooms, {n_points} points, {n_boxes} boxes: points, masks and boxes '
           'identical')
     print(f'{"converter (best of " + str(args.repeats) + ")":<50} {"wall s":>8} {"CPU s":>8} '
-          f'{"Mpoints/s":>10}')
+          f'{"sys s":>6} {"Mpoints/s":>10}')
     for label, timer in best.items():
-        print(
-            f'{label:<50} {timer.wall:8.2f} {timer.cpu:8.2f} {n_points / timer.wall / 1e6:10.2f}')
+        print(f'{label:<50} {timer.wall:8.2f} {timer.cpu:8.2f} {timer.sys:6.2f} '
+              f'{n_points / timer.wall / 1e6:10.2f}')
     labels = list(best)
     mm_1, mm_shipped, mm_n, ours_1, ours_n = (best[label].wall for label in labels)
     cpu_ratio = best[labels[0]].cpu / best[labels[3]].cpu
