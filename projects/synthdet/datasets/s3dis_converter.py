@@ -44,9 +44,9 @@ OUTPUT_DIRS = ('points', 'instance_mask', 'semantic_mask')
 PARTIAL_SUFFIX = '.partial'
 ON_ERROR_CHOICES = ('raise', 'skip')
 _SEMANTIC_ID = {name: i for i, name in enumerate(SEMANTIC_CLASSES)}
+_DETECTION_LABEL = {name: i for i, name in enumerate(DETECTION_CLASSES)}
 # Output files are written in pieces of this size: small page-cache folios (see _write_bin).
 WRITE_PIECE_BYTES = 1 << 16
-_DETECTION_LABEL = {name: i for i, name in enumerate(DETECTION_CLASSES)}
 
 
 class S3DISLayoutError(ValueError):
@@ -206,9 +206,10 @@ def _write_bin(array: np.ndarray, path: Path) -> None:
 
     One multi-megabyte ``write`` lets Linux back the file with large page-cache folios (up to
     2 MiB), taken from the high-order free blocks that a virtual machine's free page reporting
-    hands back to its host; filling them then costs a host page fault per 4 KiB page (on a
-    2-core VM, 0.1 to 1.4 s of system time for 245 MB, varying from run to run). Small writes
-    get small folios from the low-order free lists, which page reporting leaves alone."""
+    has handed back to its host; filling them then costs a host page fault per 4 KiB page
+    (over a second of system time for the 245 MB of a 20-room area, in some runs and not in
+    others). Small writes get small folios, mostly from the low-order free lists, which page
+    reporting leaves alone."""
     data = memoryview(array).cast('B')
     with open(path, 'wb') as f:
         for start in range(0, len(data), WRITE_PIECE_BYTES):
