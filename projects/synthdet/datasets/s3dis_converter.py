@@ -18,6 +18,8 @@ pickles do not depend on the number of workers; worker processes end with their 
 leftover ``.partial`` files of the converted areas are removed at the start.
 Importing this module needs numpy and numba only (no torch, no mmdet3d).
 """
+import math
+import mmap
 import os
 import pickle
 import re
@@ -177,20 +179,29 @@ def _compile_kernels() -> None:
 class _Scratch:
     """Arrays reused from room to room within one process.
 
-    First touches of fresh memory cost a page fault per page (on a virtual machine with free
-    page reporting, one on its host as well); one set of arrays, grown to the largest room,
-    pays them once per process instead of once per room. Views of them live only while one
-    room is converted; ``convert_s3dis`` releases them when it ends."""
+    First touches of fresh memory cost a page fault per page; on a virtual machine whose free
+    page reporting hands free 2 MiB blocks back to its host, a host fault per 4 KiB page as
+    well. One set of arrays, grown to the largest room, pays them once per process instead of
+    once per room, and in 4 KiB pages of an anonymous mapping: numpy would ask for 2 MiB huge
+    pages, which come from those reported blocks. Views of them live only while one room is
+    converted; ``convert_s3dis`` releases them when it ends."""
 
     def __init__(self) -> None:
         self._arrays: dict[str, np.ndarray] = {}
 
     def take(self, name: str, shape: tuple[int, ...], dtype: type) -> np.ndarray:
         """An uninitialised array of ``shape``: the first rows of the one kept under ``name``,
-        which is replaced by a new one when it has too few rows."""
+        which is replaced by a larger one when it has too few rows."""
         array = self._arrays.get(name)
         if array is None or len(array) < shape[0]:
-            array = self._arrays[name] = np.empty(shape, dtype)
+            # twice the rows it had: a few larger rooms in a row need few new arrays, and rows
+            # never used are never touched
+            rows = shape[0] if array is None else max(shape[0], 2 * len(array))
+            count = rows * math.prod(shape[1:])
+            mapping = mmap.mmap(-1, max(count * np.dtype(dtype).itemsize, 1),
+                                flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+            array = np.frombuffer(mapping, dtype, count).reshape((rows, ) + shape[1:])
+            self._arrays[name] = array
         return array[:shape[0]]
 
     def clear(self) -> None:
