@@ -36,8 +36,10 @@ included), one thread each, the median of ``--repeats`` scans going round the en
 Rays per second count the rays a scan casts (``rays_cast``; its glass passes are extra work
 within them). Where the Embree scan's time goes is timed inside it: the first hits of its ray
 batches (casting), the glass passes (their casts and bookkeeping), the noise models (range-error
-draws and mixed pixels), the laser scanner's spacing filter
-(``generator.tls.SpacingFilter``), and the rest (ray generation, labelling); writing the
+draws made apart from other work: the laser scanner's range errors and mixed pixels, numpy's
+1-D normal draws; the tablet draws its range errors in the kernel that keeps its returns, which
+counts as rest), the laser scanner's spacing filter (``generator.tls.SpacingFilter``), and the
+rest (ray generation, labelling, the final subset); writing the
 room's files (``generator.writer.write_room``) is timed after the scan. The physical bound is
 the bare Embree cast of exactly the ray batches the scan cast, first hits and glass passes
 (recorded in one more scan): "our scan / bare cast" is what is left to win. The scans' process
@@ -265,14 +267,20 @@ class TimedRandom:
 
 @contextlib.contextmanager
 def timed_sensor_parts(seconds: Counter) -> Iterator[None]:
-    """Time ``generator.tls``' mixed pixels and spacing filter into ``seconds``."""
-    mixed_pixels, spacing_filter = tls._mixed_pixels, tls.SpacingFilter
+    """Time ``generator.tls``' range errors and mixed pixels (as noise) and its spacing filter
+    into ``seconds``."""
+    range_noise, mixed_pixels, spacing_filter = (tls._add_range_noise, tls._mixed_pixels,
+                                                 tls.SpacingFilter)
 
-    def timed_mixed_pixels(*args, **kwargs):
-        start = time.perf_counter()
-        answer = mixed_pixels(*args, **kwargs)
-        seconds['noise'] += time.perf_counter() - start
-        return answer
+    def timed_noise(function: Callable) -> Callable:
+
+        def timed_call(*args, **kwargs):
+            start = time.perf_counter()
+            answer = function(*args, **kwargs)
+            seconds['noise'] += time.perf_counter() - start
+            return answer
+
+        return timed_call
 
     class TimedSpacingFilter(spacing_filter):
 
@@ -282,11 +290,13 @@ def timed_sensor_parts(seconds: Counter) -> Iterator[None]:
             seconds['spacing filter'] += time.perf_counter() - start
             return answer
 
-    tls._mixed_pixels, tls.SpacingFilter = timed_mixed_pixels, TimedSpacingFilter
+    tls._add_range_noise, tls._mixed_pixels = timed_noise(range_noise), timed_noise(mixed_pixels)
+    tls.SpacingFilter = TimedSpacingFilter
     try:
         yield
     finally:
-        tls._mixed_pixels, tls.SpacingFilter = mixed_pixels, spacing_filter
+        tls._add_range_noise, tls._mixed_pixels, tls.SpacingFilter = (range_noise, mixed_pixels,
+                                                                      spacing_filter)
 
 
 def scan_once(scanner: Scanner, room: RoomGeometry, model: str, points: int, config: dict,

@@ -30,6 +30,7 @@ from typing import Any, Mapping, Sequence
 import numba
 import numpy as np
 
+from generator.counter_random import stream_seed, uniform
 from synthdet.geometry import grid_cells
 
 
@@ -201,20 +202,24 @@ def store_ray(ray: int, origin: np.ndarray, x: float, y: float, z: float, norm: 
 
 
 @numba.njit(cache=True, nogil=True)
-def _aimed_rays(path: np.ndarray, start: int, target: np.ndarray, low: np.ndarray,
-                extent: np.ndarray, uniform: np.ndarray, origins: np.ndarray,
+def _aimed_rays(path: np.ndarray, start: int, cumulative: np.ndarray, low: np.ndarray,
+                extent: np.ndarray, seed: np.uint64, origins: np.ndarray,
                 directions: np.ndarray, cast_origins: np.ndarray,
                 cast_directions: np.ndarray) -> None:
     """Write a batch of aimed rays: origins (N, 3) going round ``path`` from ``start``, unit
-    directions (N, 3) towards ``low + uniform * extent`` of each ray's ``target`` bounds (the
-    per-component arithmetic of ``(point - origin) / (row_norms + 1e-12)``, in the same order),
-    and their float32 copies, which Embree casts."""
-    for ray in range(len(target)):
+    directions (N, 3) towards a uniform random point ``low + uniform * extent`` of a random
+    target's bounds (target k with probability ``cumulative[k] - cumulative[k - 1]``), as
+    ``(point - origin) / (row_norms + 1e-12)`` computes them, and their float32 copies, which
+    Embree casts. Ray r draws the uniforms 4r to 4r + 3 of the stream ``seed``
+    (:mod:`generator.counter_random`): its target, then its point."""
+    last = len(cumulative) - 1
+    for ray in range(len(origins)):
         step = (start + ray) % len(path)
-        box = target[ray]
-        x = (low[box, 0] + uniform[ray, 0] * extent[box, 0]) - path[step, 0]
-        y = (low[box, 1] + uniform[ray, 1] * extent[box, 1]) - path[step, 1]
-        z = (low[box, 2] + uniform[ray, 2] * extent[box, 2]) - path[step, 2]
+        counter = np.uint64(4 * ray)
+        box = min(np.searchsorted(cumulative, uniform(seed, counter), side='right'), last)
+        x = (low[box, 0] + uniform(seed, counter + np.uint64(1)) * extent[box, 0]) - path[step, 0]
+        y = (low[box, 1] + uniform(seed, counter + np.uint64(2)) * extent[box, 1]) - path[step, 1]
+        z = (low[box, 2] + uniform(seed, counter + np.uint64(3)) * extent[box, 2]) - path[step, 2]
         store_ray(ray, path[step], x, y, z,
                   np.sqrt((x * x + y * y) + z * z) + 1e-12, origins, directions, cast_origins,
                   cast_directions)
@@ -299,6 +304,7 @@ class Scanner:
             extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] +
             extent[:, 0] * extent[:, 2])
         self.target_weight = area / area.sum() if len(area) else area
+        self.target_cumulative = np.cumsum(self.target_weight)
         self.full_scene = self._embree(scene.triangles)
         self.object_scene = self._embree(scene.triangles[self.object_tri]) if len(
             self.object_tri) else None
@@ -397,9 +403,8 @@ class Scanner:
                 start = state['step']
                 state['step'] = int((state['step'] + batch) % len(path))
                 if aimed:  # towards a random point of a random object's bounds (area-weighted)
-                    target = rng.choice(len(self.targets), size=batch, p=self.target_weight)
-                    _aimed_rays(path, start, target, self.target_lo, self.target_extent,
-                                rng.random((batch, 3)), *rays)
+                    _aimed_rays(path, start, self.target_cumulative, self.target_lo,
+                                self.target_extent, stream_seed(rng), *rays)
                 else:
                     _path_rays(path, start, rng.standard_normal((batch, 3)), *rays)
                 cast_origins, cast_dirs = rays[2:]

@@ -13,6 +13,7 @@ from typing import Any, Mapping, Sequence
 import numba
 import numpy as np
 
+from generator.counter_random import normal, stream_seed, uniform
 from generator.scanner import ScanResult, Scanner, row_norms, store_ray
 from generator.sensor_common import RoomGeometry, _clearance, _inset, _result, _surface_loss
 from synthdet.geometry import points_in_polygon
@@ -109,18 +110,26 @@ def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
     return positions[keep], look[keep]
 
 
+# counters of a batch's stream per ray: its pose, its pixel (two), whether its return is kept,
+# then its range error's
+_RAY_COUNTERS = 256
+
+
 @numba.njit(cache=True, nogil=True)
 def _tablet_rays(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up: np.ndarray,
-                 pose: np.ndarray, uniform: np.ndarray, half: np.ndarray, origins: np.ndarray,
+                 seed: np.uint64, half: np.ndarray, pose: np.ndarray, origins: np.ndarray,
                  directions: np.ndarray, cast_origins: np.ndarray,
                  cast_directions: np.ndarray) -> None:
-    """Write the rays of a batch: origins and unit directions (N, 3) through the pixels
-    ``(uniform * 2 - 1) * half`` (``uniform`` (N, 2): right, up offsets on the image plane at
-    distance 1) of each ray's ``pose``, and their float32 copies, which Embree casts."""
+    """Write the rays of a batch: each a uniform random pose (written to ``pose``) and a
+    uniform random pixel ``(u * 2 - 1) * half`` (right, up offsets on the image plane at
+    distance 1), drawn from the stream ``seed``: origins and unit directions (N, 3) and their
+    float32 copies, which Embree casts."""
     for ray in range(len(pose)):
-        p = pose[ray]
-        across = (uniform[ray, 0] * 2 - 1) * half[0]
-        above = (uniform[ray, 1] * 2 - 1) * half[1]
+        counter = np.uint64(ray * _RAY_COUNTERS)
+        p = min(int(uniform(seed, counter) * len(positions)), len(positions) - 1)
+        pose[ray] = p
+        across = (uniform(seed, counter + np.uint64(1)) * 2 - 1) * half[0]
+        above = (uniform(seed, counter + np.uint64(2)) * 2 - 1) * half[1]
         x = look[p, 0] + across * right[p, 0] + above * up[p, 0]
         y = look[p, 1] + across * right[p, 1] + above * up[p, 1]
         z = look[p, 2] + across * right[p, 2] + above * up[p, 2]
@@ -129,25 +138,28 @@ def _tablet_rays(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up:
 
 
 @numba.njit(cache=True, nogil=True)
-def _tablet_returns(t_hit: np.ndarray, primitive: np.ndarray, rows: np.ndarray,
-                    noise: np.ndarray, loss: np.ndarray, range_noise: float, far_keep: float,
-                    near: float, far: float, uniform: np.ndarray,
-                    most: int) -> tuple[np.ndarray, np.ndarray]:
-    """The first ``most`` of the hit ``rows`` the tablet keeps and their measured ranges: the
-    distance plus ``noise`` x ``range_noise`` within [near, far], kept when ``uniform`` is below
-    the keep probability (falling from 1 at ``near`` to ``far_keep`` at ``far``, times one minus
-    the triangle's ``loss``)."""
-    kept = np.empty(min(len(rows), max(most, 0)), dtype=np.int64)
+def _tablet_returns(t_hit: np.ndarray, primitive: np.ndarray, seed: np.uint64,
+                    loss: np.ndarray, range_noise: float, far_keep: float, near: float,
+                    far: float, most: int) -> tuple[np.ndarray, np.ndarray]:
+    """The first ``most`` of the batch's hits the tablet keeps and their measured ranges: the
+    distance plus a standard normal draw x ``range_noise`` within [near, far], kept when a
+    uniform draw is below the keep probability (falling from 1 at ``near`` to ``far_keep`` at
+    ``far``, times one minus the triangle's ``loss``); the draws from the stream ``seed``."""
+    kept = np.empty(min(len(t_hit), max(most, 0)), dtype=np.int64)
     measured = np.empty(len(kept))
     count = 0
-    for k in range(len(rows)):
+    for ray in range(len(t_hit)):
         if count == len(kept):
             break
-        ray = rows[k]
-        distance = np.float64(t_hit[ray]) + noise[k] * range_noise
+        if not np.isfinite(t_hit[ray]):
+            continue
+        counter = np.uint64(ray * _RAY_COUNTERS)
+        distance = np.float64(t_hit[ray]) + normal(seed, counter + np.uint64(4)) * range_noise
+        if distance < near or distance > far:
+            continue
         keep = 1.0 - (1.0 - far_keep) * (distance - near) / (far - near)
         keep *= 1.0 - loss[primitive[ray]]
-        if distance >= near and distance <= far and uniform[k] < keep:
+        if uniform(seed, counter + np.uint64(3)) < keep:
             kept[count], measured[count] = ray, distance
             count += 1
     return kept[:count], measured[:count]
@@ -197,21 +209,19 @@ def cast_tablet(
     origins, directions = np.empty((batch, 3)), np.empty((batch, 3))
     cast_origins = np.empty((batch, 3), dtype=np.float32)
     cast_directions = np.empty((batch, 3), dtype=np.float32)
+    pose = np.empty(batch, dtype=np.int64)
     got = rays = 0
     max_batches = max(64, 16 * n_points // batch + 64)
     for _ in range(max_batches):
         if got >= n_points:
             break
-        pose = rng.integers(len(positions), size=batch)
-        _tablet_rays(positions, look, right, up, pose, rng.random((batch, 2)), half, origins,
-                     directions, cast_origins, cast_directions)
+        seed = stream_seed(rng)  # the batch's poses, pixels, range errors and dropouts
+        _tablet_rays(positions, look, right, up, seed, half, pose, origins, directions,
+                     cast_origins, cast_directions)
         t_hit, prim = scanner.cast(scanner.full_scene, cast_origins, cast_directions, rng)
         rays += batch
-        rows = np.flatnonzero(np.isfinite(t_hit))
-        noise = rng.standard_normal(len(rows))
-        rows, measured = _tablet_returns(t_hit, prim, rows, noise, loss, cfg['range_noise'],
-                                         cfg['far_keep'], near, far, rng.random(len(rows)),
-                                         n_points - got)
+        rows, measured = _tablet_returns(t_hit, prim, seed, loss, cfg['range_noise'],
+                                         cfg['far_keep'], near, far, n_points - got)
         end = got + len(rows)
         _tablet_points(origins, directions, prim, pose, rows, measured, xyz[got:end],
                        triangle[got:end], pose_of[got:end])

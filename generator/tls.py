@@ -14,19 +14,17 @@ gives.
 """
 import math
 import warnings
+from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numba
 import numpy as np
 
+from generator.counter_random import normal, stream_seed, uniform, word
 from generator.scanner import ScanResult, Scanner
 from generator.sensor_common import (RoomGeometry, _cast_grid, _clearance, _depth_edges, _inset,
                                      _result)
 from synthdet.voxels import hash_slot, packed_key
-
-# an empty index array
-_NONE = np.zeros(0, dtype=np.int64)
-
 
 def tls_stations(room: RoomGeometry, rng: np.random.Generator,
                  cfg: Mapping[str, Any]) -> np.ndarray:
@@ -79,24 +77,6 @@ def _grid_directions(cos_elevation: np.ndarray, sin_elevation: np.ndarray,
         directions[k, 2] = sin_elevation[row]
 
 
-# uniform draws made at once by _uniform_at: a buffer that stays in the cache
-_DRAW_CHUNK = 1 << 16
-
-
-def _uniform_at(rng: np.random.Generator, size: int, index: np.ndarray) -> np.ndarray:
-    """The values at ``index`` (ascending) of ``rng.random(size)``: the same numbers, and
-    ``rng`` left in the same state, drawn in chunks into one small buffer instead of an array
-    of ``size`` (a grid of millions of beams needs only the draws of its few edge beams)."""
-    values = np.empty(len(index))
-    buffer = np.empty(min(size, _DRAW_CHUNK))
-    for start in range(0, size, _DRAW_CHUNK):
-        count = min(_DRAW_CHUNK, size - start)
-        rng.random(out=buffer[:count])
-        low, high = np.searchsorted(index, (start, start + count))
-        values[low:high] = buffer[index[low:high] - start]
-    return values
-
-
 def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.ndarray,
                   on_object: np.ndarray, part: np.ndarray, share: float,
                   jump: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -114,7 +94,7 @@ def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.nda
     columns = ranges.shape[1]
     ranges, triangle = ranges.reshape(-1), triangle.reshape(-1)
     edges, other, other_tri = _depth_edges(ranges, triangle, columns, on_object, part, jump)
-    chosen = _uniform_at(rng, ranges.size, edges) < share
+    chosen = rng.random(len(edges)) < share
     mixed, other, other_tri = edges[chosen], other[chosen], other_tri[chosen]
     fraction = rng.random(len(mixed))
     ranges[mixed] += fraction * (other - ranges[mixed])
@@ -127,166 +107,248 @@ def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.nda
 
 @numba.njit(cache=True, nogil=True)
 def _grid_points(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: np.ndarray,
-                 cos_azimuth: np.ndarray, sin_azimuth: np.ndarray, ranges: np.ndarray,
-                 beams: np.ndarray, ordered: bool, order: np.ndarray) -> np.ndarray:
-    """Points (N, 3) of ``beams`` (grid indices), ``ordered``: those of ``order`` (indices into
-    ``beams``) in its order, else all in theirs, at their ranges."""
+                 cos_azimuth: np.ndarray, sin_azimuth: np.ndarray, beams: np.ndarray,
+                 measured: np.ndarray) -> np.ndarray:
+    """Points (N, 3) of ``beams`` (grid indices) at their ``measured`` ranges (N,)."""
     columns = len(cos_azimuth)
-    count = len(order) if ordered else len(beams)
-    xyz = np.empty((count, 3))
-    for k in range(count):
-        index = order[k] if ordered else k
-        beam = beams[index]
-        measured = ranges[beam]
+    xyz = np.empty((len(beams), 3))
+    for k in range(len(beams)):
+        beam = beams[k]
         row = beam // columns
         column = beam - row * columns
-        xyz[k, 0] = station[0] + cos_elevation[row] * cos_azimuth[column] * measured
-        xyz[k, 1] = station[1] + cos_elevation[row] * sin_azimuth[column] * measured
-        xyz[k, 2] = station[2] + sin_elevation[row] * measured
+        xyz[k, 0] = station[0] + cos_elevation[row] * cos_azimuth[column] * measured[k]
+        xyz[k, 1] = station[1] + cos_elevation[row] * sin_azimuth[column] * measured[k]
+        xyz[k, 2] = station[2] + sin_elevation[row] * measured[k]
     return xyz
 
 
-def _add_range_noise(rng: np.random.Generator, ranges: np.ndarray, rows: np.ndarray, a: float,
-                     b: float) -> None:
-    """Move the range of each of ``rows`` by a standard normal draw x (a + b x range), in place:
-    the draws of ``rng.standard_normal(len(rows))``, made in chunks into one small buffer."""
-    buffer = np.empty(min(len(rows), _DRAW_CHUNK))
-    for start in range(0, len(rows), _DRAW_CHUNK):
-        count = min(_DRAW_CHUNK, len(rows) - start)
-        rng.standard_normal(out=buffer[:count])
-        _noisy_ranges(ranges, rows[start:start + count], buffer[:count], a, b)
+# counters of a station's stream per beam: its spacing filter priority, then its range error's
+_BEAM_COUNTERS = np.uint64(256)
 
 
 @numba.njit(cache=True, nogil=True)
-def _noisy_ranges(ranges: np.ndarray, rows: np.ndarray, noise: np.ndarray, a: float,
-                  b: float) -> None:
-    """``ranges[rows]`` += ``noise`` x (a + b x range), in place."""
-    for k in range(len(rows)):
-        measured = ranges[rows[k]]
-        ranges[rows[k]] = measured + noise[k] * (a + b * measured)
+def _add_range_noise(ranges: np.ndarray, seed: np.uint64, a: float, b: float) -> None:
+    """Move every finite range by a standard normal draw x (a + b x range), in place: beam k's
+    draw from the counters k x 256 + 1 on of the stream ``seed``
+    (:func:`generator.counter_random.normal`)."""
+    for beam in range(len(ranges)):
+        measured = ranges[beam]
+        if np.isfinite(measured):
+            draw = normal(seed, np.uint64(beam) * _BEAM_COUNTERS + np.uint64(1))
+            ranges[beam] = measured + draw * (a + b * measured)
+
+
+@numba.njit(cache=True, nogil=True)
+def _priorities(seed: np.uint64, beams: np.ndarray) -> np.ndarray:
+    """The spacing filter's priority (uint64) of each of ``beams``: word k x 256 of ``seed``."""
+    priority = np.empty(len(beams), dtype=np.uint64)
+    for k in range(len(beams)):
+        priority[k] = word(seed, np.uint64(beams[k]) * _BEAM_COUNTERS)
+    return priority
 
 
 class SpacingFilter:
-    """The laser scanner export's spacing filter: keeps the first return of every cube of
-    ``side`` metres across the stations, one station's returns after the other.
+    """The laser scanner export's spacing filter: one return per cube of ``side`` metres across
+    the stations, one station after the other. A cube keeps a return of the first station that
+    hits it, drawn uniformly at random among that station's returns in the cube: the one of
+    smallest priority, a random word per beam of the station's stream (the same distribution as
+    the first return of the cube in a uniformly random order of the station's returns).
 
-    The kept cubes' keys live in an open-addressing hash set that grows with them (memory grows
-    with the kept cubes, not with the beams). A station's returns are keyed in beam order (the
-    reads go forwards), then looked up in the station's random order, without an array of its
-    points. The keys are those of
+    A station's returns go in one pass in beam order through an open-addressing hash set of the
+    cubes (memory grows with the kept cubes, not with the beams), each cube holding the beam of
+    the station's current choice until the station is done. The keys are those of
     :class:`synthdet.voxels.VoxelFilter` (cube coordinates relative to ``origin``'s cube, 21
-    bits each), and returns too far for them (2**20 cubes away) are kept by their exact cube
-    coordinates, so the two filters keep the same returns.
+    bits each); returns too far for them (2**20 cubes away) are kept by their exact cube
+    coordinates, the same way.
     """
 
     def __init__(self, side: float, origin: np.ndarray):
         self.side = float(side)
         self.origin_key = np.floor(origin / side)
-        self.table = np.full(1 << 16, -1, dtype=np.int64)
+        # slot k: table[2k] a cube's key (-1: free), table[2k + 1] the beam its station keeps
+        # so far (-1 once the station is done)
+        self.table = np.full(2 << 16, -1, dtype=np.int64)
         self.count = 0
         self.wide: set[tuple[int, int, int]] = set()  # cubes beyond the packed key range
 
     def new_returns(self, station: np.ndarray, angles: tuple[np.ndarray, ...],
-                    ranges: np.ndarray, beams: np.ndarray, order: np.ndarray) -> np.ndarray:
-        """Indices (ascending, into ``beams``) of the returns in cubes not seen before, the
-        first in ``order`` of each (at the points :func:`_grid_points` computes)."""
-        keys = _cube_keys(station, *angles, ranges, beams, self.side, self.origin_key)
-        kept, far, self.table, self.count = _first_in_new_cubes(keys, order, self.table,
-                                                                self.count)
-        if len(far):  # points kilometres away: rare, kept exact
-            points = _grid_points(station, *angles, ranges, beams, True, far)
-            for index, point in zip(far.tolist(), points):
+                    ranges: np.ndarray, seed: np.uint64) -> np.ndarray:
+        """Grid indices (ascending) of the returns (the finite ``ranges`` of the grid, at the
+        points :func:`_grid_points` computes) kept in cubes not seen before, the priorities
+        from the stream ``seed``."""
+        keys = _cube_keys(station, *angles, ranges, self.side, self.origin_key)
+        kept, far, self.table, self.count = _thin_station(keys, seed, self.table, self.count)
+        if len(far):  # points kilometres away: rare, kept exact, by priority
+            far = far[np.argsort(_priorities(seed, far), kind='stable')]
+            fresh = []
+            points = _grid_points(station, *angles, far, ranges[far])
+            for beam, point in zip(far.tolist(), points):
                 key = tuple(int(v) for v in (np.floor(point / self.side) - self.origin_key))
                 if key not in self.wide:
                     self.wide.add(key)
-                    kept[index] = True
-        return np.flatnonzero(kept)
-
-
-# returns whose keys and slots the spacing filter reads ahead of inserting them
-_FILTER_BLOCK = 32
+                    fresh.append(beam)
+            kept = np.union1d(kept, np.array(fresh, dtype=np.int64))
+        return kept
 
 
 @numba.njit(cache=True, nogil=True)
-def _add_cube(table: np.ndarray, bits: int, key: np.int64) -> bool:
-    """Put ``key`` (>= 0) into the hash set ``table`` (-1: a free slot); whether it was new."""
+def _slot_of(table: np.ndarray, bits: int, key: np.int64) -> int:
+    """The slot of ``key`` in the hash set ``table`` (2**bits slots of two entries, the first
+    the key), else the free slot where it goes."""
     mask = (1 << bits) - 1
     slot = hash_slot(key, bits)
-    while True:
-        held = table[slot]
-        if held < 0:
-            table[slot] = key
-            return True
-        if held == key:
-            return False
+    while table[2 * slot] >= 0 and table[2 * slot] != key:
         slot = (slot + 1) & mask
+    return slot
 
 
 @numba.njit(cache=True, nogil=True)
 def _cube_keys(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: np.ndarray,
                cos_azimuth: np.ndarray, sin_azimuth: np.ndarray, ranges: np.ndarray,
-               beams: np.ndarray, side: float, origin_key: np.ndarray) -> np.ndarray:
-    """The packed cube key (N,) of each return of ``beams``, at its point as
-    :func:`_grid_points` computes it, as :func:`synthdet.voxels.packed_key` packs it: -1 for
-    a point 2**20 cubes or more away. In the returns' order, so the reads go forwards."""
+               side: float, origin_key: np.ndarray) -> np.ndarray:
+    """The packed cube key (N,) of each beam of the grid, at its point as :func:`_grid_points`
+    computes it, as :func:`synthdet.voxels.packed_key` packs it: -1 for a point 2**20 cubes or
+    more away, -2 for a beam without a return."""
     columns = len(cos_azimuth)
-    keys = np.empty(len(beams), dtype=np.int64)
+    keys = np.empty(len(ranges), dtype=np.int64)
     point = np.empty(3)
-    for index in range(len(beams)):
-        beam = beams[index]
+    for beam in range(len(ranges)):
         measured = ranges[beam]
+        if not np.isfinite(measured):
+            keys[beam] = -2
+            continue
         row = beam // columns
         column = beam - row * columns
         point[0] = station[0] + cos_elevation[row] * cos_azimuth[column] * measured
         point[1] = station[1] + cos_elevation[row] * sin_azimuth[column] * measured
         point[2] = station[2] + sin_elevation[row] * measured
-        keys[index] = packed_key(point, side, origin_key)
+        keys[beam] = packed_key(point, side, origin_key)
     return keys
 
 
 @numba.njit(cache=True, nogil=True)
-def _first_in_new_cubes(keys: np.ndarray, order: np.ndarray, table: np.ndarray,
-                        count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """The spacing filter's pass over one station's returns in ``order``: whether each return
-    (N,) is the first of a cube key not in the hash set ``table``, the returns (in ``order``)
-    without a packed key (-1), and the hash set (grown at half full) and its size after."""
-    kept = np.zeros(len(keys), dtype=np.bool_)
-    far = np.empty(len(order), dtype=np.int64)
-    far_count = 0
-    bits = 0
-    while (1 << bits) < len(table):
+def _thin_station(keys: np.ndarray, seed: np.uint64, table: np.ndarray,
+                  count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The spacing filter's pass over one station's grid (see :class:`SpacingFilter`) of cube
+    ``keys`` (:func:`_cube_keys`): the kept beams (ascending), the beams without a packed key
+    (ascending), and the hash set ``table`` (grown four times at half full) and its number of
+    cubes after."""
+    # the slots of the cubes this station hit first and the beams without a packed key (the
+    # untouched rest of these arrays takes no memory)
+    fresh = np.empty(len(keys), dtype=np.int64)
+    far = np.empty(len(keys), dtype=np.int64)
+    # a station's cubes are about a quarter of its returns or fewer: room for that many more
+    # at the start spares most of the growing
+    returns = 0
+    for key in keys:
+        returns += key >= 0
+    bits = _table_bits(table)
+    while 2 * (count + returns // 4) > (1 << bits):
         bits += 1
-    # the returns go in blocks: first their keys and the keys in their first slots are read,
-    # each read independent of the others, so that the memory serves many at once; then the
-    # inserts, which skip a key found in its first slot (a key stays in the set)
-    block_keys = np.empty(_FILTER_BLOCK, dtype=np.int64)
-    first_held = np.empty(_FILTER_BLOCK, dtype=np.int64)
-    for start in range(0, len(order), _FILTER_BLOCK):
-        size = min(_FILTER_BLOCK, len(order) - start)
-        for j in range(size):
-            block_keys[j] = keys[order[start + j]]
-        for j in range(size):
-            if block_keys[j] >= 0:
-                first_held[j] = table[hash_slot(block_keys[j], bits)]
-        for j in range(size):
-            index, key = order[start + j], block_keys[j]
-            if key < 0:
-                far[far_count] = index
+    if bits > _table_bits(table):
+        table = _grown(table, fresh[:0], bits)
+    # where the pass stands: next beam, fresh and far counts, cubes
+    state = np.array([0, 0, 0, count], dtype=np.int64)
+    while True:
+        _thin_pass(keys, seed, table, fresh, far, state)
+        if state[0] == len(keys):
+            break
+        # half full: four times the slots
+        table = _grown(table, fresh[:state[1]], _table_bits(table) + 2)
+    # the station's choices, in beam order; their cubes are closed for the next stations
+    chosen = np.zeros(len(keys), dtype=np.bool_)
+    for slot in fresh[:state[1]]:
+        chosen[table[2 * slot + 1]] = True
+        table[2 * slot + 1] = -1
+    kept = np.empty(state[1], dtype=np.int64)
+    written = 0
+    for beam in range(len(keys)):
+        if chosen[beam]:
+            kept[written] = beam
+            written += 1
+    return kept, far[:state[2]].copy(), table, state[3]
+
+
+@numba.njit(cache=True, nogil=True)
+def _grown(table: np.ndarray, fresh: np.ndarray, bits: int) -> np.ndarray:
+    """The hash set ``table`` rehashed into 2**bits slots; ``fresh`` (slots) moved with their
+    cubes, in place."""
+    grown = np.full(2 << bits, -1, dtype=np.int64)
+    for held in range(len(table) // 2):
+        key = table[2 * held]
+        if key >= 0:
+            slot = _slot_of(grown, bits, key)
+            grown[2 * slot], grown[2 * slot + 1] = key, table[2 * held + 1]
+    for k in range(len(fresh)):
+        fresh[k] = _slot_of(grown, bits, table[2 * fresh[k]])
+    return grown
+
+
+@numba.njit(cache=True, nogil=True)
+def _table_bits(table: np.ndarray) -> int:
+    """log2 of the number of slots of the hash set ``table``."""
+    bits = 0
+    while (2 << bits) < len(table):
+        bits += 1
+    return bits
+
+
+@numba.njit(cache=True, nogil=True)
+def _thin_pass(keys: np.ndarray, seed: np.uint64, table: np.ndarray, fresh: np.ndarray,
+               far: np.ndarray, state: np.ndarray) -> None:
+    """The spacing filter's pass from beam ``state[0]`` on, until the grid's end or a new cube
+    that would fill ``table`` to more than half (``state`` updated)."""
+    bits = _table_bits(table)
+    fresh_count, far_count, count = state[1], state[2], state[3]
+    # the previous return's cube (none at the start or after the table grew): its slot and
+    # the priority of the station's choice there
+    last_key, last_slot, last_priority = np.int64(-3), 0, np.uint64(0)
+    for beam in range(state[0], len(keys)):
+        key = keys[beam]
+        if key < 0:
+            if key == -1:
+                far[far_count] = beam
                 far_count += 1
-                continue
-            if first_held[j] == key:  # in the set already (it stays there)
-                continue
-            if 2 * (count + 1) > len(table):  # grow: rehash into four times the slots
-                bits += 2
-                grown = np.full(1 << bits, -1, dtype=np.int64)
-                for held in table:
-                    if held >= 0:
-                        _add_cube(grown, bits, held)
-                table = grown
-            if _add_cube(table, bits, key):
-                kept[index] = True
-                count += 1
-    return kept, far[:far_count].copy(), table, count
+            continue
+        priority = word(seed, np.uint64(beam) * _BEAM_COUNTERS)
+        if key == last_key:  # neighbouring beams mostly hit the same cube: no lookup
+            if table[2 * last_slot + 1] >= 0 and priority < last_priority:
+                table[2 * last_slot + 1], last_priority = beam, priority
+            continue
+        slot = _slot_of(table, bits, key)
+        if table[2 * slot] == key:
+            choice = table[2 * slot + 1]
+            if choice >= 0:  # a cube of this station: the smaller priority stays
+                last_priority = word(seed, np.uint64(choice) * _BEAM_COUNTERS)
+                if priority < last_priority:
+                    table[2 * slot + 1], last_priority = beam, priority
+        else:
+            if 2 * (count + 1) > (1 << bits):  # the table must grow first
+                state[0], state[1], state[2], state[3] = beam, fresh_count, far_count, count
+                return
+            table[2 * slot], table[2 * slot + 1] = key, beam
+            count += 1
+            fresh[fresh_count] = slot
+            fresh_count += 1
+            last_priority = priority
+        last_key, last_slot = key, slot
+    state[0], state[1], state[2], state[3] = len(keys), fresh_count, far_count, count
+
+
+@numba.njit(cache=True, nogil=True)
+def _uniform_subset(total: int, wanted: int, seed: np.uint64) -> np.ndarray:
+    """Ascending indices of ``wanted`` of ``total`` items, every such subset equally likely:
+    selection sampling (Knuth's algorithm S), item k taken with probability (still wanted) /
+    (items left) by the uniform draw k of the stream ``seed``."""
+    chosen = np.empty(wanted, dtype=np.int64)
+    count = 0
+    for item in range(total):
+        if count == wanted:
+            break
+        if uniform(seed, np.uint64(item)) * (total - item) < wanted - count:
+            chosen[count] = item
+            count += 1
+    return chosen
 
 
 def _finite_rows(ranges: np.ndarray, dtype: type) -> np.ndarray:
@@ -316,27 +378,32 @@ def _write_finite_rows(values: np.ndarray, rows: np.ndarray) -> None:
             count += 1
 
 
-def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.random.Generator,
-             cfg: Mapping[str, Any], batch: int,
-             on_object: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """All returns of the stations' grids: points (N, 3), triangles (N,), station index (N,)
-    and whether each is a mixed pixel between two surfaces (N,).
+@dataclass
+class StationReturns:
+    """The returns one station keeps: grid indices (ascending), measured ranges, triangles and
+    whether each is a mixed pixel between two surfaces."""
 
-    ``on_object`` (T,) marks the triangles of objects, where depth edges can be. With a
-    ``point_spacing``, the export's spacing filter keeps one return per cube of that side: each
-    station's returns in a random order, the first in a cube kept, station by station (memory
-    grows with the kept cubes, not with the beams).
-    """
+    station: np.ndarray  # (3,)
+    beams: np.ndarray  # (N,) int
+    ranges: np.ndarray  # (N,) float64
+    triangle: np.ndarray  # (N,) int32
+    stray: np.ndarray  # (N,) bool
+
+
+def station_returns(scanner: Scanner, stations: np.ndarray, step_deg: float,
+                    rng: np.random.Generator, cfg: Mapping[str, Any], batch: int,
+                    on_object: np.ndarray) -> list[StationReturns]:
+    """The returns each station's grid keeps (see :func:`cast_tls`), without their points."""
     azimuth, elevation = tls_grid(step_deg, cfg['min_elevation_deg'])
     grid = (len(elevation), len(azimuth))
     angles = _angle_tables(azimuth, elevation)
     a, b = cfg['range_noise']
     spacing = cfg['point_spacing']
     cubes = SpacingFilter(spacing, stations[0]) if spacing else None
-    points, triangles, owner, strays = [], [], [], []
+    kept = []
     # one batch's directions, written batch by batch: no array of the whole grid's rays
     directions = np.empty((min(batch, grid[0] * grid[1]), 3), dtype=np.float32)
-    for index, station in enumerate(stations):
+    for station in stations:
         # the station as the float32 rays Embree casts, without a copy per beam
         origins = np.broadcast_to(station.astype(np.float32), directions.shape)
 
@@ -352,25 +419,54 @@ def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.ra
                 cfg['mixed_pixels'], cfg['edge_jump'])
         else:
             stray = np.zeros(ranges.size, dtype=bool)
-        rows = _finite_rows(ranges, np.int32 if ranges.size < 2**31 else np.int64)
+        seed = stream_seed(rng)  # the station's range errors and filter priorities
         if a > 0 or b > 0:
-            _add_range_noise(rng, ranges, rows, a, b)
-        kept = _NONE
+            _add_range_noise(ranges, seed, a, b)
         if cubes is not None:
-            # the returns in a random order; the first in a cube is kept
-            shuffled = rng.permutation(len(rows))
-            kept = cubes.new_returns(station, angles, ranges, rows, shuffled)
-        xyz = _grid_points(station, *angles, ranges, rows, cubes is not None, kept)
-        if cubes is not None:
-            rows = rows[kept]
-        points.append(xyz)
-        triangles.append(triangle[rows])
-        owner.append(np.full(len(rows), index, dtype=np.int32))
-        strays.append(stray[rows])
-    if len(stations) == 1:  # no copies of one station's returns
+            beams = cubes.new_returns(station, angles, ranges, seed)
+        else:
+            beams = _finite_rows(ranges, np.int32 if ranges.size < 2**31 else np.int64)
+        kept.append(StationReturns(station, beams, ranges[beams], triangle[beams], stray[beams]))
+    return kept
+
+
+def returns_points(returns: list[StationReturns], step_deg: float, min_elevation_deg: float,
+                   chosen: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Points (N, 3), triangles (N,), station index (N,) and mixed pixels (N,) of the stations'
+    ``returns`` in order, ``chosen`` (ascending indices into them; None: all) only."""
+    angles = _angle_tables(*tls_grid(step_deg, min_elevation_deg))
+    points, triangles, owner, strays = [], [], [], []
+    first = 0
+    for index, kept in enumerate(returns):
+        mine = slice(None)
+        if chosen is not None:  # the chosen indices within this station's returns
+            low, high = np.searchsorted(chosen, (first, first + len(kept.beams)))
+            mine = chosen[low:high] - first
+        first += len(kept.beams)
+        points.append(_grid_points(kept.station, *angles, kept.beams[mine], kept.ranges[mine]))
+        triangles.append(kept.triangle[mine])
+        owner.append(np.full(len(points[-1]), index, dtype=np.int32))
+        strays.append(kept.stray[mine])
+    if len(returns) == 1:  # no copies of one station's returns
         return points[0], triangles[0], owner[0], strays[0]
     return (np.concatenate(points), np.concatenate(triangles), np.concatenate(owner),
             np.concatenate(strays))
+
+
+def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.random.Generator,
+             cfg: Mapping[str, Any], batch: int,
+             on_object: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """All returns of the stations' grids: points (N, 3), triangles (N,), station index (N,)
+    and whether each is a mixed pixel between two surfaces (N,).
+
+    ``on_object`` (T,) marks the triangles of objects, where depth edges can be. The returns
+    get range errors (``range_noise``), then with a ``point_spacing`` the export's spacing
+    filter (:class:`SpacingFilter`) keeps one return per cube of that side, station by station
+    (memory grows with the kept cubes, not with the beams).
+    """
+    returns = station_returns(scanner, stations, step_deg, rng, cfg, batch, on_object)
+    return returns_points(returns, step_deg, cfg['min_elevation_deg'])
 
 
 def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int,
@@ -398,21 +494,20 @@ def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int,
         finest, 360.0 / math.ceil(360.0 / math.sqrt(360.0 * span * len(stations) / beams)))
     rays = 0
     for _ in range(8):
-        xyz, triangle, owner, stray = cast_tls(scanner, stations, step, rng, cfg, batch,
-                                               on_object)
+        returns = station_returns(scanner, stations, step, rng, cfg, batch, on_object)
+        found = sum(len(kept.beams) for kept in returns)
         azimuth, elevation = tls_grid(step, cfg['min_elevation_deg'])
         rays += len(stations) * len(azimuth) * len(elevation)
-        if fixed or len(xyz) >= n_points or step <= finest * (1 + 1e-9):
+        if fixed or found >= n_points or step <= finest * (1 + 1e-9):
             break
-        finer = math.ceil(360.0 / step * math.sqrt(n_points / max(len(xyz), 1)) * 1.02)
+        finer = math.ceil(360.0 / step * math.sqrt(n_points / max(found, 1)) * 1.02)
         step = max(finest, 360.0 / max(finer, int(round(360.0 / step)) + 1))
-    if len(xyz) > n_points:
-        # the drawn returns (distinct) in ascending order, without sorting them
-        chosen = np.zeros(len(xyz), dtype=bool)
-        chosen[rng.choice(len(xyz), n_points, replace=False)] = True
-        keep = np.flatnonzero(chosen)
-        xyz, triangle, owner, stray = xyz[keep], triangle[keep], owner[keep], stray[keep]
-    elif len(xyz) < n_points:
-        warnings.warn(f'TLS: only {len(xyz)} of {n_points} points at an angular step of '
+    chosen = None
+    if found > n_points:
+        # a uniform random subset of exactly n_points, in the returns' order
+        chosen = _uniform_subset(found, n_points, stream_seed(rng))
+    elif found < n_points:
+        warnings.warn(f'TLS: only {found} of {n_points} points at an angular step of '
                       f'{step:.4g} deg')
+    xyz, triangle, owner, stray = returns_points(returns, step, cfg['min_elevation_deg'], chosen)
     return _result(scanner, xyz, triangle, stations.astype(np.float32)[owner], rays, stray), step

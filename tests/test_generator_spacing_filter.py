@@ -1,10 +1,42 @@
-"""The laser scanner's spacing filter and chunked draws keep the results of the plain numpy
-versions they replace: the same returns, the same numbers, the same generator state."""
+"""The laser scanner's export (spacing filter, range noise, the final subset) and the
+counter-based draws the sensor models make in their kernels: the distributions they promise
+(normal and uniform draws, one return per cube drawn uniformly among the cube's returns, every
+cube represented, noise of the configured std, a subset of exactly the wanted size, every subset
+equally likely) and the same numbers from the same seed."""
+import numba
 import numpy as np
+from scipy import stats
 
+from generator.counter_random import normal, uniform
+from generator.scanner import _aimed_rays
+from generator.tablet import _tablet_returns
 from generator.tls import (SpacingFilter, _add_range_noise, _angle_tables, _grid_points,
-                           _uniform_at, tls_grid)
-from synthdet.voxels import VoxelFilter
+                           _priorities, _uniform_subset, tls_grid)
+
+
+@numba.njit
+def _normals(seed: np.uint64, count: int) -> np.ndarray:
+    return np.array([normal(seed, np.uint64(256 * k)) for k in range(count)])
+
+
+@numba.njit
+def _uniforms(seed: np.uint64, count: int) -> np.ndarray:
+    return np.array([uniform(seed, np.uint64(k)) for k in range(count)])
+
+
+def test_counter_draws_are_standard_normal_and_uniform_and_repeat_with_their_seed():
+    draws = _normals(np.uint64(11), 400_000)
+    assert abs(draws.mean()) < 0.01 and abs(draws.std() - 1.0) < 0.01
+    assert stats.kstest(draws, 'norm').pvalue > 1e-3
+    # the ziggurat's tail (beyond 3.4426) and its wedges give the normal's share there
+    tail = 2 * stats.norm.sf(3.442619855899)
+    assert abs(np.mean(np.abs(draws) > 3.442619855899) / tail - 1.0) < 0.15
+    assert np.abs(draws).max() > 3.9
+    flat = _uniforms(np.uint64(5), 400_000)
+    assert flat.min() >= 0.0 and flat.max() < 1.0
+    assert stats.kstest(flat, 'uniform').pvalue > 1e-3
+    np.testing.assert_array_equal(_normals(np.uint64(11), 1000), draws[:1000])
+    assert not np.array_equal(_normals(np.uint64(12), 1000), draws[:1000])
 
 
 def _station_grid(rng: np.random.Generator, step: float):
@@ -15,41 +47,114 @@ def _station_grid(rng: np.random.Generator, step: float):
     return angles, ranges
 
 
-def test_spacing_filter_keeps_the_voxel_filters_returns():
+def _cubes(points: np.ndarray, side: float, origin: np.ndarray) -> list[tuple]:
+    return [tuple(c) for c in (np.floor(points / side) - np.floor(origin / side)).astype(int)]
+
+
+def test_spacing_filter_keeps_the_smallest_priority_return_of_every_new_cube():
     rng = np.random.default_rng(3)
     stations = np.array([[1.0, 2.0, 1.5], [4.0, -1.0, 1.6], [2.5, 0.5, 1.4]])
     side = 0.05
-    fused, reference = SpacingFilter(side, stations[0]), VoxelFilter(side, stations[0])
-    total = 0
-    for station in stations:
+    spacing = SpacingFilter(side, stations[0])
+    seen: set[tuple] = set()
+    for number, station in enumerate(stations):
         angles, ranges = _station_grid(rng, 1.0)
         # a few returns 2**20 cubes and more away: kept by their exact cube
         ranges[rng.choice(len(ranges), 5, replace=False)] = 2**20 * side * 1.5
+        seed = np.uint64(100 + number)
+        kept = spacing.new_returns(station, angles, ranges, seed)
         beams = np.flatnonzero(np.isfinite(ranges))
-        order = rng.permutation(len(beams))
-        kept = fused.new_returns(station, angles, ranges, beams, order)
-        first = reference.new_points(_grid_points(station, *angles, ranges, beams, True, order))
-        expected = np.zeros(len(beams), dtype=bool)
-        expected[order[first]] = True
-        np.testing.assert_array_equal(kept, np.flatnonzero(expected))
-        total += len(kept)
-    assert 0 < total < 3 * len(beams)  # the filter dropped returns, and kept some
-    assert fused.count == len(reference.seen) and fused.wide == reference.wide
-    assert fused.wide  # the far returns were met
+        cubes = _cubes(_grid_points(station, *angles, beams, ranges[beams]), side, stations[0])
+        priority = _priorities(seed, beams)
+        # the reference: per cube not seen before, the return of smallest priority
+        best: dict[tuple, int] = {}
+        for index, cube in enumerate(cubes):
+            if cube not in seen and (cube not in best or priority[index] < priority[best[cube]]):
+                best[cube] = index
+        np.testing.assert_array_equal(kept, np.sort(beams[list(best.values())]))
+        kept_cubes = _cubes(_grid_points(station, *angles, kept, ranges[kept]), side,
+                            stations[0])
+        # one return per cube, and every cube of the returns represented (here or before)
+        assert len(set(kept_cubes)) == len(kept_cubes)
+        assert set(kept_cubes) == set(cubes) - seen
+        seen |= set(kept_cubes)
+        assert 0 < len(kept) < len(beams)
+    assert spacing.count + len(spacing.wide) == len(seen) and spacing.wide
 
 
-def test_chunked_draws_give_the_same_numbers_and_state():
-    size = 200_003  # several chunks and a partial one
-    index = np.sort(np.random.default_rng(0).choice(size, 999, replace=False))
-    chunked, whole = np.random.default_rng(7), np.random.default_rng(7)
-    np.testing.assert_array_equal(_uniform_at(chunked, size, index), whole.random(size)[index])
-    assert chunked.random() == whole.random()
+def test_spacing_filter_draws_each_return_of_a_cube_equally_often():
+    # one station, five returns in one cube (along one grid row, in a cube of 10 m): the kept
+    # return is uniform over the five across seeds
+    azimuth, elevation = tls_grid(5.0, -60.0)
+    angles = _angle_tables(azimuth, elevation)
+    ranges = np.full(len(azimuth) * len(elevation), np.inf)
+    row = len(elevation) // 2
+    beams = row * len(azimuth) + np.arange(5)
+    ranges[beams] = 1.0 + 0.001 * np.arange(5)
+    station = np.array([5.0, 5.0, 5.0])
+    wins = np.zeros(5, dtype=int)
+    for seed in range(1000):
+        kept = SpacingFilter(10.0, station).new_returns(station, angles, ranges,
+                                                      np.uint64(seed))
+        assert len(kept) == 1
+        wins[kept[0] - beams[0]] += 1
+    assert stats.chisquare(wins).pvalue > 1e-3
 
-    ranges = np.random.default_rng(1).uniform(0.5, 9.0, size)
-    rows = np.flatnonzero(np.random.default_rng(2).random(size) < 0.9)
+
+def test_range_noise_has_the_configured_std_and_spares_lost_beams():
+    ranges = np.random.default_rng(1).uniform(0.5, 20.0, 400_000)
+    ranges[::7] = np.inf
     a, b = 0.002, 0.0005
-    expected = ranges.copy()
-    expected[rows] += whole.standard_normal(len(rows)) * (a + b * ranges[rows])
-    _add_range_noise(chunked, ranges, rows, a, b)
-    np.testing.assert_array_equal(ranges, expected)
-    assert chunked.random() == whole.random()
+    noisy = ranges.copy()
+    _add_range_noise(noisy, np.uint64(9), a, b)
+    finite = np.isfinite(ranges)
+    assert not np.isfinite(noisy[~finite]).any()
+    error = (noisy[finite] - ranges[finite]) / (a + b * ranges[finite])
+    assert abs(error.mean()) < 0.01 and abs(error.std() - 1.0) < 0.01
+    again = ranges.copy()
+    _add_range_noise(again, np.uint64(9), a, b)
+    np.testing.assert_array_equal(again, noisy)
+
+
+def test_the_final_subset_has_exactly_the_wanted_size_and_every_item_the_same_chance():
+    total, wanted = 50, 20
+    taken = np.zeros(total, dtype=int)
+    for seed in range(4000):
+        chosen = _uniform_subset(total, wanted, np.uint64(seed))
+        assert len(chosen) == wanted and np.all(np.diff(chosen) > 0)
+        assert chosen[0] >= 0 and chosen[-1] < total
+        taken[chosen] += 1
+    # each item in wanted / total of the subsets
+    assert stats.chisquare(taken).pvalue > 1e-3
+    # the pairs too (a subset, not independent picks): items 0 and 1 together
+    both = sum(set(_uniform_subset(total, wanted, np.uint64(s))) >= {0, 1} for s in range(4000))
+    expected = 4000 * wanted * (wanted - 1) / (total * (total - 1))
+    assert abs(both - expected) < 4 * np.sqrt(expected)
+    np.testing.assert_array_equal(_uniform_subset(10, 10, np.uint64(1)), np.arange(10))
+
+
+def test_aimed_rays_pick_targets_by_their_weights():
+    path = np.zeros((4, 3))
+    low = np.array([[2.0, -0.5, -0.5], [-0.5, 2.0, -0.5], [-0.5, -0.5, 2.0]])
+    extent = np.ones((3, 3))
+    weights = np.array([0.2, 0.5, 0.3])
+    n = 60_000
+    rays = (np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3), np.float32),
+            np.empty((n, 3), np.float32))
+    _aimed_rays(path, 0, np.cumsum(weights), low, extent, np.uint64(4), *rays)
+    directions = rays[1]
+    np.testing.assert_allclose(np.linalg.norm(directions, axis=1), 1.0)
+    # the target of each ray: the axis its direction points along
+    counts = np.bincount(np.argmax(directions, axis=1), minlength=3)
+    assert stats.chisquare(counts, weights * n).pvalue > 1e-3
+
+
+def test_tablet_returns_get_range_noise_of_the_configured_std():
+    t_hit = np.full(200_000, 2.0, dtype=np.float32)
+    t_hit[::5] = np.inf  # misses
+    primitive = np.zeros(len(t_hit), dtype=np.uint32)
+    rows, measured = _tablet_returns(t_hit, primitive, np.uint64(3), np.zeros(1), 0.01, 1.0,
+                                     0.3, 5.0, len(t_hit))
+    assert len(rows) == np.isfinite(t_hit).sum()  # all kept: far_keep 1, no loss
+    error = (measured - 2.0) / 0.01
+    assert abs(error.mean()) < 0.02 and abs(error.std() - 1.0) < 0.02

@@ -1,0 +1,94 @@
+"""Counter-based random numbers for numba kernels: the draw number ``counter`` of a stream
+``seed`` is a pure function of the two, so a kernel draws for each beam or return where it needs
+one (in any order, only for the items it keeps) and a later pass can draw the same number again.
+
+A word is SplitMix64's output at step ``counter + 1`` of the state ``seed``: the state advanced by
+that many times the golden-ratio increment, through SplitMix64's finalising mix (a generator
+that passes TestU01's BigCrush). Uniforms take a word's top 53 bits; standard normals come from
+a 128-layer ziggurat (Marsaglia and Tsang's method in Doornik's formulation: one word per draw
+in about 99 % of draws, exact rejection in the layers' wedges and the tail).
+"""
+import math
+
+import numba
+import numpy as np
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_MIX_1 = np.uint64(0xBF58476D1CE4E5B9)
+_MIX_2 = np.uint64(0x94D049BB133111EB)
+_UNIT = 2.0**-53
+
+# the ziggurat: 128 layers of equal area, the bottom one with the tail beyond _TAIL_START
+_LAYERS = 128
+_TAIL_START = 3.442619855899
+_LAYER_AREA = 9.91256303526217e-3
+
+
+def _ziggurat_tables() -> tuple[np.ndarray, np.ndarray]:
+    """The layers' right edges x (LAYERS + 1,), x[0] the bottom layer's width as a rectangle of
+    its area, x[LAYERS] = 0, and the share of each layer inside the next one's edge."""
+    edges = np.zeros(_LAYERS + 1)
+    density = math.exp(-0.5 * _TAIL_START**2)
+    edges[0], edges[1] = _LAYER_AREA / density, _TAIL_START
+    for layer in range(2, _LAYERS):
+        edges[layer] = math.sqrt(-2.0 * math.log(_LAYER_AREA / edges[layer - 1] + density))
+        density = math.exp(-0.5 * edges[layer]**2)
+    return edges, edges[1:] / edges[:-1]
+
+
+_EDGES, _INSIDE = _ziggurat_tables()
+
+
+@numba.njit(cache=True, nogil=True)
+def word(seed: np.uint64, counter: np.uint64) -> np.uint64:
+    """The 64 random bits number ``counter`` of stream ``seed``."""
+    z = seed + (counter + np.uint64(1)) * _GOLDEN
+    z = (z ^ (z >> np.uint64(30))) * _MIX_1
+    z = (z ^ (z >> np.uint64(27))) * _MIX_2
+    return z ^ (z >> np.uint64(31))
+
+
+@numba.njit(cache=True, nogil=True)
+def uniform(seed: np.uint64, counter: np.uint64) -> float:
+    """A uniform draw in [0, 1): the top 53 bits of word ``counter``."""
+    return np.float64(word(seed, counter) >> np.uint64(11)) * _UNIT
+
+
+@numba.njit(cache=True, nogil=True)
+def _open_uniform(seed: np.uint64, counter: np.uint64) -> float:
+    """A uniform draw in (0, 1), for a logarithm."""
+    return (np.float64(word(seed, counter) >> np.uint64(11)) + 0.5) * _UNIT
+
+
+@numba.njit(cache=True, nogil=True)
+def normal(seed: np.uint64, counter: np.uint64) -> float:
+    """A standard normal draw from the words ``counter``, ``counter + 1``, ... of stream
+    ``seed`` (the first only, but for about 1 % of draws; a caller gives each draw its own
+    range of 256 counters)."""
+    while True:
+        bits = word(seed, counter)
+        counter += np.uint64(1)
+        layer = np.int64(bits & np.uint64(_LAYERS - 1))
+        # the sign and position from the top 53 bits, the layer from the lowest 7
+        u = 2.0 * (np.float64(bits >> np.uint64(11)) * _UNIT) - 1.0
+        if abs(u) < _INSIDE[layer]:
+            return u * _EDGES[layer]
+        if layer == 0:  # the tail beyond _TAIL_START (Marsaglia's method)
+            while True:
+                x = math.log(_open_uniform(seed, counter)) / _TAIL_START
+                y = math.log(_open_uniform(seed, counter + np.uint64(1)))
+                counter += np.uint64(2)
+                if -2.0 * y >= x * x:
+                    return x - _TAIL_START if u < 0 else _TAIL_START - x
+        x = u * _EDGES[layer]
+        # the density at the layer's bottom and top, relative to the density at x
+        bottom = math.exp(-0.5 * (_EDGES[layer]**2 - x * x))
+        top = math.exp(-0.5 * (_EDGES[layer + 1]**2 - x * x))
+        if bottom + uniform(seed, counter) * (top - bottom) < 1.0:
+            return x
+        counter += np.uint64(1)
+
+
+def stream_seed(rng: np.random.Generator) -> np.uint64:
+    """A stream's seed drawn from ``rng``."""
+    return np.uint64(rng.integers(0, 2**64, dtype=np.uint64))
