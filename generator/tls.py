@@ -13,6 +13,7 @@ background. There is no object-ratio phase: the share of object points is what t
 gives.
 """
 import math
+import threading
 import warnings
 from dataclasses import dataclass
 from typing import Any, Mapping
@@ -166,8 +167,14 @@ class SpacingFilter:
         self.side = float(side)
         self.origin_key = np.floor(origin / side)
         # slot k: table[2k] a cube's key (-1: free), table[2k + 1] the beam its station keeps
-        # so far (-1 once the station is done)
-        self.table = np.full(2 << 16, -1, dtype=np.int64)
+        # so far (-1 once the station is done); the memory of the thread's previous filter
+        # when there is one, emptied (a process generating rooms scans one after the other:
+        # fresh pages for every room's hash set would cost more than emptying it)
+        self.table = _spare.__dict__.pop('table', None)
+        if self.table is None:
+            self.table = np.full(2 << 16, -1, dtype=np.int64)
+        else:
+            self.table.fill(-1)
         self.count = 0
         self.wide: set[tuple[int, int, int]] = set()  # cubes beyond the packed key range
 
@@ -176,8 +183,9 @@ class SpacingFilter:
         """Grid indices (ascending) of the returns (the finite ``ranges`` of the grid, at the
         points :func:`_grid_points` computes) kept in cubes not seen before, the priorities
         from the stream ``seed``."""
-        keys = _cube_keys(station, *angles, ranges, self.side, self.origin_key)
-        kept, far, self.table, self.count = _thin_station(keys, seed, self.table, self.count)
+        kept, far, self.table, self.count = _thin_station(station, *angles, ranges, seed,
+                                                          self.side, self.origin_key,
+                                                          self.table, self.count)
         if len(far):  # points kilometres away: rare, kept exact, by priority
             far = far[np.argsort(_priorities(seed, far), kind='stable')]
             fresh = []
@@ -189,6 +197,14 @@ class SpacingFilter:
                     fresh.append(beam)
             kept = np.union1d(kept, np.array(fresh, dtype=np.int64))
         return kept
+
+    def release(self) -> None:
+        """Leave the hash set's memory to the thread's next filter (this one is done)."""
+        _spare.table, self.table = self.table, None
+
+
+# the memory of the last released spacing filter's hash set, per thread
+_spare = threading.local()
 
 
 @numba.njit(cache=True, nogil=True)
@@ -202,67 +218,82 @@ def _slot_of(table: np.ndarray, bits: int, key: np.int64) -> int:
     return slot
 
 
+# beams whose cube keys the spacing filter computes at a time (a buffer that stays in the
+# cache), and beams whose first slots it reads ahead of its pass over them
+_KEY_CHUNK = 1 << 16
+_READ_AHEAD = 128
+
+
 @numba.njit(cache=True, nogil=True)
 def _cube_keys(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: np.ndarray,
                cos_azimuth: np.ndarray, sin_azimuth: np.ndarray, ranges: np.ndarray,
-               side: float, origin_key: np.ndarray) -> np.ndarray:
-    """The packed cube key (N,) of each beam of the grid, at its point as :func:`_grid_points`
-    computes it, as :func:`synthdet.voxels.packed_key` packs it: -1 for a point 2**20 cubes or
-    more away, -2 for a beam without a return."""
+               start: int, side: float, origin_key: np.ndarray, keys: np.ndarray) -> None:
+    """Write the packed cube key of the beams ``start`` on into ``keys``, at each point as
+    :func:`_grid_points` computes it, as :func:`synthdet.voxels.packed_key` packs it: -1 for
+    a point 2**20 cubes or more away, -2 for a beam without a return."""
     columns = len(cos_azimuth)
-    keys = np.empty(len(ranges), dtype=np.int64)
     point = np.empty(3)
-    for beam in range(len(ranges)):
+    for k in range(len(keys)):
+        beam = start + k
         measured = ranges[beam]
         if not np.isfinite(measured):
-            keys[beam] = -2
+            keys[k] = -2
             continue
         row = beam // columns
         column = beam - row * columns
         point[0] = station[0] + cos_elevation[row] * cos_azimuth[column] * measured
         point[1] = station[1] + cos_elevation[row] * sin_azimuth[column] * measured
         point[2] = station[2] + sin_elevation[row] * measured
-        keys[beam] = packed_key(point, side, origin_key)
-    return keys
+        keys[k] = packed_key(point, side, origin_key)
 
 
 @numba.njit(cache=True, nogil=True)
-def _thin_station(keys: np.ndarray, seed: np.uint64, table: np.ndarray,
+def _thin_station(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: np.ndarray,
+                  cos_azimuth: np.ndarray, sin_azimuth: np.ndarray, ranges: np.ndarray,
+                  seed: np.uint64, side: float, origin_key: np.ndarray, table: np.ndarray,
                   count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """The spacing filter's pass over one station's grid (see :class:`SpacingFilter`) of cube
-    ``keys`` (:func:`_cube_keys`): the kept beams (ascending), the beams without a packed key
-    (ascending), and the hash set ``table`` (grown four times at half full) and its number of
-    cubes after."""
-    # the slots of the cubes this station hit first and the beams without a packed key (the
-    # untouched rest of these arrays takes no memory)
-    fresh = np.empty(len(keys), dtype=np.int64)
-    far = np.empty(len(keys), dtype=np.int64)
+    """The spacing filter's pass over one station's grid (see :class:`SpacingFilter`): the
+    kept beams (ascending), the beams 2**20 cubes or more away (ascending), and the hash set
+    ``table`` (grown four times at half full) and its number of cubes after."""
+    returns = 0
+    for measured in ranges:
+        returns += np.isfinite(measured)
+    # the slots of the cubes this station hit first and the beams without a packed key
+    fresh = np.empty(returns, dtype=np.int64)
+    far = np.empty(16, dtype=np.int64)
     # a station's cubes are about a quarter of its returns or fewer: room for that many more
     # at the start spares most of the growing
-    returns = 0
-    for key in keys:
-        returns += key >= 0
     bits = _table_bits(table)
     while 2 * (count + returns // 4) > (1 << bits):
         bits += 1
     if bits > _table_bits(table):
         table = _grown(table, fresh[:0], bits)
-    # where the pass stands: next beam, fresh and far counts, cubes
-    state = np.array([0, 0, 0, count], dtype=np.int64)
-    while True:
-        _thin_pass(keys, seed, table, fresh, far, state)
-        if state[0] == len(keys):
-            break
-        # half full: four times the slots
-        table = _grown(table, fresh[:state[1]], _table_bits(table) + 2)
+    keys = np.empty(min(_KEY_CHUNK, len(ranges)), dtype=np.int64)
+    # where the pass stands: next beam of the chunk, fresh and far counts, cubes (and the
+    # pass's reads ahead)
+    state = np.array([0, 0, 0, count, 0], dtype=np.int64)
+    for start in range(0, len(ranges), _KEY_CHUNK):
+        chunk = keys[:min(_KEY_CHUNK, len(ranges) - start)]
+        _cube_keys(station, cos_elevation, sin_elevation, cos_azimuth, sin_azimuth, ranges,
+                   start, side, origin_key, chunk)
+        state[0] = 0
+        while True:
+            if state[2] + len(chunk) > len(far):  # room for every beam of the chunk
+                far = np.concatenate((far[:state[2]], np.empty(len(far) + len(chunk),
+                                                               dtype=np.int64)))
+            _thin_pass(chunk, start, seed, table, fresh, far, state)
+            if state[0] == len(chunk):
+                break
+            # half full: four times the slots
+            table = _grown(table, fresh[:state[1]], _table_bits(table) + 2)
     # the station's choices, in beam order; their cubes are closed for the next stations
-    chosen = np.zeros(len(keys), dtype=np.bool_)
+    chosen = np.zeros(len(ranges), dtype=np.bool_)
     for slot in fresh[:state[1]]:
         chosen[table[2 * slot + 1]] = True
         table[2 * slot + 1] = -1
     kept = np.empty(state[1], dtype=np.int64)
     written = 0
-    for beam in range(len(keys)):
+    for beam in range(len(ranges)):
         if chosen[beam]:
             kept[written] = beam
             written += 1
@@ -294,17 +325,25 @@ def _table_bits(table: np.ndarray) -> int:
 
 
 @numba.njit(cache=True, nogil=True)
-def _thin_pass(keys: np.ndarray, seed: np.uint64, table: np.ndarray, fresh: np.ndarray,
-               far: np.ndarray, state: np.ndarray) -> None:
-    """The spacing filter's pass from beam ``state[0]`` on, until the grid's end or a new cube
-    that would fill ``table`` to more than half (``state`` updated)."""
+def _thin_pass(keys: np.ndarray, start: int, seed: np.uint64, table: np.ndarray,
+               fresh: np.ndarray, far: np.ndarray, state: np.ndarray) -> None:
+    """The spacing filter's pass over the cube ``keys`` of the beams ``start`` on, from key
+    ``state[0]`` on, until their end or a new cube that would fill ``table`` to more than half
+    (``state`` updated)."""
     bits = _table_bits(table)
     fresh_count, far_count, count = state[1], state[2], state[3]
     # the previous return's cube (none at the start or after the table grew): its slot and
     # the priority of the station's choice there
     last_key, last_slot, last_priority = np.int64(-3), 0, np.uint64(0)
-    for beam in range(state[0], len(keys)):
-        key = keys[beam]
+    # read ahead: the first slots of the next keys, each read independent of the others, so
+    # that the memory serves many at once before the pass needs them
+    ahead = np.int64(0)
+    for k in range(state[0], len(keys)):
+        if (k - state[0]) % _READ_AHEAD == 0:
+            for next_key in keys[k:k + _READ_AHEAD]:
+                if next_key >= 0:
+                    ahead ^= table[2 * hash_slot(next_key, bits)]
+        key, beam = keys[k], start + k
         if key < 0:
             if key == -1:
                 far[far_count] = beam
@@ -324,7 +363,7 @@ def _thin_pass(keys: np.ndarray, seed: np.uint64, table: np.ndarray, fresh: np.n
                     table[2 * slot + 1], last_priority = beam, priority
         else:
             if 2 * (count + 1) > (1 << bits):  # the table must grow first
-                state[0], state[1], state[2], state[3] = beam, fresh_count, far_count, count
+                state[0], state[1], state[2], state[3] = k, fresh_count, far_count, count
                 return
             table[2 * slot], table[2 * slot + 1] = key, beam
             count += 1
@@ -333,6 +372,8 @@ def _thin_pass(keys: np.ndarray, seed: np.uint64, table: np.ndarray, fresh: np.n
             last_priority = priority
         last_key, last_slot = key, slot
     state[0], state[1], state[2], state[3] = len(keys), fresh_count, far_count, count
+    # the reads ahead are kept (a value no one uses would let them be left out)
+    state[4] = ahead
 
 
 @numba.njit(cache=True, nogil=True)
@@ -427,6 +468,8 @@ def station_returns(scanner: Scanner, stations: np.ndarray, step_deg: float,
         else:
             beams = _finite_rows(ranges, np.int32 if ranges.size < 2**31 else np.int64)
         kept.append(StationReturns(station, beams, ranges[beams], triangle[beams], stray[beams]))
+    if cubes is not None:
+        cubes.release()
     return kept
 
 

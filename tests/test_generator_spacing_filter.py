@@ -82,6 +82,21 @@ def test_spacing_filter_keeps_the_smallest_priority_return_of_every_new_cube():
     assert spacing.count + len(spacing.wide) == len(seen) and spacing.wide
 
 
+def test_a_filter_on_the_released_memory_of_the_last_keeps_the_same_returns():
+    rng = np.random.default_rng(8)
+    station = np.array([1.0, 2.0, 1.5])
+    angles, ranges = _station_grid(rng, 1.0)
+    first = SpacingFilter(0.02, station)
+    kept = first.new_returns(station, angles, ranges, np.uint64(1))
+    table = first.table
+    assert (table[1::2] == -1).all()  # the station is done: no choice held
+    first.release()
+    again = SpacingFilter(0.02, station)
+    assert again.table is table  # the same memory, emptied
+    np.testing.assert_array_equal(again.new_returns(station, angles, ranges, np.uint64(1)), kept)
+    assert again.count == first.count
+
+
 def test_spacing_filter_draws_each_return_of_a_cube_equally_often():
     # one station, five returns in one cube (along one grid row, in a cube of 10 m): the kept
     # return is uniform over the five across seeds
