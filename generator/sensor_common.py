@@ -64,15 +64,23 @@ def _inset(cell: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
     return low + margin, high - margin
 
 
-def _cast_grid(scanner: Scanner, rays: Callable[[int, int], tuple[np.ndarray, np.ndarray]],
-               size: int, batch: int, rng: np.random.Generator, min_range: float,
-               max_range: float) -> tuple[np.ndarray, np.ndarray]:
+def _cast_grid(scanner: Scanner,
+               rays: Callable[[int, int], tuple[np.ndarray, np.ndarray]],
+               size: int,
+               batch: int,
+               rng: np.random.Generator,
+               min_range: float,
+               max_range: float,
+               out: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """First hits of ``size`` rays in batches, ``rays(start, stop)`` giving the origins and
     directions of rays start to stop: ranges (float64; inf for a miss and outside
     [min_range, max_range]) and triangle index (int32, half the memory of int64; 0 for a miss,
-    so that per-triangle lookups of a whole grid stay in bounds; the range tells)."""
-    ranges = np.empty(size)
-    triangle = np.empty(size, np.int32)
+    so that per-triangle lookups of a whole grid stay in bounds; the range tells), written into
+    ``out`` (two arrays of ``size`` or more) when given."""
+    if out is None:
+        ranges, triangle = np.empty(size), np.empty(size, np.int32)
+    else:
+        ranges, triangle = out[0][:size], out[1][:size]
     for start in range(0, size, batch):
         stop = min(start + batch, size)
         t_hit, primitive = scanner.cast(scanner.full_scene, *rays(start, stop), rng)

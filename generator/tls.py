@@ -185,7 +185,8 @@ class SpacingFilter:
         from the stream ``seed``."""
         kept, far, self.table, self.count = _thin_station(station, *angles, ranges, seed,
                                                           self.side, self.origin_key,
-                                                          self.table, self.count)
+                                                          self.table, self.count,
+                                                          *_filter_buffers(len(ranges)))
         if len(far):  # points kilometres away: rare, kept exact, by priority
             far = far[np.argsort(_priorities(seed, far), kind='stable')]
             fresh = []
@@ -203,8 +204,28 @@ class SpacingFilter:
         _spare.table, self.table = self.table, None
 
 
-# the memory of the last released spacing filter's hash set, per thread
+# the memory of the last released spacing filter's hash set, the last grid's ranges and
+# triangles and the filter's work space, per thread
 _spare = threading.local()
+
+
+def _grid_buffers(size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The thread's buffers for a grid's ranges (float64) and triangles (int32), of ``size``
+    or more: a station's grid is done with them before the next one is cast, and a process
+    generating rooms casts grid after grid (fresh pages for every grid would cost more)."""
+    buffers = getattr(_spare, 'grid', None)
+    if buffers is None or len(buffers[0]) < size:
+        buffers = _spare.grid = (np.empty(size), np.empty(size, np.int32))
+    return buffers
+
+
+def _filter_buffers(size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The thread's work space of the spacing filter's pass over a grid of ``size`` beams (see
+    :func:`_thin_station`), for the same reason."""
+    buffers = getattr(_spare, 'filter', None)
+    if buffers is None or len(buffers[0]) < size:
+        buffers = _spare.filter = (np.empty(size, np.int64), np.zeros(size, np.bool_))
+    return buffers
 
 
 @numba.njit(cache=True, nogil=True)
@@ -251,15 +272,16 @@ def _cube_keys(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: np
 def _thin_station(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: np.ndarray,
                   cos_azimuth: np.ndarray, sin_azimuth: np.ndarray, ranges: np.ndarray,
                   seed: np.uint64, side: float, origin_key: np.ndarray, table: np.ndarray,
-                  count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+                  count: int, fresh: np.ndarray,
+                  chosen: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """The spacing filter's pass over one station's grid (see :class:`SpacingFilter`): the
     kept beams (ascending), the beams 2**20 cubes or more away (ascending), and the hash set
-    ``table`` (grown four times at half full) and its number of cubes after."""
+    ``table`` (grown four times at half full) and its number of cubes after. ``fresh`` (int64)
+    and ``chosen`` (bool, all False, left so) are work space of the grid's size or more."""
     returns = 0
     for measured in ranges:
         returns += np.isfinite(measured)
-    # the slots of the cubes this station hit first and the beams without a packed key
-    fresh = np.empty(returns, dtype=np.int64)
+    # fresh: the slots of the cubes this station hit first; far: the beams without a packed key
     far = np.empty(16, dtype=np.int64)
     # a station's cubes are about a quarter of its returns or fewer: room for that many more
     # at the start spares most of the growing
@@ -287,7 +309,6 @@ def _thin_station(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation:
             # half full: four times the slots
             table = _grown(table, fresh[:state[1]], _table_bits(table) + 2)
     # the station's choices, in beam order; their cubes are closed for the next stations
-    chosen = np.zeros(len(ranges), dtype=np.bool_)
     for slot in fresh[:state[1]]:
         chosen[table[2 * slot + 1]] = True
         table[2 * slot + 1] = -1
@@ -297,6 +318,7 @@ def _thin_station(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation:
         if chosen[beam]:
             kept[written] = beam
             written += 1
+            chosen[beam] = False
     return kept, far[:state[2]].copy(), table, state[3]
 
 
@@ -453,7 +475,8 @@ def station_returns(scanner: Scanner, stations: np.ndarray, step_deg: float,
             return origins[:stop - start], directions[:stop - start]
 
         ranges, triangle = _cast_grid(scanner, rays, grid[0] * grid[1], batch, rng,
-                                      cfg['min_range'], cfg['max_range'])
+                                      cfg['min_range'], cfg['max_range'],
+                                      _grid_buffers(grid[0] * grid[1]))
         if cfg['mixed_pixels'] > 0:
             ranges, triangle, stray = _mixed_pixels(
                 rng, ranges.reshape(grid), triangle.reshape(grid), on_object, scanner.scene.part,
