@@ -114,12 +114,14 @@ def _depth_edges(ranges: np.ndarray, triangle: np.ndarray, columns: int, on_obje
     other = np.empty(size)
     other_tri = np.empty(size, dtype=triangle.dtype)
     count = 0
+    row, column = 0, -1  # counted on with the beam, without divisions
     for beam in range(size):
+        column += 1
+        if column == columns:
+            row, column = row + 1, 0
         mine = ranges[beam]
         if not np.isfinite(mine):  # a step from a lost beam is no edge
             continue
-        row = beam // columns
-        column = beam - row * columns
         mine_on_object = on_object[triangle[beam]]
         largest = 0.0
         for side in range(4):

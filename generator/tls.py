@@ -71,11 +71,14 @@ def _grid_directions(cos_elevation: np.ndarray, sin_elevation: np.ndarray,
     Each component is the float64 product of an elevation's and an azimuth's cosine or sine
     (:func:`_grid_points` recomputes the same products for the returns), rounded to float32."""
     columns = len(cos_azimuth)
+    row, column = start // columns, start % columns  # then counted on, without divisions
     for k in range(len(directions)):
-        row, column = (start + k) // columns, (start + k) % columns
         directions[k, 0] = cos_elevation[row] * cos_azimuth[column]
         directions[k, 1] = cos_elevation[row] * sin_azimuth[column]
         directions[k, 2] = sin_elevation[row]
+        column += 1
+        if column == columns:
+            row, column = row + 1, 0
 
 
 def _mixed_pixels(rng: np.random.Generator, ranges: np.ndarray, triangle: np.ndarray,
@@ -254,18 +257,19 @@ def _cube_keys(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: np
     a point 2**20 cubes or more away, -2 for a beam without a return."""
     columns = len(cos_azimuth)
     point = np.empty(3)
+    row, column = start // columns, start % columns  # then counted on, without divisions
     for k in range(len(keys)):
-        beam = start + k
-        measured = ranges[beam]
-        if not np.isfinite(measured):
+        measured = ranges[start + k]
+        if np.isfinite(measured):
+            point[0] = station[0] + cos_elevation[row] * cos_azimuth[column] * measured
+            point[1] = station[1] + cos_elevation[row] * sin_azimuth[column] * measured
+            point[2] = station[2] + sin_elevation[row] * measured
+            keys[k] = packed_key(point, side, origin_key)
+        else:
             keys[k] = -2
-            continue
-        row = beam // columns
-        column = beam - row * columns
-        point[0] = station[0] + cos_elevation[row] * cos_azimuth[column] * measured
-        point[1] = station[1] + cos_elevation[row] * sin_azimuth[column] * measured
-        point[2] = station[2] + sin_elevation[row] * measured
-        keys[k] = packed_key(point, side, origin_key)
+        column += 1
+        if column == columns:
+            row, column = row + 1, 0
 
 
 @numba.njit(cache=True, nogil=True)
