@@ -9,9 +9,10 @@ from scipy import stats
 
 from generator.counter_random import normal, uniform
 from generator.scanner import _aimed_rays
-from generator.tablet import _tablet_returns
+from generator.tablet import _tablet_rays, _tablet_returns
+from generator.sensor_common import _depth_edges
 from generator.tls import (SpacingFilter, _add_range_noise, _angle_tables, _grid_points,
-                           _priorities, _uniform_subset, tls_grid)
+                           _mixed_pixels, _priorities, _uniform_subset, tls_grid)
 
 
 @numba.njit
@@ -173,3 +174,40 @@ def test_tablet_returns_get_range_noise_of_the_configured_std():
     assert len(rows) == np.isfinite(t_hit).sum()  # all kept: far_keep 1, no loss
     error = (measured - 2.0) / 0.01
     assert abs(error.mean()) < 0.02 and abs(error.std() - 1.0) < 0.02
+
+
+def test_mixed_pixels_take_the_configured_share_of_the_edge_beams():
+    # a grid of 200 x 300 beams: the room (part 0, 5 m) with an object (part 1, 2 m) in columns
+    # 100-199: its two outlines are depth edges, 2 x 2 beams per row
+    ranges = np.full((200, 300), 5.0)
+    triangle = np.zeros((200, 300), dtype=np.int32)
+    ranges[:, 100:200], triangle[:, 100:200] = 2.0, 1
+    on_object, part = np.array([False, True]), np.array([0, 1])
+    edges = _depth_edges(ranges.reshape(-1), triangle.reshape(-1), 300, on_object, part, 0.1)[0]
+    assert len(edges) == 200 * 4
+    mixed, _, stray = _mixed_pixels(np.random.default_rng(6), ranges.copy(), triangle.copy(),
+                                    on_object, part, 0.3, 0.1)
+    assert set(np.flatnonzero(stray)) <= set(edges)
+    assert abs(stray.sum() - 0.3 * len(edges)) < 4 * np.sqrt(0.3 * 0.7 * len(edges))
+    # a mixed return lies between the two ranges, uniformly
+    between = mixed[stray]
+    assert between.min() > 2.0 and between.max() < 5.0
+    assert stats.kstest((between - 2.0) / 3.0, 'uniform').pvalue > 1e-3
+
+
+def test_tablet_rays_take_uniform_poses_and_pixels():
+    n, poses = 100_000, 7
+    positions = np.zeros((poses, 3))
+    look = np.tile([1.0, 0.0, 0.0], (poses, 1))
+    right, up = np.tile([0.0, -1.0, 0.0], (poses, 1)), np.tile([0.0, 0.0, 1.0], (poses, 1))
+    half = np.array([0.5, 0.4])
+    pose = np.empty(n, dtype=np.int64)
+    rays = (np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3), np.float32),
+            np.empty((n, 3), np.float32))
+    _tablet_rays(positions, look, right, up, np.uint64(2), half, pose, *rays)
+    assert stats.chisquare(np.bincount(pose, minlength=poses)).pvalue > 1e-3
+    # the pixel on the image plane at distance 1: (-y, z) / x, uniform within the half sizes
+    directions = rays[1]
+    across, above = -directions[:, 1] / directions[:, 0], directions[:, 2] / directions[:, 0]
+    assert stats.kstest((across + 0.5) / 1.0, 'uniform').pvalue > 1e-3
+    assert stats.kstest((above + 0.4) / 0.8, 'uniform').pvalue > 1e-3
