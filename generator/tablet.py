@@ -229,5 +229,6 @@ def cast_tablet(
     if got < n_points:
         warnings.warn(f'tablet: only {got} of {n_points} points after {rays} rays')
     pose = pose_of[:got]
-    return _result(scanner, xyz[:got], triangle[:got], positions.astype(np.float32)[pose],
-                   rays), pose
+    # np.take gathers rows several times faster than fancy indexing
+    origin = np.take(positions.astype(np.float32), pose, axis=0)
+    return _result(scanner, xyz[:got], triangle[:got], origin, rays), pose

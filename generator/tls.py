@@ -580,4 +580,6 @@ def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int,
         warnings.warn(f'TLS: only {found} of {n_points} points at an angular step of '
                       f'{step:.4g} deg')
     xyz, triangle, owner, stray = returns_points(returns, step, cfg['min_elevation_deg'], chosen)
-    return _result(scanner, xyz, triangle, stations.astype(np.float32)[owner], rays, stray), step
+    # np.take gathers rows several times faster than fancy indexing
+    origin = np.take(stations.astype(np.float32), owner, axis=0)
+    return _result(scanner, xyz, triangle, origin, rays, stray), step
