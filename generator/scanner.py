@@ -303,8 +303,9 @@ class Scanner:
         area = 2 * (
             extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] +
             extent[:, 0] * extent[:, 2])
-        self.target_weight = area / area.sum() if len(area) else area
-        self.target_cumulative = np.cumsum(self.target_weight)
+        # a target's probability is its share of the bounds' surface area, drawn by inverting
+        # the cumulative shares
+        self.target_cumulative = np.cumsum(area / area.sum() if len(area) else area)
         self.full_scene = self._embree(scene.triangles)
         self.object_scene = self._embree(scene.triangles[self.object_tri]) if len(
             self.object_tri) else None
