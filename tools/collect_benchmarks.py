@@ -110,11 +110,15 @@ NOTES = {
     ],
     'convert': [
         '',
-        'The ratio swings from run to run on the 2-core VM: five runs of the command above on '
-        'an otherwise idle machine (2026-12-06, 1-minute load 0.8-1.4) gave 3.3x, 2.1x, 3.1x, '
-        '2.2x and 4.6x at one process each. The swing is in synthdet\'s one-worker run (0.7 to '
-        '1.7 s for the same rooms), which runs in the benchmark\'s own process after '
-        'mmdet3d\'s.'
+        'Three runs of the command above on the idle machine (2026-12-06, 1-minute load 0.6-1.4) '
+        'gave 6.1x, 4.8x and 6.4x at one process each (4.6x, 4.5x, 4.4x at 2 each); synthdet\'s '
+        'one-worker run took 0.58-0.61 s, 0.10-0.12 s of it system time, mmdet3d\'s 2.9-3.9 s. '
+        'Before, five runs gave 2.1x to 4.6x: synthdet\'s run swung from 0.7 to 1.7 s, all of '
+        'it system time. The VM hands free 2 MiB blocks back to its host (virtio-balloon free '
+        'page reporting); memory taken from them costs a host fault per 4 KiB page when first '
+        'touched, and the converter took such blocks for numpy\'s huge pages and for the 2 MiB '
+        'page-cache folios of one-call `tofile` writes. It now reuses its room arrays in 4 KiB '
+        'pages and writes 64 KiB per call; the `sys s` column shows what is left.'
     ],
     'domain_shift': [
         '',
