@@ -345,14 +345,14 @@ def time_sensor_scans(scene: TriangleScene, room: RoomGeometry, names: list[str]
         runs = {'embree': [], 'loop': [], 'parts': [], 'loop cpu': []}
         for _ in range(repeats):
             embree.seconds = Counter()
-            seconds, scan = scan_once(embree, room, model, points, config, embree.seconds)
-            runs['embree'].append(seconds)
+            # each scan's result is dropped at once: no live result adds page faults to the next
+            runs['embree'].append(scan_once(embree, room, model, points, config, embree.seconds)[0])
             runs['parts'].append(embree.seconds)
             loop_seconds = Counter()
             runs['loop'].append(scan_once(loop, room, model, points, config, loop_seconds)[0])
             runs['loop cpu'].append(loop_seconds['cpu'])
         embree.seconds, embree.batches = Counter(), []
-        scan_once(embree, room, model, points, config, embree.seconds)
+        _, scan = scan_once(embree, room, model, points, config, embree.seconds)
         batches, embree.batches = embree.batches, None
         bare = statistics.median(bare_cast(batches) for _ in range(repeats))
         start = time.perf_counter()
