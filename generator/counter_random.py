@@ -23,6 +23,11 @@ _LAYERS = 128
 _TAIL_START = 3.442619855899
 _LAYER_AREA = 9.91256303526217e-3
 
+# counters per item (beam, ray) of a stream that gives each item a few uniform words and then
+# one normal draw: the item's words start at item x ITEM_COUNTERS, and its normal draw has the
+# rest of them (one word in about 99 % of draws, see :func:`normal`)
+ITEM_COUNTERS = np.uint64(256)
+
 
 def _ziggurat_tables() -> tuple[np.ndarray, np.ndarray]:
     """The layers' right edges x (LAYERS + 1,), x[0] the bottom layer's width as a rectangle of
@@ -64,7 +69,7 @@ def _open_uniform(seed: np.uint64, counter: np.uint64) -> float:
 def normal(seed: np.uint64, counter: np.uint64) -> float:
     """A standard normal draw from the words ``counter``, ``counter + 1``, ... of stream
     ``seed`` (the first only, but for about 1 % of draws; a caller gives each draw its own
-    range of 256 counters)."""
+    range of counters, as :data:`ITEM_COUNTERS` does)."""
     while True:
         bits = word(seed, counter)
         counter += np.uint64(1)

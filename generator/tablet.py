@@ -13,7 +13,7 @@ from typing import Any, Mapping, Sequence
 import numba
 import numpy as np
 
-from generator.counter_random import normal, stream_seed, uniform
+from generator.counter_random import ITEM_COUNTERS, normal, stream_seed, uniform
 from generator.scanner import ScanResult, Scanner, row_norms, store_ray
 from generator.sensor_common import RoomGeometry, _clearance, _inset, _result, _surface_loss
 from synthdet.geometry import points_in_polygon
@@ -110,11 +110,6 @@ def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
     return positions[keep], look[keep]
 
 
-# counters of a batch's stream per ray: its pose, its pixel (two), whether its return is kept,
-# then its range error's
-_RAY_COUNTERS = 256
-
-
 @numba.njit(cache=True, nogil=True)
 def _tablet_rays(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up: np.ndarray,
                  seed: np.uint64, half: np.ndarray, pose: np.ndarray, origins: np.ndarray,
@@ -125,7 +120,9 @@ def _tablet_rays(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up:
     distance 1), drawn from the stream ``seed``: origins and unit directions (N, 3) and their
     float32 copies, which Embree casts."""
     for ray in range(len(pose)):
-        counter = np.uint64(ray * _RAY_COUNTERS)
+        # the ray's counters: its pose, its pixel (two), whether its return is kept, then its
+        # range error
+        counter = np.uint64(ray) * ITEM_COUNTERS
         p = min(int(uniform(seed, counter) * len(positions)), len(positions) - 1)
         pose[ray] = p
         across = (uniform(seed, counter + np.uint64(1)) * 2 - 1) * half[0]
@@ -153,7 +150,7 @@ def _tablet_returns(t_hit: np.ndarray, primitive: np.ndarray, seed: np.uint64,
             break
         if not np.isfinite(t_hit[ray]):
             continue
-        counter = np.uint64(ray * _RAY_COUNTERS)
+        counter = np.uint64(ray) * ITEM_COUNTERS
         distance = np.float64(t_hit[ray]) + normal(seed, counter + np.uint64(4)) * range_noise
         if distance < near or distance > far:
             continue

@@ -21,7 +21,7 @@ from typing import Any, Mapping
 import numba
 import numpy as np
 
-from generator.counter_random import normal, stream_seed, uniform, word
+from generator.counter_random import ITEM_COUNTERS, normal, stream_seed, uniform, word
 from generator.scanner import ScanResult, Scanner
 from generator.sensor_common import (RoomGeometry, _cast_grid, _clearance, _depth_edges, _inset,
                                      _result)
@@ -126,28 +126,31 @@ def _grid_points(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: 
     return xyz
 
 
-# counters of a station's stream per beam: its spacing filter priority, then its range error's
-_BEAM_COUNTERS = np.uint64(256)
-
-
 @numba.njit(cache=True, nogil=True)
 def _add_range_noise(ranges: np.ndarray, seed: np.uint64, a: float, b: float) -> None:
     """Move every finite range by a standard normal draw x (a + b x range), in place: beam k's
-    draw from the counters k x 256 + 1 on of the stream ``seed``
-    (:func:`generator.counter_random.normal`)."""
+    draw from its counters after the first in the stream ``seed``
+    (:data:`generator.counter_random.ITEM_COUNTERS`, :func:`generator.counter_random.normal`)."""
     for beam in range(len(ranges)):
         measured = ranges[beam]
         if np.isfinite(measured):
-            draw = normal(seed, np.uint64(beam) * _BEAM_COUNTERS + np.uint64(1))
+            draw = normal(seed, np.uint64(beam) * ITEM_COUNTERS + np.uint64(1))
             ranges[beam] = measured + draw * (a + b * measured)
 
 
 @numba.njit(cache=True, nogil=True)
+def _priority(seed: np.uint64, beam: int) -> np.uint64:
+    """The spacing filter's priority of ``beam``: the first word of the beam's counters in the
+    station's stream ``seed`` (its range error draws from the next ones)."""
+    return word(seed, np.uint64(beam) * ITEM_COUNTERS)
+
+
+@numba.njit(cache=True, nogil=True)
 def _priorities(seed: np.uint64, beams: np.ndarray) -> np.ndarray:
-    """The spacing filter's priority (uint64) of each of ``beams``: word k x 256 of ``seed``."""
+    """The spacing filter's priority (uint64) of each of ``beams``."""
     priority = np.empty(len(beams), dtype=np.uint64)
     for k in range(len(beams)):
-        priority[k] = word(seed, np.uint64(beams[k]) * _BEAM_COUNTERS)
+        priority[k] = _priority(seed, beams[k])
     return priority
 
 
@@ -375,7 +378,7 @@ def _thin_pass(keys: np.ndarray, start: int, seed: np.uint64, table: np.ndarray,
                 far[far_count] = beam
                 far_count += 1
             continue
-        priority = word(seed, np.uint64(beam) * _BEAM_COUNTERS)
+        priority = _priority(seed, beam)
         if key == last_key:  # neighbouring beams mostly hit the same cube: no lookup
             if table[2 * last_slot + 1] >= 0 and priority < last_priority:
                 table[2 * last_slot + 1], last_priority = beam, priority
@@ -384,7 +387,7 @@ def _thin_pass(keys: np.ndarray, start: int, seed: np.uint64, table: np.ndarray,
         if table[2 * slot] == key:
             choice = table[2 * slot + 1]
             if choice >= 0:  # a cube of this station: the smaller priority stays
-                last_priority = word(seed, np.uint64(choice) * _BEAM_COUNTERS)
+                last_priority = _priority(seed, choice)
                 if priority < last_priority:
                     table[2 * slot + 1], last_priority = beam, priority
         else:
