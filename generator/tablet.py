@@ -14,7 +14,7 @@ import numba
 import numpy as np
 
 from generator.counter_random import ITEM_COUNTERS, normal, stream_seed, uniform
-from generator.scanner import ScanResult, Scanner, row_norms, store_ray
+from generator.scanner import ScanResult, Scanner, row_norms
 from generator.sensor_common import RoomGeometry, _clearance, _inset, _result, _surface_loss
 from synthdet.geometry import points_in_polygon
 
@@ -110,28 +110,39 @@ def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
     return positions[keep], look[keep]
 
 
+@numba.njit(cache=True, nogil=True, inline='always')
+def _tablet_ray(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up: np.ndarray,
+                seed: np.uint64, half: np.ndarray, ray: int) -> tuple[int, float, float, float]:
+    """Ray ``ray`` of a batch: a uniform random pose and a uniform random pixel
+    ``(u * 2 - 1) * half`` (right, up offsets on the image plane at distance 1), drawn from the
+    stream ``seed``: the pose and the direction (not of unit length)."""
+    # the ray's counters: its pose, its pixel (two), whether its return is kept, then its range
+    # error
+    counter = np.uint64(ray) * ITEM_COUNTERS
+    p = min(int(uniform(seed, counter) * len(positions)), len(positions) - 1)
+    across = (uniform(seed, counter + np.uint64(1)) * 2 - 1) * half[0]
+    above = (uniform(seed, counter + np.uint64(2)) * 2 - 1) * half[1]
+    x = look[p, 0] + across * right[p, 0] + above * up[p, 0]
+    y = look[p, 1] + across * right[p, 1] + above * up[p, 1]
+    z = look[p, 2] + across * right[p, 2] + above * up[p, 2]
+    return p, x, y, z
+
+
 @numba.njit(cache=True, nogil=True)
 def _tablet_rays(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up: np.ndarray,
-                 seed: np.uint64, half: np.ndarray, pose: np.ndarray, origins: np.ndarray,
-                 directions: np.ndarray, cast_origins: np.ndarray,
+                 seed: np.uint64, half: np.ndarray, cast_origins: np.ndarray,
                  cast_directions: np.ndarray) -> None:
-    """Write the rays of a batch: each a uniform random pose (written to ``pose``) and a
-    uniform random pixel ``(u * 2 - 1) * half`` (right, up offsets on the image plane at
-    distance 1), drawn from the stream ``seed``: origins and unit directions (N, 3) and their
-    float32 copies, which Embree casts."""
-    for ray in range(len(pose)):
-        # the ray's counters: its pose, its pixel (two), whether its return is kept, then its
-        # range error
-        counter = np.uint64(ray) * ITEM_COUNTERS
-        p = min(int(uniform(seed, counter) * len(positions)), len(positions) - 1)
-        pose[ray] = p
-        across = (uniform(seed, counter + np.uint64(1)) * 2 - 1) * half[0]
-        above = (uniform(seed, counter + np.uint64(2)) * 2 - 1) * half[1]
-        x = look[p, 0] + across * right[p, 0] + above * up[p, 0]
-        y = look[p, 1] + across * right[p, 1] + above * up[p, 1]
-        z = look[p, 2] + across * right[p, 2] + above * up[p, 2]
-        store_ray(ray, positions[p], x, y, z, np.sqrt((x * x + y * y) + z * z), origins,
-                  directions, cast_origins, cast_directions)
+    """Write the rays of a batch (:func:`_tablet_ray`) as the float32 origins and unit
+    directions (N, 3) Embree casts; :func:`_tablet_points` draws the kept ones again in float64
+    (the batch's rays are written once, in half the memory)."""
+    for ray in range(len(cast_origins)):
+        p, x, y, z = _tablet_ray(positions, look, right, up, seed, half, ray)
+        norm = np.sqrt((x * x + y * y) + z * z)
+        cast_directions[ray, 0] = x / norm
+        cast_directions[ray, 1] = y / norm
+        cast_directions[ray, 2] = z / norm
+        for axis in range(3):
+            cast_origins[ray, axis] = positions[p, axis]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -163,16 +174,21 @@ def _tablet_returns(t_hit: np.ndarray, primitive: np.ndarray, seed: np.uint64,
 
 
 @numba.njit(cache=True, nogil=True)
-def _tablet_points(origins: np.ndarray, directions: np.ndarray, primitive: np.ndarray,
-                   pose: np.ndarray, rows: np.ndarray, measured: np.ndarray, xyz: np.ndarray,
-                   triangle: np.ndarray, pose_of: np.ndarray) -> None:
-    """Write the returns of ``rows``: points at origin + direction x measured range into
-    ``xyz`` (N, 3), their triangles and poses into ``triangle`` and ``pose_of`` (N,)."""
+def _tablet_points(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up: np.ndarray,
+                   seed: np.uint64, half: np.ndarray, primitive: np.ndarray, rows: np.ndarray,
+                   measured: np.ndarray, xyz: np.ndarray, triangle: np.ndarray,
+                   pose_of: np.ndarray) -> None:
+    """Write the returns of ``rows`` of the batch of stream ``seed`` (:func:`_tablet_ray`):
+    points at origin + unit direction x measured range into ``xyz`` (N, 3), their triangles and
+    poses into ``triangle`` and ``pose_of`` (N,)."""
     for k in range(len(rows)):
         ray = rows[k]
-        for axis in range(3):
-            xyz[k, axis] = origins[ray, axis] + directions[ray, axis] * measured[k]
-        triangle[k], pose_of[k] = primitive[ray], pose[ray]
+        p, x, y, z = _tablet_ray(positions, look, right, up, seed, half, ray)
+        norm = np.sqrt((x * x + y * y) + z * z)
+        xyz[k, 0] = positions[p, 0] + x / norm * measured[k]
+        xyz[k, 1] = positions[p, 1] + y / norm * measured[k]
+        xyz[k, 2] = positions[p, 2] + z / norm * measured[k]
+        triangle[k], pose_of[k] = primitive[ray], p
 
 
 def cast_tablet(
@@ -203,25 +219,22 @@ def cast_tablet(
     triangle = np.empty(n_points, dtype=np.int64)
     pose_of = np.empty(n_points, dtype=np.int64)
     # one batch's rays, reused by every batch
-    origins, directions = np.empty((batch, 3)), np.empty((batch, 3))
     cast_origins = np.empty((batch, 3), dtype=np.float32)
     cast_directions = np.empty((batch, 3), dtype=np.float32)
-    pose = np.empty(batch, dtype=np.int64)
     got = rays = 0
     max_batches = max(64, 16 * n_points // batch + 64)
     for _ in range(max_batches):
         if got >= n_points:
             break
         seed = stream_seed(rng)  # the batch's poses, pixels, range errors and dropouts
-        _tablet_rays(positions, look, right, up, seed, half, pose, origins, directions,
-                     cast_origins, cast_directions)
+        _tablet_rays(positions, look, right, up, seed, half, cast_origins, cast_directions)
         t_hit, prim = scanner.cast(scanner.full_scene, cast_origins, cast_directions, rng)
         rays += batch
         rows, measured = _tablet_returns(t_hit, prim, seed, loss, cfg['range_noise'],
                                          cfg['far_keep'], near, far, n_points - got)
         end = got + len(rows)
-        _tablet_points(origins, directions, prim, pose, rows, measured, xyz[got:end],
-                       triangle[got:end], pose_of[got:end])
+        _tablet_points(positions, look, right, up, seed, half, prim, rows, measured,
+                       xyz[got:end], triangle[got:end], pose_of[got:end])
         got = end
     if got < n_points:
         warnings.warn(f'tablet: only {got} of {n_points} points after {rays} rays')

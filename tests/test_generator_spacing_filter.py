@@ -9,7 +9,7 @@ from scipy import stats
 
 from generator.counter_random import normal, uniform
 from generator.scanner import _aimed_rays
-from generator.tablet import _tablet_rays, _tablet_returns
+from generator.tablet import _tablet_points, _tablet_rays, _tablet_returns
 from generator.sensor_common import _depth_edges
 from generator.tls import (SpacingFilter, _add_range_noise, _angle_tables, _grid_points,
                            _mixed_pixels, _priorities, _uniform_subset, tls_grid)
@@ -195,19 +195,31 @@ def test_mixed_pixels_take_the_configured_share_of_the_edge_beams():
     assert stats.kstest((between - 2.0) / 3.0, 'uniform').pvalue > 1e-3
 
 
-def test_tablet_rays_take_uniform_poses_and_pixels():
+def test_tablet_rays_take_uniform_poses_and_pixels_and_the_kept_points_lie_on_them():
     n, poses = 100_000, 7
     positions = np.zeros((poses, 3))
+    positions[:, 2] = np.arange(poses)  # the pose of a ray: its origin's height
     look = np.tile([1.0, 0.0, 0.0], (poses, 1))
     right, up = np.tile([0.0, -1.0, 0.0], (poses, 1)), np.tile([0.0, 0.0, 1.0], (poses, 1))
     half = np.array([0.5, 0.4])
-    pose = np.empty(n, dtype=np.int64)
-    rays = (np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3), np.float32),
-            np.empty((n, 3), np.float32))
-    _tablet_rays(positions, look, right, up, np.uint64(2), half, pose, *rays)
+    origins, directions = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32)
+    _tablet_rays(positions, look, right, up, np.uint64(2), half, origins, directions)
+    pose = origins[:, 2].astype(int)
     assert stats.chisquare(np.bincount(pose, minlength=poses)).pvalue > 1e-3
     # the pixel on the image plane at distance 1: (-y, z) / x, uniform within the half sizes
-    directions = rays[1]
     across, above = -directions[:, 1] / directions[:, 0], directions[:, 2] / directions[:, 0]
     assert stats.kstest((across + 0.5) / 1.0, 'uniform').pvalue > 1e-3
     assert stats.kstest((above + 0.4) / 0.8, 'uniform').pvalue > 1e-3
+    # the kept returns are drawn again in float64: the points lie on the cast rays, each with
+    # its ray's pose and triangle
+    rows = np.arange(0, n, 3)
+    measured = np.linspace(0.5, 4.0, len(rows))
+    primitive = np.arange(n, dtype=np.uint32)
+    xyz, triangle, pose_of = np.empty((len(rows), 3)), np.empty(len(rows), np.int64), np.empty(
+        len(rows), np.int64)
+    _tablet_points(positions, look, right, up, np.uint64(2), half, primitive, rows, measured, xyz,
+                   triangle, pose_of)
+    np.testing.assert_array_equal(pose_of, pose[rows])
+    np.testing.assert_array_equal(triangle, rows)
+    expected = origins[rows] + directions[rows].astype(np.float64) * measured[:, None]
+    np.testing.assert_allclose(xyz, expected, atol=1e-6)
