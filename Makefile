@@ -91,7 +91,7 @@ exp2-cpu: setup
 	    --work-dir $(EXP2_WORK)/test --box-fit --false-positives --cfg-options $(EXP2_CFG_OPTIONS)
 	$(PY) tools/test.py $(EXP2_CONFIG) $$(cat $(EXP2_WORK)/last_checkpoint) --tta \
 	    --work-dir $(EXP2_WORK)/test_tta --box-fit --false-positives --cfg-options $(EXP2_CFG_OPTIONS)
-	for sensor in paper tls tablet depth_frame; do \
+	for sensor in paper tls tablet depth_frame reconstruction; do \
 	    $(PY) tools/test.py $(EXP2_CONFIG) $$(cat $(EXP2_WORK)/last_checkpoint) \
 	        --sensor $$sensor --work-dir $(EXP2_WORK)/test_$$sensor --box-fit \
 	        --cfg-options $(EXP2_CFG_OPTIONS) || exit 1; \

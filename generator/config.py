@@ -90,7 +90,8 @@ DEFAULTS: dict[str, Any] = {
             'paper': 0.34,
             'tls': 0.33,
             'tablet': 0.33,
-            'depth_frame': 0.0
+            'depth_frame': 0.0,
+            'reconstruction': 0.0
         },
         # every sensor model: probability that a ray passes glass (printer doors, cabinet fronts)
         # to the surface behind it, as a laser crosses clear glass; 0: glass is opaque (paper)
@@ -128,6 +129,26 @@ DEFAULTS: dict[str, Any] = {
             'dark_luminance': 40.0,  # a triangle color darker than this (0-255) is dark
             'dark_dropout': 0.7,  # probability that a return on a dark triangle is lost
             'shiny_dropout': 0.5,  # the same on shiny (metal palette) triangles
+        },
+        'reconstruction': {  # a fused RGB-D reconstruction (generator/reconstruction.py)
+            # the walk and the depth camera: the tablet's keys, with a depth camera's range
+            'poses': 512,
+            'height': [1.2, 1.6],
+            'wall_distance': 1.0,
+            'fov_deg': [60.0, 48.0],
+            'wall_look': 0.7,
+            'sway_deg': 50.0,
+            'pitch_deg': [-45.0, 15.0],
+            'min_range': 0.3,
+            'max_range': 4.0,
+            'range_noise': 0.005,  # std of the range error of the fused surface, metres
+            'far_keep': 1.0,  # share of the returns kept at max_range (1 at min_range)
+            'dark_luminance': 40.0,
+            'dark_dropout': 0.3,  # lower than the tablet's: fusion fills some of the holes
+            'shiny_dropout': 0.3,
+            'oversample': 8.0,  # returns cast per point of the budget
+            'surface_spacing': 0.01,  # the fused surface: one return per cube of this side
+            'ceiling_keep': 0.0,  # probability that a point of the ceiling is kept
         },
         'depth_frame': {  # one RGB-D camera frame (Kinect-like; generator/depth_frame.py)
             'height': [1.0, 1.6],  # camera height, metres
@@ -406,12 +427,15 @@ def _validate_appearance(config: dict[str, Any], source: str) -> None:
 
 
 def _validate_sensors(scanner: dict[str, Any], source: str) -> None:
-    """The sensor mix and the TLS, tablet and depth frame parameters."""
+    """The sensor mix and the TLS, tablet, reconstruction and depth frame parameters."""
     _distribution({'scanner': scanner}, 'scanner', 'sensors', source)
     for sensor, ranges, probabilities, lengths in (
         ('tls', ('height', 'stations_per_cell'), ('mixed_pixels', ),
          ('wall_clearance', 'object_clearance', 'min_range', 'max_range', 'edge_jump')),
         ('tablet', ('height', ), ('wall_look', 'far_keep', 'dark_dropout', 'shiny_dropout'),
+         ('wall_distance', 'min_range', 'max_range', 'range_noise', 'sway_deg', 'dark_luminance')),
+        ('reconstruction', ('height', ),
+         ('wall_look', 'far_keep', 'dark_dropout', 'shiny_dropout', 'ceiling_keep'),
          ('wall_distance', 'min_range', 'max_range', 'range_noise', 'sway_deg', 'dark_luminance')),
         ('depth_frame', ('height', 'wall_distance', 'pitch_deg', 'horizontal_fov_deg',
                          'vertical_fov_deg', 'max_range'),
@@ -433,7 +457,7 @@ def _validate_sensors(scanner: dict[str, Any], source: str) -> None:
             nearest_far = nearest_far[0]
         if scanner[sensor]['min_range'] >= nearest_far:
             raise ConfigError(f'{source}: "{where}.min_range" must be below "{where}.max_range"')
-    tls, tablet = scanner['tls'], scanner['tablet']
+    tls = scanner['tls']
     if tls['stations_per_cell'][0] < 1:
         raise ConfigError(f'{source}: "scanner.tls.stations_per_cell" must be at least 1')
     for key, largest in (('angular_step_deg', 10.0), ('point_spacing', 1.0)):
@@ -457,20 +481,33 @@ def _validate_sensors(scanner: dict[str, Any], source: str) -> None:
                    for v in noise)):
         raise ConfigError(f'{source}: "scanner.tls.range_noise" must be [a, b], two non-negative '
                           f'numbers (std a + b * distance), got {_shown(noise)}')
+    for walker in ('tablet', 'reconstruction'):  # the reconstruction walks as the tablet does
+        _validate_walk(scanner[walker], f'scanner.{walker}', source)
+    reconstruction = {'scanner.reconstruction': scanner['reconstruction']}
+    if _number(reconstruction, 'scanner.reconstruction', 'oversample', source) < 1.0:
+        raise ConfigError(f'{source}: "scanner.reconstruction.oversample" must be at least 1')
+    spacing = _number(reconstruction, 'scanner.reconstruction', 'surface_spacing', source)
+    if not 0.0 < spacing <= 1.0:
+        raise ConfigError(f'{source}: "scanner.reconstruction.surface_spacing" must be in (0, 1] '
+                          f'metres, got {_shown(spacing)}')
+    _validate_depth_frame(scanner['depth_frame'], source)
+
+
+def _validate_walk(walker: dict[str, Any], where: str, source: str) -> None:
+    """The field of view, pitch and poses of the tablet's walk (``where``: the section)."""
     for key, low, high in (('fov_deg', 1.0, 170.0), ('pitch_deg', -90.0, 90.0)):
-        value = tablet[key]
+        value = walker[key]
         if (not isinstance(value, (list, tuple)) or len(value) != 2
                 or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)
                 or not all(low <= v <= high for v in value)):
-            raise ConfigError(f'{source}: "scanner.tablet.{key}" must be two numbers in '
+            raise ConfigError(f'{source}: "{where}.{key}" must be two numbers in '
                               f'[{low:g}, {high:g}] degrees, got {_shown(value)}')
-    if tablet['pitch_deg'][0] > tablet['pitch_deg'][1]:
-        raise ConfigError(f'{source}: "scanner.tablet.pitch_deg" has min > max')
-    poses = tablet['poses']
+    if walker['pitch_deg'][0] > walker['pitch_deg'][1]:
+        raise ConfigError(f'{source}: "{where}.pitch_deg" has min > max')
+    poses = walker['poses']
     if isinstance(poses, bool) or not isinstance(poses, int) or poses < 2:
-        raise ConfigError(f'{source}: "scanner.tablet.poses" must be an integer >= 2, '
+        raise ConfigError(f'{source}: "{where}.poses" must be an integer >= 2, '
                           f'got {_shown(poses)}')
-    _validate_depth_frame(scanner['depth_frame'], source)
 
 
 def _validate_depth_frame(frame: dict[str, Any], source: str) -> None:

@@ -1,7 +1,8 @@
 """Sensor models on the Embree caster, one drawn per room: the paper's crossing path
 (:mod:`generator.scanner`), a terrestrial laser scanner (:mod:`generator.tls`), a handheld
-tablet LiDAR (:mod:`generator.tablet`) and one RGB-D depth frame (:mod:`generator.depth_frame`);
-here the draw, the dispatch to the model and the annotation of stray returns.
+tablet LiDAR (:mod:`generator.tablet`), one RGB-D depth frame (:mod:`generator.depth_frame`) and
+a fused RGB-D reconstruction (:mod:`generator.reconstruction`); here the draw, the dispatch to
+the model and the annotation of stray returns.
 
 Every model builds ray batches (origins, directions) and casts them through
 :meth:`generator.scanner.Scanner.cast`, the one place rays are cast. The paper model is
@@ -15,6 +16,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from generator.depth_frame import cast_depth_frame, depth_frame_camera
+from generator.reconstruction import scan_reconstruction
 from generator.scanner import ScanResult, Scanner, sensor_path
 from generator.sensor_common import RoomGeometry
 from generator.tablet import cast_tablet, tablet_trajectory
@@ -102,6 +104,20 @@ def scan_room(
                 for k in ('min_range', 'depth_noise', 'edge_jump', 'edge_dropout',
                           'dark_luminance', 'dark_dropout', 'shiny_dropout',
                           'min_object_points')
+            }
+        }
+    if model == 'reconstruction':
+        cfg = scanner_config['reconstruction']
+        scan, record = scan_reconstruction(scanner, room, n_points, rng, cfg,
+                                           scanner_config['batch_rays'], shiny_colors)
+        return scan, {
+            'model': 'reconstruction',
+            **record,
+            **{
+                k: cfg[k]
+                for k in ('wall_look', 'fov_deg', 'min_range', 'max_range', 'range_noise',
+                          'far_keep', 'dark_luminance', 'dark_dropout', 'shiny_dropout',
+                          'oversample', 'surface_spacing', 'ceiling_keep')
             }
         }
     raise ValueError(f'unknown sensor model {model!r} (known: {", ".join(SENSOR_MODELS)})')

@@ -29,7 +29,7 @@ PREDICTIONS_FORMAT = 'synthdet.predictions/1'
 CORNERS_FORMAT = 'synthdet.corners/1'
 LABELS_FORMAT = 'synthdet.labels/1'
 # the generator's sensor models, recorded in a room's meta.json as generator.sensor.model
-SENSOR_MODELS = ('paper', 'tls', 'tablet', 'depth_frame')
+SENSOR_MODELS = ('paper', 'tls', 'tablet', 'depth_frame', 'reconstruction')
 
 MAX_NAME_LENGTH = 200
 MAX_DETECTIONS = 100_000

@@ -338,7 +338,7 @@ class RecordingScanner(Scanner):
 def test_paper_profile_casts_uniform_directions():
     profile = load_config(REPO / 'generator' / 'profiles' / 'paper.json')['scanner']
     assert profile['sensors'] == {'paper': 1.0, 'tls': 0.0, 'tablet': 0.0,
-                                  'depth_frame': 0.0}
+                                  'depth_frame': 0.0, 'reconstruction': 0.0}
     scene = room_scene((6, 4, 3), [((2, 1, 0), (3, 2, 1), (255, 0, 0))])
     room = RoomGeometry(
         np.array([[0, 0], [0, 4], [6, 4], [6, 0]], float), 3.0, [], np.zeros((0, 2, 2)),
