@@ -138,7 +138,9 @@ DEFAULTS: dict[str, Any] = {
             'fov_deg': [60.0, 48.0],
             'wall_look': 0.7,
             'sway_deg': 50.0,
-            'pitch_deg': [-45.0, 15.0],
+            # lower than the tablet's: a person scanning a room also looks down at the floor,
+            # which at -45 keeps a hole under the walk
+            'pitch_deg': [-60.0, 15.0],
             'min_range': 0.3,
             'max_range': 4.0,
             'range_noise': 0.005,  # std of the range error of the fused surface, metres

@@ -28,8 +28,9 @@ BATCH = 65536
 SIZE = (10.0, 8.0, 3.0)
 # fused cubes of 5 cm: the small room's surfaces get a few returns per cube
 COARSE = dict(RECONSTRUCTION, surface_spacing=0.05)
-# fused cubes of 10 cm, 16 returns per point: every cube of the floor it sees gets several
-SATURATED = dict(RECONSTRUCTION, surface_spacing=0.1, oversample=16.0)
+# fused cubes of 10 cm, 16 returns per point and a walk facing the room's inside for 70 % of
+# the way: every cube of the floor gets several returns, far from the walk too
+SATURATED = dict(RECONSTRUCTION, surface_spacing=0.1, oversample=16.0, wall_look=0.3)
 
 
 def box_room(size=SIZE, cubes=()) -> tuple[Scanner, RoomGeometry]:
@@ -48,8 +49,8 @@ def reconstruct(n_points: int, cfg: dict, seed: int = 0, size=SIZE):
 
 def floor_densities(xyz: np.ndarray, size=SIZE) -> tuple[float, float]:
     """Floor points per m^2 in the band along the walls up to 0.5 m from them (0.5-1 m from
-    the walk) and 2.5 m or more from them (the floor's centre, 1.5 m and more from the walk; the
-    walk keeps looking at the walls, so the floor right under it is seen less, a hole)."""
+    the walk) and 2.5 m or more from them (the floor's centre, 1.5 m and more from the
+    walk)."""
     floor = xyz[xyz[:, 2] < 0.05]
     width, depth, _ = size
     wall = np.minimum.reduce([floor[:, 0], width - floor[:, 0], floor[:, 1], depth - floor[:, 1]])
@@ -70,12 +71,13 @@ def test_the_fused_surface_keeps_at_most_one_point_per_cube():
 
 
 def test_the_density_is_even_near_and_far_from_the_walk_and_the_tablets_is_not():
-    scan, _ = reconstruct(10000, SATURATED)
-    near, far = floor_densities(scan.xyz)
-    assert abs(near / far - 1) < 0.25, (near, far)
+    for seed in range(3):
+        scan, _ = reconstruct(8000, SATURATED, seed)
+        near, far = floor_densities(scan.xyz)
+        assert abs(near / far - 1) < 0.25, (seed, near, far)
     # the same walk and casts without the fused surface: the tablet's returns
     scanner, room = box_room()
-    tablet, _ = scan_room(scanner, room, 'tablet', 10000, 0.5, np.random.default_rng(0),
+    tablet, _ = scan_room(scanner, room, 'tablet', 8000, 0.5, np.random.default_rng(0),
                           dict(DEFAULTS['scanner'], batch_rays=BATCH, tablet=SATURATED))
     near, far = floor_densities(tablet.xyz)
     assert near / far > 1.5, (near, far)
