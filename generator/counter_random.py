@@ -65,19 +65,34 @@ def _open_uniform(seed: np.uint64, counter: np.uint64) -> float:
     return (np.float64(word(seed, counter) >> np.uint64(11)) + 0.5) * _UNIT
 
 
+@numba.njit(cache=True, nogil=True, inline='always')
+def _ziggurat_try(bits: np.uint64) -> tuple[float, float, int]:
+    """One try of the ziggurat with a word: the position u in (-1, 1) (from the top 53 bits,
+    with the sign), the value u x the layer's edge, and the layer (the lowest 7 bits)."""
+    layer = np.int64(bits & np.uint64(_LAYERS - 1))
+    u = 2.0 * (np.float64(bits >> np.uint64(11)) * _UNIT) - 1.0
+    return u, u * _EDGES[layer], layer
+
+
+@numba.njit(cache=True, nogil=True, inline='always')
+def normal_first_try(seed: np.uint64, counter: np.uint64) -> tuple[float, bool]:
+    """The first try of :func:`normal` at ``counter``, without a branch: its value and whether
+    it is the draw (in about 99 % of draws; else :func:`normal` gives the draw). A kernel
+    makes the first tries of many items in one pass and calls :func:`normal` for the rest."""
+    u, value, layer = _ziggurat_try(word(seed, counter))
+    return value, abs(u) < _INSIDE[layer]
+
+
 @numba.njit(cache=True, nogil=True)
 def normal(seed: np.uint64, counter: np.uint64) -> float:
     """A standard normal draw from the words ``counter``, ``counter + 1``, ... of stream
     ``seed`` (the first only, but for about 1 % of draws; a caller gives each draw its own
     range of counters, as :data:`ITEM_COUNTERS` does)."""
     while True:
-        bits = word(seed, counter)
+        u, value, layer = _ziggurat_try(word(seed, counter))
         counter += np.uint64(1)
-        layer = np.int64(bits & np.uint64(_LAYERS - 1))
-        # the sign and position from the top 53 bits, the layer from the lowest 7
-        u = 2.0 * (np.float64(bits >> np.uint64(11)) * _UNIT) - 1.0
         if abs(u) < _INSIDE[layer]:
-            return u * _EDGES[layer]
+            return value
         if layer == 0:  # the tail beyond _TAIL_START (Marsaglia's method)
             while True:
                 x = math.log(_open_uniform(seed, counter)) / _TAIL_START

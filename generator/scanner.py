@@ -201,6 +201,11 @@ def store_ray(ray: int, origin: np.ndarray, x: float, y: float, z: float, norm: 
         cast_directions[ray, axis] = directions[ray, axis]
 
 
+# up to this many targets, an aimed ray's target is found by counting the cumulative shares below
+# its draw, else by a binary search
+_COUNTED_TARGETS = 512
+
+
 @numba.njit(cache=True, nogil=True)
 def _aimed_rays(path: np.ndarray, start: int, cumulative: np.ndarray, low: np.ndarray,
                 extent: np.ndarray, seed: np.uint64, origins: np.ndarray,
@@ -216,7 +221,15 @@ def _aimed_rays(path: np.ndarray, start: int, cumulative: np.ndarray, low: np.nd
     for ray in range(len(origins)):
         step = (start + ray) % len(path)
         counter = np.uint64(4 * ray)
-        box = min(np.searchsorted(cumulative, uniform(seed, counter), side='right'), last)
+        draw = uniform(seed, counter)
+        if last < _COUNTED_TARGETS:
+            # the targets whose cumulative share is at most the draw, counted without a branch
+            # (a binary search mispredicts about every other step)
+            box = 0
+            for target in range(last):
+                box += cumulative[target] <= draw
+        else:
+            box = min(np.searchsorted(cumulative, draw, side='right'), last)
         x = (low[box, 0] + uniform(seed, counter + np.uint64(1)) * extent[box, 0]) - path[step, 0]
         y = (low[box, 1] + uniform(seed, counter + np.uint64(2)) * extent[box, 1]) - path[step, 1]
         z = (low[box, 2] + uniform(seed, counter + np.uint64(3)) * extent[box, 2]) - path[step, 2]

@@ -100,6 +100,13 @@ def _store_hits(t_hit: np.ndarray, primitive: np.ndarray, min_range: float, max_
         triangle[ray] = primitive[ray] if np.isfinite(t_hit[ray]) else 0
 
 
+@numba.njit(cache=True, nogil=True, inline='always')
+def _steep(mine: float, theirs: float, jump: float) -> bool:
+    """Whether two finite neighbouring ranges differ by more than ``jump``."""
+    gap = abs(theirs - mine)
+    return gap > jump and gap < np.inf
+
+
 @numba.njit(cache=True, nogil=True)
 def _depth_edges(ranges: np.ndarray, triangle: np.ndarray, columns: int, on_object: np.ndarray,
                  part: np.ndarray,
@@ -107,49 +114,62 @@ def _depth_edges(ranges: np.ndarray, triangle: np.ndarray, columns: int, on_obje
     """The beams (ascending) of a grid (flattened, ``columns`` azimuths per row) at an object
     edge, with the range and triangle of the neighbour across the largest range step. The
     neighbours in this order: azimuth - 1 and + 1 (wrapping around), elevation - 1 and + 1; a
-    later one replaces an earlier one only with a larger step."""
+    later one replaces an earlier one only with a larger step.
+
+    Row by row: first, without branches, the beams with a range step over ``jump`` to some
+    neighbour (a small share of a grid); then the triangles of those only."""
     size = len(ranges)
     rows = size // columns
     edges = np.empty(size, dtype=np.int64)
     other = np.empty(size)
     other_tri = np.empty(size, dtype=triangle.dtype)
+    steep = np.empty(columns, dtype=np.bool_)
     count = 0
-    row, column = 0, -1  # counted on with the beam, without divisions
-    for beam in range(size):
-        column += 1
-        if column == columns:
-            row, column = row + 1, 0
-        mine = ranges[beam]
-        if not np.isfinite(mine):  # a step from a lost beam is no edge
-            continue
-        mine_on_object = on_object[triangle[beam]]
-        largest = 0.0
-        for side in range(4):
-            if side == 0:
-                neighbour = beam - 1 if column > 0 else beam + columns - 1
-            elif side == 1:
-                neighbour = beam + 1 if column < columns - 1 else beam - columns + 1
-            elif side == 2:
-                if row == 0:
+    for row in range(rows):
+        first = row * columns
+        # the rows above and below (the row itself at the grid's border: no step)
+        below = first - columns if row > 0 else first
+        above = first + columns if row < rows - 1 else first
+        for column in range(columns):
+            mine = ranges[first + column]
+            left = ranges[first + (column - 1 if column > 0 else columns - 1)]
+            right = ranges[first + (column + 1 if column < columns - 1 else 0)]
+            steep[column] = (_steep(mine, left, jump) | _steep(mine, right, jump)
+                             | _steep(mine, ranges[below + column], jump)
+                             | _steep(mine, ranges[above + column], jump))
+        for column in range(columns):
+            if not steep[column]:
+                continue
+            beam = first + column
+            mine = ranges[beam]
+            mine_on_object = on_object[triangle[beam]]
+            largest = 0.0
+            for side in range(4):
+                if side == 0:
+                    neighbour = beam - 1 if column > 0 else beam + columns - 1
+                elif side == 1:
+                    neighbour = beam + 1 if column < columns - 1 else beam - columns + 1
+                elif side == 2:
+                    if row == 0:
+                        continue
+                    neighbour = beam - columns
+                else:
+                    if row == rows - 1:
+                        continue
+                    neighbour = beam + columns
+                theirs = ranges[neighbour]
+                gap = abs(theirs - mine)
+                if not (gap > jump and gap > largest and gap < np.inf):
                     continue
-                neighbour = beam - columns
-            else:
-                if row == rows - 1:
+                their_tri = triangle[neighbour]
+                if not (mine_on_object or on_object[their_tri]):
                     continue
-                neighbour = beam + columns
-            theirs = ranges[neighbour]
-            gap = abs(theirs - mine)
-            if not (gap > jump and gap > largest and gap < np.inf):
-                continue
-            their_tri = triangle[neighbour]
-            if not (mine_on_object or on_object[their_tri]):
-                continue
-            if part[their_tri] == part[triangle[beam]]:
-                continue
-            largest, other[count], other_tri[count] = gap, theirs, their_tri
-        if largest > 0:
-            edges[count] = beam
-            count += 1
+                if part[their_tri] == part[triangle[beam]]:
+                    continue
+                largest, other[count], other_tri[count] = gap, theirs, their_tri
+            if largest > 0:
+                edges[count] = beam
+                count += 1
     return edges[:count].copy(), other[:count].copy(), other_tri[:count].copy()
 
 

@@ -21,7 +21,8 @@ from typing import Any, Mapping
 import numba
 import numpy as np
 
-from generator.counter_random import ITEM_COUNTERS, normal, stream_seed, uniform, word
+from generator.counter_random import (ITEM_COUNTERS, normal, normal_first_try, stream_seed,
+                                     uniform, word)
 from generator.scanner import ScanResult, Scanner
 from generator.sensor_common import (RoomGeometry, _cast_grid, _clearance, _depth_edges, _inset,
                                      _result)
@@ -116,26 +117,46 @@ def _grid_points(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: 
     """Points (N, 3) of ``beams`` (grid indices) at their ``measured`` ranges (N,)."""
     columns = len(cos_azimuth)
     xyz = np.empty((len(beams), 3))
+    row, first = 0, 0  # the row of the last beam and its first beam
     for k in range(len(beams)):
         beam = beams[k]
-        row = beam // columns
-        column = beam - row * columns
+        # the row from a division only when it changes (ascending beams mostly stay in it)
+        if beam < first or beam >= first + columns:
+            row = beam // columns
+            first = row * columns
+        column = beam - first
         xyz[k, 0] = station[0] + cos_elevation[row] * cos_azimuth[column] * measured[k]
         xyz[k, 1] = station[1] + cos_elevation[row] * sin_azimuth[column] * measured[k]
         xyz[k, 2] = station[2] + sin_elevation[row] * measured[k]
     return xyz
 
 
+# beams whose range errors the noise kernel draws at a time (buffers that stay in the cache)
+_NOISE_CHUNK = 2048
+
+
 @numba.njit(cache=True, nogil=True)
 def _add_range_noise(ranges: np.ndarray, seed: np.uint64, a: float, b: float) -> None:
     """Move every finite range by a standard normal draw x (a + b x range), in place: beam k's
     draw from its counters after the first in the stream ``seed``
-    (:data:`generator.counter_random.ITEM_COUNTERS`, :func:`generator.counter_random.normal`)."""
-    for beam in range(len(ranges)):
-        measured = ranges[beam]
-        if np.isfinite(measured):
-            draw = normal(seed, np.uint64(beam) * ITEM_COUNTERS + np.uint64(1))
-            ranges[beam] = measured + draw * (a + b * measured)
+    (:data:`generator.counter_random.ITEM_COUNTERS`, :func:`generator.counter_random.normal`).
+
+    Chunk by chunk: the draws' first tries in one pass without branches, then the ranges, with
+    :func:`generator.counter_random.normal` for the draws whose first try fails (about 1 %)."""
+    tries = np.empty(_NOISE_CHUNK)
+    accepted = np.empty(_NOISE_CHUNK, dtype=np.bool_)
+    for start in range(0, len(ranges), _NOISE_CHUNK):
+        stop = min(start + _NOISE_CHUNK, len(ranges))
+        for beam in range(start, stop):
+            tries[beam - start], accepted[beam - start] = normal_first_try(
+                seed, np.uint64(beam) * ITEM_COUNTERS + np.uint64(1))
+        for beam in range(start, stop):
+            measured = ranges[beam]
+            if np.isfinite(measured):
+                draw = tries[beam - start]
+                if not accepted[beam - start]:
+                    draw = normal(seed, np.uint64(beam) * ITEM_COUNTERS + np.uint64(1))
+                ranges[beam] = measured + draw * (a + b * measured)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -410,15 +431,16 @@ def _uniform_subset(total: int, wanted: int, seed: np.uint64) -> np.ndarray:
     """Ascending indices of ``wanted`` of ``total`` items, every such subset equally likely:
     selection sampling (Knuth's algorithm S), item k taken with probability (still wanted) /
     (items left) by the uniform draw k of the stream ``seed``."""
-    chosen = np.empty(wanted, dtype=np.int64)
+    # one slot more: each item is written to the next slot, which it keeps when taken (no
+    # branch on a draw)
+    chosen = np.empty(wanted + 1, dtype=np.int64)
     count = 0
     for item in range(total):
         if count == wanted:
             break
-        if uniform(seed, np.uint64(item)) * (total - item) < wanted - count:
-            chosen[count] = item
-            count += 1
-    return chosen
+        chosen[count] = item
+        count += uniform(seed, np.uint64(item)) * (total - item) < wanted - count
+    return chosen[:wanted]
 
 
 def _finite_rows(ranges: np.ndarray, dtype: type) -> np.ndarray:
@@ -497,7 +519,9 @@ def station_returns(scanner: Scanner, stations: np.ndarray, step_deg: float,
             beams = cubes.new_returns(station, angles, ranges, seed)
         else:
             beams = _finite_rows(ranges, np.int32 if ranges.size < 2**31 else np.int64)
-        kept.append(StationReturns(station, beams, ranges[beams], triangle[beams], stray[beams]))
+        # np.take gathers faster than fancy indexing
+        kept.append(StationReturns(station, beams, np.take(ranges, beams),
+                                   np.take(triangle, beams), np.take(stray, beams)))
     if cubes is not None:
         cubes.release()
     return kept
@@ -517,14 +541,20 @@ def returns_points(returns: list[StationReturns], step_deg: float, min_elevation
             low, high = np.searchsorted(chosen, (first, first + len(kept.beams)))
             mine = chosen[low:high] - first
         first += len(kept.beams)
-        points.append(_grid_points(kept.station, *angles, kept.beams[mine], kept.ranges[mine]))
-        triangles.append(kept.triangle[mine])
+        points.append(_grid_points(kept.station, *angles, _taken(kept.beams, mine),
+                                   _taken(kept.ranges, mine)))
+        triangles.append(_taken(kept.triangle, mine))
         owner.append(np.full(len(points[-1]), index, dtype=np.int32))
-        strays.append(kept.stray[mine])
+        strays.append(_taken(kept.stray, mine))
     if len(returns) == 1:  # no copies of one station's returns
         return points[0], triangles[0], owner[0], strays[0]
     return (np.concatenate(points), np.concatenate(triangles), np.concatenate(owner),
             np.concatenate(strays))
+
+
+def _taken(values: np.ndarray, rows: np.ndarray | slice) -> np.ndarray:
+    """``values[rows]``; index arrays gathered with np.take (faster than fancy indexing)."""
+    return values[rows] if isinstance(rows, slice) else np.take(values, rows)
 
 
 def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.random.Generator,

@@ -5,6 +5,7 @@ cube represented, noise of the configured std, a subset of exactly the wanted si
 equally likely) and the same numbers from the same seed."""
 import numba
 import numpy as np
+import pytest
 from scipy import stats
 
 from generator.counter_random import normal, uniform
@@ -163,6 +164,30 @@ def test_aimed_rays_pick_targets_by_their_weights():
     # the target of each ray: the axis its direction points along
     counts = np.bincount(np.argmax(directions, axis=1), minlength=3)
     assert stats.chisquare(counts, weights * n).pvalue > 1e-3
+
+
+@pytest.mark.parametrize('targets', [12, 600])
+def test_aimed_rays_take_the_target_of_their_first_draw(targets):
+    # point targets (no extent) at (k + 1, 1, 0): a ray's direction tells its target; the
+    # target is the first whose cumulative share exceeds the ray's first uniform draw (few
+    # targets are counted, many searched)
+    n = 20_000
+    path = np.zeros((3, 3))
+    low = np.stack([np.arange(1.0, targets + 1), np.ones(targets), np.zeros(targets)], axis=1)
+    cumulative = np.cumsum(np.random.default_rng(targets).random(targets))
+    cumulative /= cumulative[-1]
+    rays = (np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3), np.float32),
+            np.empty((n, 3), np.float32))
+    _aimed_rays(path, 0, cumulative, low, np.zeros((targets, 3)), np.uint64(9), *rays)
+    target = np.rint(rays[1][:, 0] / rays[1][:, 1]).astype(int) - 1
+    draws = _uniforms_every(np.uint64(9), 4, n)
+    expected = np.minimum(np.searchsorted(cumulative, draws, side='right'), targets - 1)
+    np.testing.assert_array_equal(target, expected)
+
+
+@numba.njit
+def _uniforms_every(seed: np.uint64, stride: int, count: int) -> np.ndarray:
+    return np.array([uniform(seed, np.uint64(stride * k)) for k in range(count)])
 
 
 def test_tablet_returns_get_range_noise_of_the_configured_std():
