@@ -32,7 +32,8 @@ demo: setup
 # train areas 7, 8 and test area 9 with configs/tr3d/exp2_cpu.py. Every step resumes: finished
 # rooms are kept, training continues from the newest checkpoint of work_dirs/exp2_cpu, and the
 # test uses the final epoch's checkpoint (named in last_checkpoint), on all of area 9 and then on
-# the rooms of each generator sensor (tools/test.py --sensor), each test with its box-fit table
+# the rooms of each generator sensor that scanned some of them (tools/dataset_stats.py --sensors,
+# tools/test.py --sensor), each test with its box-fit table
 # (--box-fit), the area-9 test also with what its false positives hit (--false-positives).
 # About 2 hours on an idle 2-core machine in the default 2 processes (12 epochs of 8-9 min with
 # their validation). Rooms written by an older generator are kept as they are:
@@ -91,7 +92,8 @@ exp2-cpu: setup
 	    --work-dir $(EXP2_WORK)/test --box-fit --false-positives --cfg-options $(EXP2_CFG_OPTIONS)
 	$(PY) tools/test.py $(EXP2_CONFIG) $$(cat $(EXP2_WORK)/last_checkpoint) --tta \
 	    --work-dir $(EXP2_WORK)/test_tta --box-fit --false-positives --cfg-options $(EXP2_CFG_OPTIONS)
-	for sensor in paper tls tablet depth_frame reconstruction; do \
+	sensors=$$($(PY) tools/dataset_stats.py $(EXP2_DATA) --areas 9 --sensors) || exit 1; \
+	for sensor in $$sensors; do \
 	    $(PY) tools/test.py $(EXP2_CONFIG) $$(cat $(EXP2_WORK)/last_checkpoint) \
 	        --sensor $$sensor --work-dir $(EXP2_WORK)/test_$$sensor --box-fit \
 	        --cfg-options $(EXP2_CFG_OPTIONS) || exit 1; \

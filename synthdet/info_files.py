@@ -56,7 +56,7 @@ def load_info_pickle(path: str | os.PathLike) -> dict:
 
 
 def room_sensor(room: dict) -> str:
-    """The generator sensor model (``paper``, ``tls``, ``tablet``) that scanned a validated
+    """The generator sensor model (``synthdet.contracts.SENSOR_MODELS``) that scanned a validated
     ``synthdet.room/1`` document; rooms from before the sensor models are ``paper``."""
     return room.get('generator', {}).get('sensor', {}).get('model', 'paper')
 
@@ -69,16 +69,16 @@ def raw_room_dir(data_root: str | os.PathLike, scan_name: str) -> Path | None:
     return Path(data_root) / RAW_DIR / match[1] / match[2] if match else None
 
 
-def rooms_scanned_by(info_file: str | os.PathLike, sensor: str) -> list[int]:
-    """Indices into the info pickle's ``data_list`` of the rooms that ``sensor`` scanned.
+def room_sensors(info_file: str | os.PathLike) -> list[str]:
+    """The generator sensor model of every room of the info pickle, in its ``data_list`` order.
 
     Each room's ``meta.json`` is looked up in the raw folder next to the pickle
     (``<data_root>/Stanford3dDataset_v1.2_Aligned_Version/Area_N/<room>/meta.json``); a room
     without one (a real S3DIS room) raises ``InfoFileError`` naming it.
     """
     info_file = Path(info_file)
-    selected = []
-    for index, info in enumerate(load_info_pickle(info_file)['data_list']):
+    sensors = []
+    for info in load_info_pickle(info_file)['data_list']:
         name = Path(info['lidar_points']['lidar_path']).name
         room_dir = raw_room_dir(info_file.parent, name)
         meta = room_dir / 'meta.json' if room_dir else None
@@ -86,8 +86,13 @@ def rooms_scanned_by(info_file: str | os.PathLike, sensor: str) -> list[int]:
             raise InfoFileError(f'{info_file}: room {name} has no generator meta.json '
                                 f'({meta or "not an Area_N_<room>.bin name"})')
         try:
-            if room_sensor(read_room(meta)) == sensor:
-                selected.append(index)
+            sensors.append(room_sensor(read_room(meta)))
         except SchemaError as error:
             raise InfoFileError(str(error)) from None
-    return selected
+    return sensors
+
+
+def rooms_scanned_by(info_file: str | os.PathLike, sensor: str) -> list[int]:
+    """Indices into the info pickle's ``data_list`` of the rooms that ``sensor`` scanned
+    (:func:`room_sensors`)."""
+    return [index for index, model in enumerate(room_sensors(info_file)) if model == sensor]

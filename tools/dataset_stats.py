@@ -5,13 +5,33 @@ Counts come from the info pickles ``<data_root>/s3dis_infos_Area_N.pkl`` written
 (``synthdet.table1/1``) and as text (``table1.txt``). Example::
 
     python tools/dataset_stats.py data/s3dis --areas 1 2 3 4 5 6 7 8 9 --out work_dirs/table1.json
+
+``--sensors`` prints instead the generator sensor models that scanned the areas' rooms (their
+``meta.json``), one per line in the order of ``synthdet.contracts.SENSOR_MODELS``: the sensors
+``tools/test.py --sensor`` has rooms for (``make exp2-cpu`` tests each of them).
 """
 import argparse
 import sys
 
-from projects.synthdet.evaluation.table1 import count_instances, format_table1, table1  # noqa: E501
-from synthdet.info_files import InfoFileError
+from projects.synthdet.evaluation.table1 import (
+    count_instances, find_info_areas, format_table1, info_path, table1)
+from synthdet.contracts import SENSOR_MODELS
+from synthdet.info_files import InfoFileError, room_sensors
 from projects.synthdet.evaluation.table_files import write_table
+
+
+def sensors_of_areas(data_root: str, areas: list[int] | None, extra_tag: str) -> list[str]:
+    """The sensor models that scanned the rooms of the areas' info pickles (default: every
+    pickle found), in the order of ``SENSOR_MODELS``."""
+    areas = find_info_areas(data_root, extra_tag) if areas is None else areas
+    found = set()
+    for area in areas:
+        info_file = info_path(data_root, area, extra_tag)
+        if not info_file.is_file():
+            raise FileNotFoundError(
+                f'{info_file}: info pickle not found (run tools/create_data.py)')
+        found.update(room_sensors(info_file))
+    return [model for model in SENSOR_MODELS if model in found]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -22,8 +42,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--out', help='write the table to this JSON file and a .txt next to it')
     parser.add_argument(
         '--extra-tag', default='s3dis', help='the pickles are <extra-tag>_infos_Area_N.pkl')
+    parser.add_argument(
+        '--sensors',
+        action='store_true',
+        help='print the sensor models that scanned the rooms instead (one per line)')
     args = parser.parse_args(argv)
     try:
+        if args.sensors:
+            print('\n'.join(sensors_of_areas(args.data_root, args.areas, args.extra_tag)))
+            return 0
         counts = count_instances(args.data_root, args.areas, args.extra_tag)
     except (FileNotFoundError, InfoFileError) as error:
         print(f'dataset_stats: error: {error}', file=sys.stderr)

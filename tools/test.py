@@ -1,7 +1,7 @@
 """Evaluate a checkpoint with mmengine's Runner and print the paper's Table 3.
 
 Usage: python tools/test.py CONFIG CHECKPOINT [--work-dir DIR] [--out JSON] [--cfg-options k=v ...]
-                            [--show-dir DIR [--score-thr T]] [--sensor {paper,tls,tablet}]
+                            [--show-dir DIR [--score-thr T]] [--sensor MODEL]
                             [--box-fit] [--false-positives] [--tta]
                             [--launcher {none,pytorch,slurm,mpi}]
 
