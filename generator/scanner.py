@@ -30,7 +30,7 @@ from typing import Any, Mapping, Sequence
 import numba
 import numpy as np
 
-from generator.counter_random import stream_seed, uniform
+from generator.counter_random import ITEM_COUNTERS, normal, normal_first_try, stream_seed, uniform
 from synthdet.geometry import grid_cells
 
 
@@ -170,22 +170,46 @@ def _cast_slice(raycaster, origins: np.ndarray,
 _NO_MAP = np.zeros(0, dtype=np.int64)
 
 
+# rays whose direction draws the uniform-ray kernel makes at a time (buffers that stay in the
+# cache)
+_DRAW_CHUNK = 2048
+
+
 @numba.njit(cache=True, nogil=True)
-def _path_rays(path: np.ndarray, start: int, draws: np.ndarray, origins: np.ndarray,
+def _path_rays(path: np.ndarray, start: int, seed: np.uint64, origins: np.ndarray,
                directions: np.ndarray, cast_origins: np.ndarray,
                cast_directions: np.ndarray) -> None:
     """Write a batch of uniform rays: origins (N, 3) going round ``path`` from ``start``, unit
-    directions (N, 3) of the normal ``draws`` (N, 3) as :func:`random_directions` computes
-    them, and their float32 copies, which Embree casts."""
-    for ray in range(len(draws)):
-        x, y, z = draws[ray, 0], draws[ray, 1], draws[ray, 2]
-        norm = np.sqrt((x * x + y * y) + z * z)
-        directions[ray, 0], directions[ray, 1], directions[ray, 2] = x / norm, y / norm, z / norm
-        step = (start + ray) % len(path)
-        for axis in range(3):
-            origins[ray, axis] = path[step, axis]
-            cast_origins[ray, axis] = origins[ray, axis]
-            cast_directions[ray, axis] = directions[ray, axis]
+    directions (N, 3) of three standard normal draws each, normalised as
+    :func:`random_directions` does, and their float32 copies, which Embree casts. Ray r's
+    draws are those of the items 3r, 3r + 1, 3r + 2 of the stream ``seed``
+    (:data:`generator.counter_random.ITEM_COUNTERS`): chunk by chunk, their first tries in one
+    pass without branches, :func:`generator.counter_random.normal` for the few that fail."""
+    tries = np.empty(3 * _DRAW_CHUNK)
+    accepted = np.empty(3 * _DRAW_CHUNK, dtype=np.bool_)
+    step = start % len(path)
+    for first in range(0, len(origins), _DRAW_CHUNK):
+        stop = min(first + _DRAW_CHUNK, len(origins))
+        for item in range(3 * first, 3 * stop):
+            tries[item - 3 * first], accepted[item - 3 * first] = normal_first_try(
+                seed, np.uint64(item) * ITEM_COUNTERS)
+        for ray in range(first, stop):
+            for axis in range(3):
+                item = 3 * ray + axis
+                if not accepted[item - 3 * first]:
+                    tries[item - 3 * first] = normal(seed, np.uint64(item) * ITEM_COUNTERS)
+            own = 3 * (ray - first)
+            x, y, z = tries[own], tries[own + 1], tries[own + 2]
+            norm = np.sqrt((x * x + y * y) + z * z)
+            directions[ray, 0], directions[ray, 1] = x / norm, y / norm
+            directions[ray, 2] = z / norm
+            for axis in range(3):
+                origins[ray, axis] = path[step, axis]
+                cast_origins[ray, axis] = origins[ray, axis]
+                cast_directions[ray, axis] = directions[ray, axis]
+            step += 1
+            if step == len(path):
+                step = 0
 
 
 @numba.njit(cache=True, nogil=True)
@@ -420,7 +444,7 @@ class Scanner:
                     _aimed_rays(path, start, self.target_cumulative, self.target_lo,
                                 self.target_extent, stream_seed(rng), *rays)
                 else:
-                    _path_rays(path, start, rng.standard_normal((batch, 3)), *rays)
+                    _path_rays(path, start, stream_seed(rng), *rays)
                 cast_origins, cast_dirs = rays[2:]
                 if config['angular_jitter'] > 0:
                     cast_dirs = nominal + rng.standard_normal(

@@ -340,14 +340,14 @@ def _thin_station(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation:
     for slot in fresh[:state[1]]:
         chosen[table[2 * slot + 1]] = True
         table[2 * slot + 1] = -1
-    kept = np.empty(state[1], dtype=np.int64)
+    # each beam written to the next place, which it keeps when chosen (no branch per beam)
+    kept = np.empty(state[1] + 1, dtype=np.int64)
     written = 0
     for beam in range(len(ranges)):
-        if chosen[beam]:
-            kept[written] = beam
-            written += 1
-            chosen[beam] = False
-    return kept, far[:state[2]].copy(), table, state[3]
+        kept[written] = beam
+        written += chosen[beam]
+        chosen[beam] = False
+    return kept[:state[1]], far[:state[2]].copy(), table, state[3]
 
 
 @numba.njit(cache=True, nogil=True)

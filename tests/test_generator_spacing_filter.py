@@ -9,7 +9,7 @@ import pytest
 from scipy import stats
 
 from generator.counter_random import normal, uniform
-from generator.scanner import _aimed_rays
+from generator.scanner import _aimed_rays, _path_rays
 from generator.tablet import _tablet_points, _tablet_rays, _tablet_returns
 from generator.sensor_common import _depth_edges
 from generator.tls import (SpacingFilter, _add_range_noise, _angle_tables, _grid_points,
@@ -188,6 +188,26 @@ def test_aimed_rays_take_the_target_of_their_first_draw(targets):
 @numba.njit
 def _uniforms_every(seed: np.uint64, stride: int, count: int) -> np.ndarray:
     return np.array([uniform(seed, np.uint64(stride * k)) for k in range(count)])
+
+
+def test_uniform_path_rays_are_uniform_on_the_sphere_and_go_round_the_path():
+    n = 100_000
+    path = np.arange(21.0).reshape(7, 3)
+    rays = (np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3), np.float32),
+            np.empty((n, 3), np.float32))
+    _path_rays(path, 3, np.uint64(5), *rays)
+    origins, directions = rays[0], rays[1]
+    np.testing.assert_array_equal(origins, path[(3 + np.arange(n)) % 7])
+    np.testing.assert_allclose(np.linalg.norm(directions, axis=1), 1.0)
+    # uniform on the sphere: the height uniform in [-1, 1] (Archimedes), the azimuth uniform
+    assert stats.kstest((directions[:, 2] + 1) / 2, 'uniform').pvalue > 1e-3
+    azimuth = np.arctan2(directions[:, 1], directions[:, 0])
+    assert stats.kstest((azimuth + np.pi) / (2 * np.pi), 'uniform').pvalue > 1e-3
+    np.testing.assert_array_equal(rays[2], origins.astype(np.float32))
+    np.testing.assert_array_equal(rays[3], directions.astype(np.float32))
+    again = tuple(np.empty_like(r) for r in rays)
+    _path_rays(path, 3, np.uint64(5), *again)
+    np.testing.assert_array_equal(again[1], directions)
 
 
 def test_tablet_returns_get_range_noise_of_the_configured_std():
