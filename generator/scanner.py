@@ -212,19 +212,6 @@ def _path_rays(path: np.ndarray, start: int, seed: np.uint64, origins: np.ndarra
                 step = 0
 
 
-@numba.njit(cache=True, nogil=True)
-def store_ray(ray: int, origin: np.ndarray, x: float, y: float, z: float, norm: float,
-              origins: np.ndarray, directions: np.ndarray, cast_origins: np.ndarray,
-              cast_directions: np.ndarray) -> None:
-    """Write row ``ray`` of a batch: ``origin``, the direction ``(x, y, z) / norm``, and their
-    float32 copies, which Embree casts."""
-    directions[ray, 0], directions[ray, 1], directions[ray, 2] = x / norm, y / norm, z / norm
-    for axis in range(3):
-        origins[ray, axis] = origin[axis]
-        cast_origins[ray, axis] = origins[ray, axis]
-        cast_directions[ray, axis] = directions[ray, axis]
-
-
 # up to this many targets, an aimed ray's target is found by counting the cumulative shares below
 # its draw, else by a binary search
 _COUNTED_TARGETS = 512
@@ -257,9 +244,13 @@ def _aimed_rays(path: np.ndarray, start: int, cumulative: np.ndarray, low: np.nd
         x = (low[box, 0] + uniform(seed, counter + np.uint64(1)) * extent[box, 0]) - path[step, 0]
         y = (low[box, 1] + uniform(seed, counter + np.uint64(2)) * extent[box, 1]) - path[step, 1]
         z = (low[box, 2] + uniform(seed, counter + np.uint64(3)) * extent[box, 2]) - path[step, 2]
-        store_ray(ray, path[step], x, y, z,
-                  np.sqrt((x * x + y * y) + z * z) + 1e-12, origins, directions, cast_origins,
-                  cast_directions)
+        norm = np.sqrt((x * x + y * y) + z * z) + 1e-12
+        directions[ray, 0], directions[ray, 1] = x / norm, y / norm
+        directions[ray, 2] = z / norm
+        for axis in range(3):
+            origins[ray, axis] = path[step, axis]
+            cast_origins[ray, axis] = origins[ray, axis]
+            cast_directions[ray, axis] = directions[ray, axis]
 
 
 @numba.njit(cache=True, nogil=True)
