@@ -168,6 +168,8 @@ def _cast_slice(raycaster, origins: np.ndarray,
 
 # no triangle map: the hit triangles are the scene's own
 _NO_MAP = np.zeros(0, dtype=np.int64)
+# no stray returns (see :func:`_labels`)
+_NO_STRAY = np.zeros(0, dtype=bool)
 
 
 # rays whose direction draws the uniform-ray kernel makes at a time (buffers that stay in the
@@ -305,6 +307,22 @@ def _glass_hits(t_hit: np.ndarray, primitive: np.ndarray, glass: np.ndarray) -> 
             rows[count] = ray
             count += 1
     return rows[:count].copy()
+
+
+@numba.njit(cache=True, nogil=True)
+def _labels(triangle: np.ndarray, colors: np.ndarray, part_of: np.ndarray,
+            movable_tri: np.ndarray, stray: np.ndarray, rgb: np.ndarray, part: np.ndarray,
+            triangles: np.ndarray) -> int:
+    """Write each return's color, part and triangle (int64) in one pass; returns the number
+    of returns on objects, ``stray`` ones (empty: none) left out."""
+    object_points = 0
+    for k in range(len(triangle)):
+        index = triangle[k]
+        rgb[k, 0], rgb[k, 1], rgb[k, 2] = colors[index, 0], colors[index, 1], colors[index, 2]
+        part[k] = part_of[index]
+        triangles[k] = index
+        object_points += movable_tri[index] and not (len(stray) and stray[k])
+    return object_points
 
 
 class Scanner:
@@ -482,10 +500,13 @@ class Scanner:
                           f'scene (is the room closed?)')
         count = state['points']
         xyz, origin, tri = xyz[:count], origin[:count], tri[:count]
+        rgb, part = np.empty((count, 3), dtype=np.uint8), np.empty(count, dtype=np.int32)
+        _labels(tri, self.scene.colors, self.scene.part, self.movable_tri, _NO_STRAY, rgb, part,
+                tri)
         return ScanResult(
             xyz=xyz,
-            rgb=np.take(self.scene.colors, tri, axis=0),
-            part=self.scene.part[tri].astype(np.int32, copy=False),
+            rgb=rgb,
+            part=part,
             triangle=tri,
             origin=origin,
             rays_cast=state['rays'],

@@ -13,8 +13,8 @@ from typing import Any, Callable, Mapping, Sequence
 import numba
 import numpy as np
 
-from generator.scanner import (ScanResult, Scanner, TriangleScene, part_bounds,
-                               triangles_of_colors)
+from generator.scanner import (_NO_STRAY, ScanResult, Scanner, TriangleScene, _labels,
+                               part_bounds, triangles_of_colors)
 from synthdet.geometry import grid_cells
 
 # the room's structure; every other part is an object (kept clear of, edges for mixed pixels)
@@ -194,13 +194,18 @@ def _result(scanner: Scanner,
     """Label the returns by their triangles; ``origin`` (N, 3): where each was seen from;
     ``stray`` (N,): returns between two surfaces, which count as no object's points."""
     scene = scanner.scene
-    on_object = scanner.movable_tri[triangle]
+    rgb = np.empty((len(triangle), 3), dtype=np.uint8)
+    part = np.empty(len(triangle), dtype=np.int32)
+    triangles = np.empty(len(triangle), dtype=np.int64)
+    object_points = _labels(triangle, scene.colors, scene.part, scanner.movable_tri,
+                            _NO_STRAY if stray is None else stray, rgb, part,
+                            triangles)
     return ScanResult(
         xyz=xyz.astype(np.float64, copy=False),
-        rgb=np.take(scene.colors, triangle, axis=0),
-        part=scene.part[triangle].astype(np.int32, copy=False),
-        triangle=triangle.astype(np.int64, copy=False),
+        rgb=rgb,
+        part=part,
+        triangle=triangles,
         origin=origin.astype(np.float32, copy=False),
         rays_cast=int(rays),
-        object_points=int((on_object if stray is None else on_object & ~stray).sum()),
+        object_points=object_points,
         stray=stray)
