@@ -150,6 +150,8 @@ def part_bounds(scene: TriangleScene, parts: np.ndarray) -> tuple[np.ndarray, np
     return low, high
 
 
+# rays per casting thread a sensor model casts at a time (see :meth:`Scanner.slice_size`)
+CACHE_SLICE = 32768
 # fewer rays than this per thread are cast on one thread (starting threads would cost more)
 _MIN_SLICE = 16_384
 # a ray that passes a glass face goes on from this far (metres) behind it
@@ -357,6 +359,12 @@ class Scanner:
             self.object_tri) else None
         # the glass triangles in the objects-only scene's triangle order
         self._object_glass_tri = self.glass_tri[self.object_tri]
+
+    def slice_size(self, batch: int) -> int:
+        """Rays a sensor model casts at a time out of a batch of ``batch``: at most
+        ``CACHE_SLICE`` per casting thread, so that a slice's rays and hits stay in the cores'
+        caches (each ray is cast on its own: slicing a batch changes no hit)."""
+        return min(batch, CACHE_SLICE * (self.threads or os.cpu_count() or 1))
 
     def _embree(self, triangles: np.ndarray):
         from embreex.mesh_construction import TriangleMesh

@@ -13,7 +13,6 @@ background. There is no object-ratio phase: the share of object points is what t
 gives.
 """
 import math
-import os
 import threading
 import warnings
 from dataclasses import dataclass
@@ -471,11 +470,6 @@ def _write_finite_rows(values: np.ndarray, rows: np.ndarray) -> None:
             count += 1
 
 
-# the most beams of a station's grid cast at a time per casting thread (see
-# :func:`station_returns`)
-_GRID_SLICE = 32768
-
-
 @dataclass
 class StationReturns:
     """The returns one station keeps: grid indices (ascending), measured ranges, triangles and
@@ -499,11 +493,9 @@ def station_returns(scanner: Scanner, stations: np.ndarray, step_deg: float,
     spacing = cfg['point_spacing']
     cubes = SpacingFilter(spacing, stations[0]) if spacing else None
     kept = []
-    # the grid is cast in slices of at most batch rays and at most _GRID_SLICE per casting
-    # thread, whose rays and hits stay in a core's cache (each beam is cast on its own: the
-    # slices change no return); one slice's directions, written slice by slice: no array of
-    # the whole grid's rays
-    batch = min(batch, _GRID_SLICE * (scanner.threads or os.cpu_count() or 1))
+    # the grid is cast in slices (Scanner.slice_size); one slice's directions, written slice
+    # by slice: no array of the whole grid's rays
+    batch = scanner.slice_size(batch)
     directions = np.empty((min(batch, grid[0] * grid[1]), 3), dtype=np.float32)
     for station in stations:
         # the station as the float32 rays Embree casts, without a copy per beam
