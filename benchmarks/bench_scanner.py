@@ -258,7 +258,7 @@ class TimedRandom:
         def timed_draw(*args, **kwargs):
             start = time.perf_counter()
             answer = method(*args, **kwargs)
-            if np.ndim(answer) == 1:  # range errors; (N, 3) draws are directions
+            if np.ndim(answer) == 1:  # range errors; (N, 3) draws are the angular jitter
                 self._seconds['noise'] += time.perf_counter() - start
             return answer
 
