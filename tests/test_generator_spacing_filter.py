@@ -2,18 +2,20 @@
 counter-based draws the sensor models make in their kernels: the distributions they promise
 (normal and uniform draws, one return per cube drawn uniformly among the cube's returns, every
 cube represented, noise of the configured std, a subset of exactly the wanted size, every subset
-equally likely) and the same numbers from the same seed."""
+equally likely), the same numbers from the same seed, and the kernels' branch-free passes and
+cast slices giving what the rules they implement give."""
 import numba
 import numpy as np
 import pytest
 from scipy import stats
 
+from generator.config import DEFAULTS
 from generator.counter_random import normal, uniform
-from generator.scanner import _aimed_rays, _path_rays
+from generator.scanner import Scanner, _aimed_rays, _path_rays
 from generator.tablet import _tablet_points, _tablet_rays, _tablet_returns
 from generator.sensor_common import _depth_edges
 from generator.tls import (SpacingFilter, _add_range_noise, _angle_tables, _grid_points,
-                           _mixed_pixels, _priorities, _uniform_subset, tls_grid)
+                           _mixed_pixels, _priorities, _uniform_subset, cast_tls, tls_grid)
 
 
 @numba.njit
@@ -268,3 +270,88 @@ def test_tablet_rays_take_uniform_poses_and_pixels_and_the_kept_points_lie_on_th
     np.testing.assert_array_equal(triangle, rows)
     expected = origins[rows] + directions[rows].astype(np.float64) * measured[:, None]
     np.testing.assert_allclose(xyz, expected, atol=1e-6)
+
+
+def _edge_rule(ranges: np.ndarray, triangle: np.ndarray, on_object: np.ndarray, part: np.ndarray,
+               jump: float) -> list[tuple[int, float, int]]:
+    """The depth edges of a grid (E, A) beam by beam, as documented: (beam, range, triangle)
+    of the neighbour across the largest step."""
+    rows, columns = ranges.shape
+    found = []
+    for row in range(rows):
+        for column in range(columns):
+            mine = ranges[row, column]
+            if not np.isfinite(mine):
+                continue
+            largest, best = 0.0, None
+            neighbours = [(row, (column - 1) % columns), (row, (column + 1) % columns)]
+            neighbours += [(r, column) for r in (row - 1, row + 1) if 0 <= r < rows]
+            for r, c in neighbours:
+                gap = abs(ranges[r, c] - mine)
+                if not (jump < gap < np.inf and gap > largest):
+                    continue
+                theirs, own = triangle[r, c], triangle[row, column]
+                if (on_object[own] or on_object[theirs]) and part[theirs] != part[own]:
+                    largest, best = gap, (row * columns + column, ranges[r, c], theirs)
+            if best is not None:
+                found.append(best)
+    return found
+
+
+def test_depth_edges_follow_the_edge_rule_beam_by_beam():
+    # a random grid with lost beams, three parts (two objects), steps of all sizes
+    rng = np.random.default_rng(4)
+    ranges = rng.choice([1.0, 1.05, 2.0, 3.5], (13, 17)) + rng.uniform(0, 0.04, (13, 17))
+    ranges[rng.random((13, 17)) < 0.15] = np.inf
+    triangle = rng.integers(0, 6, (13, 17)).astype(np.int32)
+    on_object, part = np.array([False, False, True, True, True, False]), np.array([0, 0, 1, 1, 2,
+                                                                                   0])
+    edges, other, other_tri = _depth_edges(ranges.reshape(-1), triangle.reshape(-1), 17,
+                                           on_object, part, 0.1)
+    expected = _edge_rule(ranges, triangle, on_object, part, 0.1)
+    assert len(expected) > 20
+    assert list(zip(edges.tolist(), other.tolist(), other_tri.tolist())) == expected
+
+
+@numba.njit
+def _beam_draws(seed: np.uint64, count: int) -> np.ndarray:
+    return np.array([normal(seed, np.uint64(256 * k + 1)) for k in range(count)])
+
+
+def test_range_noise_is_each_beams_own_normal_draw():
+    # chunks of beams draw the first tries apart from the rest: each beam still gets the
+    # normal draw of its own counters
+    ranges = np.random.default_rng(2).uniform(0.5, 9.0, 10_000)
+    ranges[::9] = np.inf
+    noisy = ranges.copy()
+    _add_range_noise(noisy, np.uint64(21), 0.002, 0.0005)
+    finite = np.isfinite(ranges)
+    draws = _beam_draws(np.uint64(21), len(ranges))
+    np.testing.assert_array_equal(noisy[finite], ranges[finite] + draws[finite] *
+                                  (0.002 + 0.0005 * ranges[finite]))
+    assert (np.abs(draws) > 3.442619855899).sum() > 0  # draws past the ziggurat's first try
+
+
+def test_grid_points_of_beams_in_any_order():
+    angles = _angle_tables(*tls_grid(3.0, -60.0))
+    station = np.array([1.0, -2.0, 1.5])
+    beams = np.random.default_rng(5).permutation(len(angles[0]) * len(angles[2]))[:3000]
+    measured = np.linspace(1.0, 7.0, len(beams))
+    row, column = np.divmod(beams, len(angles[2]))
+    direction = np.stack([angles[0][row] * angles[2][column], angles[0][row] * angles[3][column],
+                          angles[1][row]], axis=1)
+    np.testing.assert_allclose(_grid_points(station, *angles, beams, measured),
+                               station + direction * measured[:, None], atol=1e-12)
+
+
+def test_tls_returns_do_not_depend_on_the_slices_of_the_cast():
+    from tests.test_generator_sensors import objects, room_scene
+    scanner = Scanner(room_scene((6.0, 5.0, 3.0), [((2, 2, 0), (3, 3, 1), (200, 0, 0))]), 1,
+                      [(200, 0, 0)], 0.5)
+    station = np.array([[4.0, 1.5, 1.4]])
+    cfg = DEFAULTS['scanner']['tls']
+    assert scanner.slice_size(700) == 700 and scanner.slice_size(10**6) == 32768
+    small, large = (cast_tls(scanner, station, 1.5, np.random.default_rng(3), cfg, batch,
+                             objects(scanner)) for batch in (700, 10**6))
+    for a, b in zip(small, large):
+        np.testing.assert_array_equal(a, b)
