@@ -13,7 +13,8 @@ from typing import Any, Mapping, Sequence
 import numba
 import numpy as np
 
-from generator.counter_random import ITEM_COUNTERS, normal, stream_seed, uniform
+from generator.counter_random import (ITEM_COUNTERS, normal, normal_first_try, stream_seed,
+                                     uniform)
 from generator.scanner import ScanResult, Scanner, row_norms
 from generator.sensor_common import RoomGeometry, _clearance, _inset, _result, _surface_loss
 from synthdet.geometry import points_in_polygon
@@ -145,6 +146,11 @@ def _tablet_rays(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up:
             cast_origins[ray, axis] = positions[p, axis]
 
 
+# rays whose range errors' first tries the returns kernel draws at a time (buffers that stay in
+# the cache)
+_DRAW_CHUNK = 2048
+
+
 @numba.njit(cache=True, nogil=True)
 def _tablet_returns(t_hit: np.ndarray, primitive: np.ndarray, seed: np.uint64,
                     loss: np.ndarray, range_noise: float, far_keep: float, near: float,
@@ -153,23 +159,35 @@ def _tablet_returns(t_hit: np.ndarray, primitive: np.ndarray, seed: np.uint64,
     distance plus a standard normal draw x ``range_noise`` within [near, far], kept when a
     uniform draw is below the keep probability (falling from 1 at ``near`` to ``far_keep`` at
     ``far``, times one minus the triangle's ``loss``); the draws from the stream ``seed``."""
-    kept = np.empty(min(len(t_hit), max(most, 0)), dtype=np.int64)
-    measured = np.empty(len(kept))
+    wanted = min(len(t_hit), max(most, 0))
+    # one place more: each hit is written to the next place, which it keeps when kept (no
+    # branch on a draw)
+    kept = np.empty(wanted + 1, dtype=np.int64)
+    measured = np.empty(wanted + 1)
+    tries = np.empty(_DRAW_CHUNK)
+    accepted = np.empty(_DRAW_CHUNK, dtype=np.bool_)
     count = 0
-    for ray in range(len(t_hit)):
-        if count == len(kept):
-            break
-        if not np.isfinite(t_hit[ray]):
-            continue
-        counter = np.uint64(ray) * ITEM_COUNTERS
-        distance = np.float64(t_hit[ray]) + normal(seed, counter + np.uint64(4)) * range_noise
-        if distance < near or distance > far:
-            continue
-        keep = 1.0 - (1.0 - far_keep) * (distance - near) / (far - near)
-        keep *= 1.0 - loss[primitive[ray]]
-        if uniform(seed, counter + np.uint64(3)) < keep:
+    for first in range(0, len(t_hit), _DRAW_CHUNK):
+        stop = min(first + _DRAW_CHUNK, len(t_hit))
+        # the range errors' first tries, without branches
+        for ray in range(first, stop):
+            tries[ray - first], accepted[ray - first] = normal_first_try(
+                seed, np.uint64(ray) * ITEM_COUNTERS + np.uint64(4))
+        for ray in range(first, stop):
+            if count == wanted:
+                break
+            if not np.isfinite(t_hit[ray]):
+                continue
+            counter = np.uint64(ray) * ITEM_COUNTERS
+            error = tries[ray - first]
+            if not accepted[ray - first]:
+                error = normal(seed, counter + np.uint64(4))
+            distance = np.float64(t_hit[ray]) + error * range_noise
+            keep = 1.0 - (1.0 - far_keep) * (distance - near) / (far - near)
+            keep *= 1.0 - loss[primitive[ray]]
             kept[count], measured[count] = ray, distance
-            count += 1
+            count += (distance >= near) & (distance <= far) & (uniform(
+                seed, counter + np.uint64(3)) < keep)
     return kept[:count], measured[:count]
 
 

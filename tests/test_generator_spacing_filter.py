@@ -355,3 +355,29 @@ def test_tls_returns_do_not_depend_on_the_slices_of_the_cast():
                              objects(scanner)) for batch in (700, 10**6))
     for a, b in zip(small, large):
         np.testing.assert_array_equal(a, b)
+
+
+@numba.njit
+def _ray_draws(seed: np.uint64, count: int) -> tuple[np.ndarray, np.ndarray]:
+    errors = np.array([normal(seed, np.uint64(256 * k + 4)) for k in range(count)])
+    keeps = np.array([uniform(seed, np.uint64(256 * k + 3)) for k in range(count)])
+    return errors, keeps
+
+
+@pytest.mark.parametrize('most', [10**6, 3000])
+def test_tablet_returns_follow_the_keep_rule_ray_by_ray(most):
+    rng = np.random.default_rng(6)
+    t_hit = rng.uniform(0.1, 6.0, 20_000).astype(np.float32)
+    t_hit[rng.random(len(t_hit)) < 0.1] = np.inf
+    primitive = rng.integers(0, 50, len(t_hit)).astype(np.uint32)
+    loss = rng.choice([0.0, 0.3, 0.7], 50)
+    rows, measured = _tablet_returns(t_hit, primitive, np.uint64(8), loss, 0.05, 0.3, 0.3, 5.0,
+                                     most)
+    errors, keeps = _ray_draws(np.uint64(8), len(t_hit))
+    distance = t_hit.astype(np.float64) + errors * 0.05
+    chance = (1.0 - 0.7 * (distance - 0.3) / 4.7) * (1.0 - loss[primitive])
+    expected = np.flatnonzero(np.isfinite(t_hit) & (distance >= 0.3) & (distance <= 5.0) &
+                              (keeps < chance))[:most]
+    np.testing.assert_array_equal(rows, expected)
+    np.testing.assert_array_equal(measured, distance[expected])
+
