@@ -264,21 +264,23 @@ def _returns(t_hit: np.ndarray, primitive: np.ndarray, kept: np.ndarray, movable
     """Rows (ascending) and scene triangles of a batch's returns: finite hits, kept (``kept``
     empty: all), mapped through ``tri_map`` (empty: none), on the structure only unless
     ``keep_movable``; the first ``most`` of them."""
-    rows = np.empty(min(len(t_hit), max(most, 0)), dtype=np.int64)
-    triangles = np.empty(len(rows), dtype=np.int64)
+    wanted = min(len(t_hit), max(most, 0))
+    # one place more: each ray is written to the next place, which it keeps when it is a
+    # return (no branch on a ray's hit)
+    rows = np.empty(wanted + 1, dtype=np.int64)
+    triangles = np.empty(wanted + 1, dtype=np.int64)
     count = 0
     for ray in range(len(t_hit)):
-        if count == len(rows):
+        if count == wanted:
             break
-        if not np.isfinite(t_hit[ray]) or (len(kept) and not kept[ray]):
-            continue
-        triangle = np.int64(primitive[ray])
+        hit = np.isfinite(t_hit[ray])
+        if len(kept):
+            hit &= kept[ray]
+        triangle = np.int64(primitive[ray]) if hit else np.int64(0)  # a miss has none
         if len(tri_map):
             triangle = tri_map[triangle]
-        if not keep_movable and movable_tri[triangle]:
-            continue
         rows[count], triangles[count] = ray, triangle
-        count += 1
+        count += hit & (keep_movable | (not movable_tri[triangle]))
     return rows[:count], triangles[:count]
 
 
