@@ -521,9 +521,7 @@ def station_returns(scanner: Scanner, stations: np.ndarray, step_deg: float,
             beams = cubes.new_returns(station, angles, ranges, seed)
         else:
             beams = _finite_rows(ranges, np.int32 if ranges.size < 2**31 else np.int64)
-        # np.take gathers faster than fancy indexing
-        kept.append(StationReturns(station, beams, np.take(ranges, beams),
-                                   np.take(triangle, beams), np.take(stray, beams)))
+        kept.append(StationReturns(station, beams, *_gathered(beams, ranges, triangle, stray)))
     if cubes is not None:
         cubes.release()
     return kept
@@ -538,25 +536,48 @@ def returns_points(returns: list[StationReturns], step_deg: float, min_elevation
     points, triangles, owner, strays = [], [], [], []
     first = 0
     for index, kept in enumerate(returns):
-        mine = slice(None)
-        if chosen is not None:  # the chosen indices within this station's returns
+        if chosen is None:
+            points.append(_grid_points(kept.station, *angles, kept.beams, kept.ranges))
+            triangles.append(kept.triangle)
+            strays.append(kept.stray)
+        else:  # the chosen indices within this station's returns
             low, high = np.searchsorted(chosen, (first, first + len(kept.beams)))
             mine = chosen[low:high] - first
+            ranges, triangle, stray = _gathered(mine, kept.ranges, kept.triangle, kept.stray)
+            points.append(_grid_points(kept.station, *angles, np.take(kept.beams, mine), ranges))
+            triangles.append(triangle)
+            strays.append(stray)
         first += len(kept.beams)
-        points.append(_grid_points(kept.station, *angles, _taken(kept.beams, mine),
-                                   _taken(kept.ranges, mine)))
-        triangles.append(_taken(kept.triangle, mine))
         owner.append(np.full(len(points[-1]), index, dtype=np.int32))
-        strays.append(_taken(kept.stray, mine))
     if len(returns) == 1:  # no copies of one station's returns
         return points[0], triangles[0], owner[0], strays[0]
     return (np.concatenate(points), np.concatenate(triangles), np.concatenate(owner),
             np.concatenate(strays))
 
 
-def _taken(values: np.ndarray, rows: np.ndarray | slice) -> np.ndarray:
-    """``values[rows]``; index arrays gathered with np.take (faster than fancy indexing)."""
-    return values[rows] if isinstance(rows, slice) else np.take(values, rows)
+@numba.njit(cache=True, nogil=True)
+def _gathered(rows: np.ndarray, ranges: np.ndarray, triangle: np.ndarray,
+              stray: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ``rows`` of a station's ranges, triangles and mixed pixels, in one pass (numpy
+    gathers each array in a pass of its own)."""
+    chosen_ranges = np.empty(len(rows))
+    chosen_triangle = np.empty(len(rows), dtype=triangle.dtype)
+    chosen_stray = np.empty(len(rows), dtype=np.bool_)
+    for k in range(len(rows)):
+        row = rows[k]
+        chosen_ranges[k], chosen_triangle[k], chosen_stray[k] = (ranges[row], triangle[row],
+                                                                 stray[row])
+    return chosen_ranges, chosen_triangle, chosen_stray
+
+
+@numba.njit(cache=True, nogil=True)
+def _station_rows(stations: np.ndarray, owner: np.ndarray) -> np.ndarray:
+    """Row ``owner[k]`` of ``stations`` (S, 3) for every k: where each return was seen from."""
+    rows = np.empty((len(owner), 3), dtype=stations.dtype)
+    for k in range(len(owner)):
+        for axis in range(3):
+            rows[k, axis] = stations[owner[k], axis]
+    return rows
 
 
 def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.random.Generator,
@@ -615,6 +636,5 @@ def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int,
         warnings.warn(f'TLS: only {found} of {n_points} points at an angular step of '
                       f'{step:.4g} deg')
     xyz, triangle, owner, stray = returns_points(returns, step, cfg['min_elevation_deg'], chosen)
-    # np.take gathers rows several times faster than fancy indexing
-    origin = np.take(stations.astype(np.float32), owner, axis=0)
+    origin = _station_rows(stations.astype(np.float32), owner)
     return _result(scanner, xyz, triangle, origin, rays, stray), step
