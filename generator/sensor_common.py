@@ -173,6 +173,17 @@ def _depth_edges(ranges: np.ndarray, triangle: np.ndarray, columns: int, on_obje
     return edges[:count].copy(), other[:count].copy(), other_tri[:count].copy()
 
 
+@numba.njit(cache=True, nogil=True)
+def _rows_of(table: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """Row ``index[k]`` of ``table`` (M, 3) for every k (where each return was seen from): one
+    pass, faster than ``np.take`` along an axis."""
+    rows = np.empty((len(index), 3), dtype=table.dtype)
+    for k in range(len(index)):
+        for axis in range(3):
+            rows[k, axis] = table[index[k], axis]
+    return rows
+
+
 def _surface_loss(scanner: Scanner, cfg: Mapping[str, Any],
                   shiny_colors: Sequence[Sequence[int]]) -> np.ndarray:
     """Per triangle: the probability that a return on it is lost, ``dark_dropout`` when its

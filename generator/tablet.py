@@ -16,7 +16,8 @@ import numpy as np
 from generator.counter_random import (ITEM_COUNTERS, normal, normal_first_try, stream_seed,
                                      uniform)
 from generator.scanner import ScanResult, Scanner, row_norms
-from generator.sensor_common import RoomGeometry, _clearance, _inset, _result, _surface_loss
+from generator.sensor_common import (RoomGeometry, _clearance, _inset, _result, _rows_of,
+                                     _surface_loss)
 from synthdet.geometry import points_in_polygon
 
 
@@ -257,6 +258,5 @@ def cast_tablet(
     if got < n_points:
         warnings.warn(f'tablet: only {got} of {n_points} points after {rays} rays')
     pose = pose_of[:got]
-    # np.take gathers rows several times faster than fancy indexing
-    origin = np.take(positions.astype(np.float32), pose, axis=0)
+    origin = _rows_of(positions.astype(np.float32), pose)
     return _result(scanner, xyz[:got], triangle[:got], origin, rays), pose

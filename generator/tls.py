@@ -25,7 +25,7 @@ from generator.counter_random import (ITEM_COUNTERS, normal, normal_first_try, s
                                      uniform, word)
 from generator.scanner import ScanResult, Scanner
 from generator.sensor_common import (RoomGeometry, _cast_grid, _clearance, _depth_edges, _inset,
-                                     _result)
+                                     _result, _rows_of)
 from synthdet.voxels import hash_slot, packed_key
 
 def tls_stations(room: RoomGeometry, rng: np.random.Generator,
@@ -570,16 +570,6 @@ def _gathered(rows: np.ndarray, ranges: np.ndarray, triangle: np.ndarray,
     return chosen_ranges, chosen_triangle, chosen_stray
 
 
-@numba.njit(cache=True, nogil=True)
-def _station_rows(stations: np.ndarray, owner: np.ndarray) -> np.ndarray:
-    """Row ``owner[k]`` of ``stations`` (S, 3) for every k: where each return was seen from."""
-    rows = np.empty((len(owner), 3), dtype=stations.dtype)
-    for k in range(len(owner)):
-        for axis in range(3):
-            rows[k, axis] = stations[owner[k], axis]
-    return rows
-
-
 def cast_tls(scanner: Scanner, stations: np.ndarray, step_deg: float, rng: np.random.Generator,
              cfg: Mapping[str, Any], batch: int,
              on_object: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -636,5 +626,5 @@ def scan_tls(scanner: Scanner, stations: np.ndarray, n_points: int,
         warnings.warn(f'TLS: only {found} of {n_points} points at an angular step of '
                       f'{step:.4g} deg')
     xyz, triangle, owner, stray = returns_points(returns, step, cfg['min_elevation_deg'], chosen)
-    origin = _station_rows(stations.astype(np.float32), owner)
+    origin = _rows_of(stations.astype(np.float32), owner)
     return _result(scanner, xyz, triangle, origin, rays, stray), step
