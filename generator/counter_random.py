@@ -83,6 +83,17 @@ def normal_first_try(seed: np.uint64, counter: np.uint64) -> tuple[float, bool]:
     return value, abs(u) < _INSIDE[layer]
 
 
+@numba.njit(cache=True, nogil=True, inline='always')
+def first_tries(seed: np.uint64, first: int, stop: int, offset: int, tries: np.ndarray,
+                accepted: np.ndarray) -> None:
+    """:func:`normal_first_try` of the items ``first`` to ``stop - 1`` (item k at counter
+    ``k * ITEM_COUNTERS + offset``) into ``tries[:stop - first]`` and
+    ``accepted[:stop - first]``, in one pass without branches."""
+    for item in range(first, stop):
+        tries[item - first], accepted[item - first] = normal_first_try(
+            seed, np.uint64(item) * ITEM_COUNTERS + np.uint64(offset))
+
+
 @numba.njit(cache=True, nogil=True)
 def normal(seed: np.uint64, counter: np.uint64) -> float:
     """A standard normal draw from the words ``counter``, ``counter + 1``, ... of stream

@@ -30,7 +30,7 @@ from typing import Any, Mapping, Sequence
 import numba
 import numpy as np
 
-from generator.counter_random import ITEM_COUNTERS, normal, normal_first_try, stream_seed, uniform
+from generator.counter_random import ITEM_COUNTERS, first_tries, normal, stream_seed, uniform
 from synthdet.geometry import grid_cells
 
 
@@ -179,6 +179,20 @@ _NO_STRAY = np.zeros(0, dtype=bool)
 _DRAW_CHUNK = 2048
 
 
+@numba.njit(cache=True, nogil=True, inline='always')
+def _write_ray(ray: int, path: np.ndarray, step: int, x: float, y: float, z: float, norm: float,
+               origins: np.ndarray, directions: np.ndarray, cast_origins: np.ndarray,
+               cast_directions: np.ndarray) -> None:
+    """Row ``ray`` of a batch: the origin ``path[step]``, the direction ``(x, y, z) / norm``,
+    and their float32 copies, which Embree casts."""
+    directions[ray, 0], directions[ray, 1] = x / norm, y / norm
+    directions[ray, 2] = z / norm
+    for axis in range(3):
+        origins[ray, axis] = path[step, axis]
+        cast_origins[ray, axis] = origins[ray, axis]
+        cast_directions[ray, axis] = directions[ray, axis]
+
+
 @numba.njit(cache=True, nogil=True)
 def _path_rays(path: np.ndarray, start: int, seed: np.uint64, origins: np.ndarray,
                directions: np.ndarray, cast_origins: np.ndarray,
@@ -194,9 +208,7 @@ def _path_rays(path: np.ndarray, start: int, seed: np.uint64, origins: np.ndarra
     step = start % len(path)
     for first in range(0, len(origins), _DRAW_CHUNK):
         stop = min(first + _DRAW_CHUNK, len(origins))
-        for item in range(3 * first, 3 * stop):
-            tries[item - 3 * first], accepted[item - 3 * first] = normal_first_try(
-                seed, np.uint64(item) * ITEM_COUNTERS)
+        first_tries(seed, 3 * first, 3 * stop, 0, tries, accepted)
         for ray in range(first, stop):
             for axis in range(3):
                 item = 3 * ray + axis
@@ -204,13 +216,8 @@ def _path_rays(path: np.ndarray, start: int, seed: np.uint64, origins: np.ndarra
                     tries[item - 3 * first] = normal(seed, np.uint64(item) * ITEM_COUNTERS)
             own = 3 * (ray - first)
             x, y, z = tries[own], tries[own + 1], tries[own + 2]
-            norm = np.sqrt((x * x + y * y) + z * z)
-            directions[ray, 0], directions[ray, 1] = x / norm, y / norm
-            directions[ray, 2] = z / norm
-            for axis in range(3):
-                origins[ray, axis] = path[step, axis]
-                cast_origins[ray, axis] = origins[ray, axis]
-                cast_directions[ray, axis] = directions[ray, axis]
+            _write_ray(ray, path, step, x, y, z, np.sqrt((x * x + y * y) + z * z), origins,
+                       directions, cast_origins, cast_directions)
             step += 1
             if step == len(path):
                 step = 0
@@ -248,13 +255,8 @@ def _aimed_rays(path: np.ndarray, start: int, cumulative: np.ndarray, low: np.nd
         x = (low[box, 0] + uniform(seed, counter + np.uint64(1)) * extent[box, 0]) - path[step, 0]
         y = (low[box, 1] + uniform(seed, counter + np.uint64(2)) * extent[box, 1]) - path[step, 1]
         z = (low[box, 2] + uniform(seed, counter + np.uint64(3)) * extent[box, 2]) - path[step, 2]
-        norm = np.sqrt((x * x + y * y) + z * z) + 1e-12
-        directions[ray, 0], directions[ray, 1] = x / norm, y / norm
-        directions[ray, 2] = z / norm
-        for axis in range(3):
-            origins[ray, axis] = path[step, axis]
-            cast_origins[ray, axis] = origins[ray, axis]
-            cast_directions[ray, axis] = directions[ray, axis]
+        _write_ray(ray, path, step, x, y, z, np.sqrt((x * x + y * y) + z * z) + 1e-12, origins,
+                   directions, cast_origins, cast_directions)
 
 
 @numba.njit(cache=True, nogil=True)

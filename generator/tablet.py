@@ -13,8 +13,7 @@ from typing import Any, Mapping, Sequence
 import numba
 import numpy as np
 
-from generator.counter_random import (ITEM_COUNTERS, normal, normal_first_try, stream_seed,
-                                     uniform)
+from generator.counter_random import ITEM_COUNTERS, first_tries, normal, stream_seed, uniform
 from generator.scanner import ScanResult, Scanner, row_norms
 from generator.sensor_common import (RoomGeometry, _clearance, _inset, _result, _rows_of,
                                      _surface_loss)
@@ -171,9 +170,7 @@ def _tablet_returns(t_hit: np.ndarray, primitive: np.ndarray, seed: np.uint64,
     for first in range(0, len(t_hit), _DRAW_CHUNK):
         stop = min(first + _DRAW_CHUNK, len(t_hit))
         # the range errors' first tries, without branches
-        for ray in range(first, stop):
-            tries[ray - first], accepted[ray - first] = normal_first_try(
-                seed, np.uint64(ray) * ITEM_COUNTERS + np.uint64(4))
+        first_tries(seed, first, stop, 4, tries, accepted)
         for ray in range(first, stop):
             if count == wanted:
                 break

@@ -21,7 +21,7 @@ from typing import Any, Mapping
 import numba
 import numpy as np
 
-from generator.counter_random import (ITEM_COUNTERS, normal, normal_first_try, stream_seed,
+from generator.counter_random import (ITEM_COUNTERS, first_tries, normal, stream_seed,
                                      uniform, word)
 from generator.scanner import ScanResult, Scanner
 from generator.sensor_common import (RoomGeometry, _cast_grid, _clearance, _depth_edges, _inset,
@@ -147,9 +147,7 @@ def _add_range_noise(ranges: np.ndarray, seed: np.uint64, a: float, b: float) ->
     accepted = np.empty(_NOISE_CHUNK, dtype=np.bool_)
     for start in range(0, len(ranges), _NOISE_CHUNK):
         stop = min(start + _NOISE_CHUNK, len(ranges))
-        for beam in range(start, stop):
-            tries[beam - start], accepted[beam - start] = normal_first_try(
-                seed, np.uint64(beam) * ITEM_COUNTERS + np.uint64(1))
+        first_tries(seed, start, stop, 1, tries, accepted)
         for beam in range(start, stop):
             measured = ranges[beam]
             if np.isfinite(measured):
