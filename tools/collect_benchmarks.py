@@ -109,12 +109,9 @@ NOTES = {
         'its bare cast.',
         '',
         'Three runs of the command above on the idle machine (2026-12-06 21:45-21:49, 1-minute '
-        'load 0.2-1.0) gave 9.4x, 9.3x and 9.3x, short of the 10x goal; the sensor kernels '
-        'before that evening\'s changes (commit 2dbefc1), run twice right after, gave 8.2x and '
-        '9.0x. The machine ran about a fifth slower than in the day\'s earlier runs (bare '
-        'casting 0.119 s here against 0.093 s at 19:09 for the same rays), so absolute times '
-        'moved more than the ratios. The laser scanner stays furthest from the goal (7x): its '
-        'spacing filter takes 0.26 s of its 0.82 s scan above, 48 ns per beam of the 5.4M.'
+        'load 0.2-1.0) gave 9.4x, 9.3x and 9.3x, short of the 10x goal. The laser scanner is '
+        'furthest from it (7x): its spacing filter takes 0.26 s of its 0.82 s scan above, '
+        '48 ns per beam of the 5.4M. What earlier versions gave is in docs/history.md.'
     ],
     'convert': [
         '',
