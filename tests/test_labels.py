@@ -232,13 +232,26 @@ def on_a_foot_plane(xyz: np.ndarray, boxes: list[dict]) -> np.ndarray:
     return ambiguous
 
 
+def in_the_margin(xyz: np.ndarray, box: dict) -> np.ndarray:
+    """Points outside ``box`` but within ``BOX_MARGIN`` of it (above its bottom): the documented
+    rule gives them to the box whoever's they are, e.g. a shelf's side 2 mm from a table."""
+    top = box['center'][2] + box['size'][2] / 2.0
+    grown_size = [box['size'][0] + 2 * BOX_MARGIN, box['size'][1] + 2 * BOX_MARGIN, 0.0]
+    exact = inside_outline(box_corners_xy(box['center'], box['size'], box['yaw']), xyz)
+    grown = inside_outline(box_corners_xy(box['center'], grown_size, box['yaw']), xyz)
+    below_top = xyz[:, 2] <= top
+    just_above = (xyz[:, 2] > top) & (xyz[:, 2] <= top + BOX_MARGIN)
+    return (grown & ~exact & (below_top | just_above)) | (exact & just_above)
+
+
 def inside_outline(polygon: np.ndarray, xyz: np.ndarray) -> np.ndarray:
     from matplotlib.path import Path as Outline
     return Outline(polygon).contains_points(xyz[:, :2])
 
 
 def test_s3dis_room_annotations_equal_the_generators(round_trip):
-    """Every untouched object's points are the generator's (but on a foot plane, above)."""
+    """Every untouched object's points are the generator's, but on a foot plane and in the
+    margin around its box (above)."""
     written = round_trip['out'] / 'Area_1' / 'factory_1'
     annotations = written / 'Annotations'
     assert read_scan(written / 'factory_1.txt').shape == read_scan(round_trip['scan']).shape
@@ -253,8 +266,10 @@ def test_s3dis_room_annotations_equal_the_generators(round_trip):
         theirs = read_scan(round_trip['room'] / 'Annotations' / f'{box["label"]}.txt')[:, :3]
         ours, theirs = (
             rows[~on_a_foot_plane(rows, round_trip['truth'])] for rows in (ours, theirs))
-        assert {tuple(row) for row in ours.round(3)} == {tuple(row) for row in theirs.round(3)}
-        compared += len(ours)
+        ours_set, theirs_set = ({tuple(row) for row in rows.round(3)} for rows in (ours, theirs))
+        differing = np.array(sorted(ours_set ^ theirs_set)).reshape(-1, 3)
+        assert in_the_margin(differing, box).all(), differing[~in_the_margin(differing, box)]
+        compared += len(ours_set & theirs_set)
     assert compared > 5000
     total = sum(len(read_scan(path)) for path in annotations.glob('*.txt'))
     assert total == len(read_scan(round_trip['scan']))
