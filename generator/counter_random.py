@@ -78,20 +78,10 @@ def _ziggurat_try(bits: np.uint64) -> tuple[float, float, int]:
 def normal_first_try(seed: np.uint64, counter: np.uint64) -> tuple[float, bool]:
     """The first try of :func:`normal` at ``counter``, without a branch: its value and whether
     it is the draw (in about 99 % of draws; else :func:`normal` gives the draw). A kernel
-    makes the first tries of many items in one pass and calls :func:`normal` for the rest."""
+    makes the first tries of many items in one pass and calls :func:`normal` for the rest
+    (:func:`normals`)."""
     u, value, layer = _ziggurat_try(word(seed, counter))
     return value, abs(u) < _INSIDE[layer]
-
-
-@numba.njit(cache=True, nogil=True, inline='always')
-def first_tries(seed: np.uint64, first: int, stop: int, offset: int, tries: np.ndarray,
-                accepted: np.ndarray) -> None:
-    """:func:`normal_first_try` of the items ``first`` to ``stop - 1`` (item k at counter
-    ``k * ITEM_COUNTERS + offset``) into ``tries[:stop - first]`` and
-    ``accepted[:stop - first]``, in one pass without branches."""
-    for item in range(first, stop):
-        tries[item - first], accepted[item - first] = normal_first_try(
-            seed, np.uint64(item) * ITEM_COUNTERS + np.uint64(offset))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -123,3 +113,18 @@ def normal(seed: np.uint64, counter: np.uint64) -> float:
 def stream_seed(rng: np.random.Generator) -> np.uint64:
     """A stream's seed drawn from ``rng``."""
     return np.uint64(rng.integers(0, 2**64, dtype=np.uint64))
+
+
+@numba.njit(cache=True, nogil=True, inline='always')
+def normals(seed: np.uint64, first: int, stop: int, offset: int, out: np.ndarray) -> None:
+    """The standard normal draws of the items ``first`` to ``stop - 1`` into
+    ``out[:stop - first]``, item k's as :func:`normal` gives it from the counter
+    ``k * ITEM_COUNTERS + offset``: the first tries of all in one pass without branches (a
+    failed one written as NaN), then :func:`normal` for those, about 1 %."""
+    for item in range(first, stop):
+        value, accepted = normal_first_try(
+            seed, np.uint64(item) * ITEM_COUNTERS + np.uint64(offset))
+        out[item - first] = value if accepted else np.nan
+    for item in range(first, stop):
+        if np.isnan(out[item - first]):
+            out[item - first] = normal(seed, np.uint64(item) * ITEM_COUNTERS + np.uint64(offset))

@@ -30,7 +30,7 @@ from typing import Any, Mapping, Sequence
 import numba
 import numpy as np
 
-from generator.counter_random import ITEM_COUNTERS, first_tries, normal, stream_seed, uniform
+from generator.counter_random import normals, stream_seed, uniform
 from synthdet.geometry import grid_cells
 
 
@@ -201,21 +201,16 @@ def _path_rays(path: np.ndarray, start: int, seed: np.uint64, origins: np.ndarra
     directions (N, 3) of three standard normal draws each, normalised as
     :func:`random_directions` does, and their float32 copies, which Embree casts. Ray r's
     draws are those of the items 3r, 3r + 1, 3r + 2 of the stream ``seed``
-    (:data:`generator.counter_random.ITEM_COUNTERS`): chunk by chunk, their first tries in one
-    pass without branches, :func:`generator.counter_random.normal` for the few that fail."""
-    tries = np.empty(3 * _DRAW_CHUNK)
-    accepted = np.empty(3 * _DRAW_CHUNK, dtype=np.bool_)
+    (:data:`generator.counter_random.ITEM_COUNTERS`), chunk by chunk
+    (:func:`generator.counter_random.normals`)."""
+    draws = np.empty(3 * _DRAW_CHUNK)
     step = start % len(path)
     for first in range(0, len(origins), _DRAW_CHUNK):
         stop = min(first + _DRAW_CHUNK, len(origins))
-        first_tries(seed, 3 * first, 3 * stop, 0, tries, accepted)
+        normals(seed, 3 * first, 3 * stop, 0, draws)
         for ray in range(first, stop):
-            for axis in range(3):
-                item = 3 * ray + axis
-                if not accepted[item - 3 * first]:
-                    tries[item - 3 * first] = normal(seed, np.uint64(item) * ITEM_COUNTERS)
             own = 3 * (ray - first)
-            x, y, z = tries[own], tries[own + 1], tries[own + 2]
+            x, y, z = draws[own], draws[own + 1], draws[own + 2]
             _write_ray(ray, path, step, x, y, z, np.sqrt((x * x + y * y) + z * z), origins,
                        directions, cast_origins, cast_directions)
             step += 1

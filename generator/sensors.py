@@ -24,6 +24,11 @@ from generator.tls import scan_tls, tls_stations
 from synthdet.contracts import SENSOR_MODELS
 
 
+# the parameters a tablet walk's meta.json record repeats (the tablet's and the reconstruction's)
+_WALK_RECORD = ('wall_look', 'fov_deg', 'min_range', 'max_range', 'range_noise', 'far_keep',
+                'dark_luminance', 'dark_dropout', 'shiny_dropout')
+
+
 def choose_sensor(probabilities: Mapping[str, float], rng: np.random.Generator) -> str:
     """Draw one sensor model from ``probabilities`` (model -> probability, summing to 1)."""
     weights = np.array([float(probabilities.get(m, 0.0)) for m in SENSOR_MODELS])
@@ -84,11 +89,7 @@ def scan_room(
         return scan, {
             'model': 'tablet',
             'trajectory': np.round(positions, 3).tolist(),
-            **{
-                k: cfg[k]
-                for k in ('wall_look', 'fov_deg', 'min_range', 'max_range', 'range_noise',
-                          'far_keep', 'dark_luminance', 'dark_dropout', 'shiny_dropout')
-            }
+            **{k: cfg[k] for k in _WALK_RECORD}
         }
     if model == 'depth_frame':
         cfg = scanner_config['depth_frame']
@@ -115,9 +116,7 @@ def scan_room(
             **record,
             **{
                 k: cfg[k]
-                for k in ('wall_look', 'fov_deg', 'min_range', 'max_range', 'range_noise',
-                          'far_keep', 'dark_luminance', 'dark_dropout', 'shiny_dropout',
-                          'oversample', 'surface_spacing', 'ceiling_keep')
+                for k in (*_WALK_RECORD, 'oversample', 'surface_spacing', 'ceiling_keep')
             }
         }
     raise ValueError(f'unknown sensor model {model!r} (known: {", ".join(SENSOR_MODELS)})')

@@ -13,7 +13,7 @@ from typing import Any, Mapping, Sequence
 import numba
 import numpy as np
 
-from generator.counter_random import ITEM_COUNTERS, first_tries, normal, stream_seed, uniform
+from generator.counter_random import ITEM_COUNTERS, normals, stream_seed, uniform
 from generator.scanner import ScanResult, Scanner, row_norms
 from generator.sensor_common import (RoomGeometry, _clearance, _inset, _result, _rows_of,
                                      _surface_loss)
@@ -146,7 +146,7 @@ def _tablet_rays(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up:
             cast_origins[ray, axis] = positions[p, axis]
 
 
-# rays whose range errors' first tries the returns kernel draws at a time (buffers that stay in
+# rays whose range errors the returns kernel draws at a time (buffers that stay in
 # the cache)
 _DRAW_CHUNK = 2048
 
@@ -164,23 +164,18 @@ def _tablet_returns(t_hit: np.ndarray, primitive: np.ndarray, seed: np.uint64,
     # branch on a draw)
     kept = np.empty(wanted + 1, dtype=np.int64)
     measured = np.empty(wanted + 1)
-    tries = np.empty(_DRAW_CHUNK)
-    accepted = np.empty(_DRAW_CHUNK, dtype=np.bool_)
+    errors = np.empty(_DRAW_CHUNK)
     count = 0
     for first in range(0, len(t_hit), _DRAW_CHUNK):
         stop = min(first + _DRAW_CHUNK, len(t_hit))
-        # the range errors' first tries, without branches
-        first_tries(seed, first, stop, 4, tries, accepted)
+        normals(seed, first, stop, 4, errors)  # the range errors
         for ray in range(first, stop):
             if count == wanted:
                 break
             if not np.isfinite(t_hit[ray]):
                 continue
             counter = np.uint64(ray) * ITEM_COUNTERS
-            error = tries[ray - first]
-            if not accepted[ray - first]:
-                error = normal(seed, counter + np.uint64(4))
-            distance = np.float64(t_hit[ray]) + error * range_noise
+            distance = np.float64(t_hit[ray]) + errors[ray - first] * range_noise
             keep = 1.0 - (1.0 - far_keep) * (distance - near) / (far - near)
             keep *= 1.0 - loss[primitive[ray]]
             kept[count], measured[count] = ray, distance

@@ -21,8 +21,7 @@ from typing import Any, Mapping
 import numba
 import numpy as np
 
-from generator.counter_random import (ITEM_COUNTERS, first_tries, normal, stream_seed,
-                                     uniform, word)
+from generator.counter_random import ITEM_COUNTERS, normals, stream_seed, uniform, word
 from generator.scanner import ScanResult, Scanner
 from generator.sensor_common import (RoomGeometry, _cast_grid, _clearance, _depth_edges, _inset,
                                      _result, _rows_of)
@@ -139,22 +138,16 @@ _NOISE_CHUNK = 2048
 def _add_range_noise(ranges: np.ndarray, seed: np.uint64, a: float, b: float) -> None:
     """Move every finite range by a standard normal draw x (a + b x range), in place: beam k's
     draw from its counters after the first in the stream ``seed``
-    (:data:`generator.counter_random.ITEM_COUNTERS`, :func:`generator.counter_random.normal`).
-
-    Chunk by chunk: the draws' first tries in one pass without branches, then the ranges, with
-    :func:`generator.counter_random.normal` for the draws whose first try fails (about 1 %)."""
-    tries = np.empty(_NOISE_CHUNK)
-    accepted = np.empty(_NOISE_CHUNK, dtype=np.bool_)
+    (:data:`generator.counter_random.ITEM_COUNTERS`), chunk by chunk
+    (:func:`generator.counter_random.normals`)."""
+    draws = np.empty(_NOISE_CHUNK)
     for start in range(0, len(ranges), _NOISE_CHUNK):
         stop = min(start + _NOISE_CHUNK, len(ranges))
-        first_tries(seed, start, stop, 1, tries, accepted)
+        normals(seed, start, stop, 1, draws)
         for beam in range(start, stop):
             measured = ranges[beam]
             if np.isfinite(measured):
-                draw = tries[beam - start]
-                if not accepted[beam - start]:
-                    draw = normal(seed, np.uint64(beam) * ITEM_COUNTERS + np.uint64(1))
-                ranges[beam] = measured + draw * (a + b * measured)
+                ranges[beam] = measured + draws[beam - start] * (a + b * measured)
 
 
 @numba.njit(cache=True, nogil=True)
