@@ -18,9 +18,11 @@ numpy hit distances and triangle (face) indices, the input of labelling:
   (vectorised, outside the loop), the nearest hit over the objects kept;
 - ``scene.ray_cast`` loop: one call per ray on the scene (the previous baseline).
 
-Beside them, Open3D's ``RaycastingScene.cast_rays`` (Embree in robust mode, the scanner's
-previous engine): what the switch to embreex gains, and whether the two Embree modes find the
-same hits. One warm-up pass on the first 1000 rays, then the median of ``--repeats`` timed
+The scanner calls Embree from a compiled kernel (``generator.embree``: ``rtcIntersect8`` on
+packets of 8 rays, hits written into preallocated arrays). Beside it, the engines it replaced:
+embreex's ``run`` (the same Embree library and scene mode, one ``rtcIntersect1`` per ray, new
+output arrays per call) and Open3D's ``RaycastingScene.cast_rays`` (Embree in robust mode): what
+each switch gains, and whether they find the same hits. One warm-up pass on the first 1000 rays, then the median of ``--repeats`` timed
 passes with the garbage collector off, the passes going round the methods in turn; the slow
 loops (``Object`` and ``scene``) take the first ``--slow-rays`` rays. Each loop's hits are
 checked against Embree's. All methods run on one thread (bpy's ray casts are single-threaded);
@@ -72,11 +74,11 @@ from mathutils.bvhtree import BVHTree
 from generator import tls
 from generator.assets.palette import METAL, SEE_THROUGH
 from generator.config import load_config
+from generator.embree import first_hits
 from generator.layout import catalog_from_library, generate_layout, layout_meta
 from generator.pipeline import RunOptions, open_library
 from generator.scanner import (
-    ScanResult, Scanner, TriangleScene, _cast_slice, random_directions, sensor_path,
-    triangles_of_colors)
+    ScanResult, Scanner, TriangleScene, random_directions, sensor_path, triangles_of_colors)
 from generator.scene import COLLECTION, RoomScene, export_triangles
 from generator.sensor_common import RoomGeometry, room_geometry
 from generator.sensors import label_stray_returns, scan_room
@@ -106,9 +108,25 @@ def bvhtree_caster(vertices: np.ndarray, triangles: np.ndarray) -> Caster:
     return cast
 
 
+def embreex_caster(vertices: np.ndarray, triangles: np.ndarray) -> Caster:
+    """embreex's ``run`` on one scene in Embree's default mode, as the scanner's previous
+    ``Scanner.cast`` called it: float32 rays, output arrays of every hit field per call."""
+    from embreex.mesh_construction import TriangleMesh
+    from embreex.rtcore_scene import EmbreeScene
+    scene = EmbreeScene(robust=False)
+    TriangleMesh(scene, vertices.astype(np.float32), triangles.astype(np.int32))
+
+    def cast(origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        answer = scene.run(origins.astype(np.float32), directions.astype(np.float32),
+                           dists=np.full(len(origins), np.inf, dtype=np.float32), output=1)
+        return answer['tfar'], answer['primID']
+
+    return cast
+
+
 def open3d_caster(vertices: np.ndarray, triangles: np.ndarray) -> Caster:
     """Open3D's ``RaycastingScene.cast_rays`` on one thread (Embree in robust mode), as the
-    scanner's previous ``Scanner.cast`` called it: an (N, 6) float32 ray array per batch."""
+    scanner's first engine called it: an (N, 6) float32 ray array per batch."""
     import open3d as o3d
     scene = o3d.t.geometry.RaycastingScene(nthreads=1)
     scene.add_triangles(
@@ -317,10 +335,11 @@ def scan_once(scanner: Scanner, room: RoomGeometry, model: str, points: int, con
 
 
 def bare_cast(batches: list) -> float:
-    """Seconds of Embree's bare first-hit casts of ``batches`` on one thread."""
+    """Seconds of Embree's bare first-hit casts of ``batches`` on one thread, with the scan's
+    engine (``generator.embree.first_hits``)."""
     start = time.perf_counter()
     for raycaster, origins, directions in batches:
-        _cast_slice(raycaster, origins, directions)
+        first_hits(raycaster, origins, directions)
     return time.perf_counter() - start
 
 
@@ -476,8 +495,10 @@ def main() -> None:
         (lambda o, d, s=scanner: s.cast(s.full_scene, o, d), args.rays)
         for threads, scanner in embree.items()
     }
-    methods['Open3D cast_rays (previous engine)'] = (open3d_caster(triangles.vertices,
-                                                                   triangles.triangles), args.rays)
+    methods['embreex run (previous engine)'] = (embreex_caster(triangles.vertices,
+                                                               triangles.triangles), args.rays)
+    methods['Open3D cast_rays (first engine)'] = (open3d_caster(triangles.vertices,
+                                                                triangles.triangles), args.rays)
     methods['bpy BVHTree.ray_cast loop'] = (bvhtree_caster(triangles.vertices,
                                                            triangles.triangles), args.rays)
     methods['bpy Object.ray_cast loop (per object)'] = (object_caster(objects,

@@ -1,4 +1,4 @@
-"""Simulated LiDAR: the paper's sensor path and ray scheme, cast in batches on Embree (embreex).
+"""Simulated LiDAR: the paper's sensor path and ray scheme, cast in batches on Embree (generator.embree).
 
 Knows nothing of Blender: it takes triangle arrays (world frame) where every triangle carries a
 color and the index of the part (annotated element) it belongs to.
@@ -31,6 +31,7 @@ import numba
 import numpy as np
 
 from generator.counter_random import normals, stream_seed, uniform
+from generator.embree import TriangleMeshScene, first_hits
 from synthdet.geometry import grid_cells
 
 
@@ -158,14 +159,6 @@ _MIN_SLICE = 16_384
 _GLASS_STEP = 1e-4
 # glass faces one ray passes at most (a pane has two)
 _MAX_GLASS_FACES = 16
-
-
-def _cast_slice(raycaster, origins: np.ndarray,
-                directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Embree's first hits of float32 rays: distance (inf on a miss), triangle (-1 on a miss)."""
-    answer = raycaster.run(
-        origins, directions, dists=np.full(len(origins), np.inf, dtype=np.float32), output=1)
-    return answer['tfar'], answer['primID']
 
 
 # no triangle map: the hit triangles are the scene's own
@@ -327,7 +320,8 @@ def _labels(triangle: np.ndarray, colors: np.ndarray, part_of: np.ndarray,
 
 
 class Scanner:
-    """Casts the paper's ray scheme on a :class:`TriangleScene` with Embree scenes (embreex)."""
+    """Casts the paper's ray scheme on a :class:`TriangleScene` with Embree scenes
+    (:mod:`generator.embree`)."""
 
     def __init__(self,
                  scene: TriangleScene,
@@ -365,15 +359,10 @@ class Scanner:
         caches (each ray is cast on its own: slicing a batch changes no hit)."""
         return min(batch, CACHE_SLICE * (self.threads or os.cpu_count() or 1))
 
-    def _embree(self, triangles: np.ndarray):
-        from embreex.mesh_construction import TriangleMesh
-        from embreex.rtcore_scene import EmbreeScene
-
+    def _embree(self, triangles: np.ndarray) -> TriangleMeshScene:
         # Embree's default mode, faster per ray than the robust mode Open3D sets; the benchmark
         # prints the agreement of the two (docs/generator.md, "Speed")
-        raycaster = EmbreeScene(robust=False)
-        TriangleMesh(raycaster, self.scene.vertices.astype(np.float32), triangles.astype(np.int32))
-        return raycaster
+        return TriangleMeshScene(self.scene.vertices, triangles)
 
     def cast(self,
              raycaster,
@@ -385,7 +374,7 @@ class Scanner:
         The distance is float32 in units of the direction's length, the index uint32 (the
         largest uint32 for a miss). Each ray is cast on its own, so the result of a ray does not
         depend on the batch or on the thread count; ``threads`` > 1 (0: all cores) casts
-        contiguous slices of the batch in parallel (embreex releases the GIL). With ``rng`` and a
+        contiguous slices of the batch in parallel (the cast releases the GIL). With ``rng`` and a
         ``glass_transmission`` above 0, a ray whose first hit is glass passes it with that
         probability (one draw per such ray) and returns from the first opaque surface behind.
         """
@@ -418,16 +407,21 @@ class Scanner:
         """Embree's first hits of a batch (see :meth:`cast`), sliced over the threads."""
         origins = np.asarray(origins, dtype=np.float32)
         directions = np.asarray(directions, dtype=np.float32)
-        workers = min(self.threads or os.cpu_count() or 1, max(1, len(origins) // _MIN_SLICE))
+        count = len(origins)
+        workers = min(self.threads or os.cpu_count() or 1, max(1, count // _MIN_SLICE))
+        t_hit, primitive = np.empty(count, dtype=np.float32), np.empty(count, dtype=np.int32)
         if workers == 1:
-            t_hit, primitive = _cast_slice(raycaster, origins, directions)
+            first_hits(raycaster, origins, directions, t_hit, primitive)
         else:
+            # each thread casts a contiguous slice into its part of the outputs
+            edges = [count * k // workers for k in range(workers + 1)]
+
+            def cast_slice(start: int, stop: int) -> None:
+                first_hits(raycaster, origins[start:stop], directions[start:stop],
+                           t_hit[start:stop], primitive[start:stop])
+
             with ThreadPoolExecutor(workers) as pool:
-                slices = list(
-                    pool.map(_cast_slice, [raycaster] * workers, np.array_split(origins, workers),
-                             np.array_split(directions, workers)))
-            t_hit = np.concatenate([hit for hit, _ in slices])
-            primitive = np.concatenate([index for _, index in slices])
+                list(pool.map(cast_slice, edges[:-1], edges[1:]))
         # a miss is -1 in int32, the same bits as Open3D's invalid id in uint32
         return t_hit, primitive.view(np.uint32)
 
