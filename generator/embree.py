@@ -36,12 +36,14 @@ _ERRORS = {
 # the geometry and primitive id Embree leaves in a ray that hits nothing
 _INVALID_ID = 0xFFFFFFFF
 
-# rays in a packet (rtcIntersect8) and 4-byte fields per ray of an RTCRayHit8: the ray's 12, the
-# hit's 9 (Ng x3, u, v, primID, geomID, instID[1], instPrimID[1]), rounded up
+# rays in a packet (rtcIntersect8) and 4-byte fields per ray of an RTCRayHit8: the ray's 12
+# (origin x3, tnear, direction x3, time, tfar, mask, id, flags), the hit's 9 (Ng x3, u, v,
+# primID, geomID, instID[1], instPrimID[1]), rounded up
 _LANES = 8
 _FIELDS = 24
-# the fields of an RTCRayHit8 this module writes or reads (each an array of the 8 lanes)
-_TNEAR, _TFAR, _MASK, _FLAGS, _PRIM_ID, _GEOM_ID = 3, 8, 9, 11, 17, 18
+# the fields of an RTCRayHit8 this module writes or reads, each an array of the 8 lanes
+_ORIGIN, _TNEAR, _DIRECTION, _TIME, _TFAR, _MASK, _ID, _FLAGS = 0, 3, 4, 7, 8, 9, 10, 11
+_PRIM_ID, _GEOM_ID = 17, 18
 
 _POINTER = ctypes.c_size_t
 # rtcIntersect8(const int* valid, RTCScene, RTCRayHit8*, RTCIntersectArguments*)
@@ -170,6 +172,13 @@ def _cast_packets(intersect8, scene: int, origins: np.ndarray, directions: np.nd
     words = packet.view(np.uint32)
     valid = np.zeros(_LANES, dtype=np.int32)
     packet_address, valid_address = packet.ctypes.data, valid.ctypes.data
+    # the fields Embree only reads, the same for every ray
+    for lane in range(_LANES):
+        packet[_TNEAR * _LANES + lane] = 0.0
+        packet[_TIME * _LANES + lane] = 0.0
+        words[_MASK * _LANES + lane] = _INVALID_ID  # all mask bits set
+        words[_ID * _LANES + lane] = 0
+        words[_FLAGS * _LANES + lane] = 0
     count = len(origins)
     for first in range(0, count, _LANES):
         lanes = min(_LANES, count - first)
@@ -178,16 +187,10 @@ def _cast_packets(intersect8, scene: int, origins: np.ndarray, directions: np.nd
             ray = first + lane if lane < lanes else first
             valid[lane] = -1 if lane < lanes else 0
             for axis in range(3):
-                packet[axis * _LANES + lane] = origins[ray, axis]
-                packet[(4 + axis) * _LANES + lane] = directions[ray, axis]
-            packet[_TNEAR * _LANES + lane] = 0.0
-            packet[7 * _LANES + lane] = 0.0  # time
+                packet[(_ORIGIN + axis) * _LANES + lane] = origins[ray, axis]
+                packet[(_DIRECTION + axis) * _LANES + lane] = directions[ray, axis]
             packet[_TFAR * _LANES + lane] = np.inf
-            words[_MASK * _LANES + lane] = _INVALID_ID  # all mask bits
-            words[10 * _LANES + lane] = 0  # id
-            words[_FLAGS * _LANES + lane] = 0
-            words[_PRIM_ID * _LANES + lane] = _INVALID_ID
-            words[_GEOM_ID * _LANES + lane] = _INVALID_ID
+            words[_GEOM_ID * _LANES + lane] = _INVALID_ID  # stays so on a miss
         intersect8(valid_address, scene, packet_address, 0)
         for lane in range(lanes):
             t_hit[first + lane] = packet[_TFAR * _LANES + lane]
