@@ -108,9 +108,11 @@ NOTES = {
         'engines the same time; the `scan/bare` column shows how far each Embree scan is from '
         'its bare cast.',
         '',
-        'Three runs of the command above on the idle machine (2026-12-06 21:45-21:49, 1-minute '
-        'load 0.2-1.0) gave 9.4x, 9.3x and 9.3x, short of the 10x goal. The laser scanner is '
-        'furthest from it (7x): its spacing filter takes 0.26 s of its 0.82 s scan above, '
+        'Three runs of the command above on the idle machine (2026-12-07 00:29-00:35 UTC, '
+        '1-minute load 0.4-0.9) gave 10.9x, 10.8x and 10.7x; with embreex\'s `run` as the '
+        'scanner\'s engine, three runs gave 9.4x, 9.3x and 9.3x (2026-12-06 21:45-21:49). The '
+        'laser scanner is furthest from '
+        'the goal (7.5-8.0x): its spacing filter takes 0.26-0.27 s of its 0.65-0.70 s scan, '
         '48 ns per beam of the 5.4M. What earlier versions gave is in docs/history.md.'
     ],
     'convert': [
