@@ -22,8 +22,9 @@ The scanner calls Embree from a compiled kernel (``generator.embree``: ``rtcInte
 packets of 8 rays, hits written into preallocated arrays). Beside it, the engines it replaced:
 embreex's ``run`` (the same Embree library and scene mode, one ``rtcIntersect1`` per ray, new
 output arrays per call) and Open3D's ``RaycastingScene.cast_rays`` (Embree in robust mode): what
-each switch gains, and whether they find the same hits. One warm-up pass on the first 1000 rays, then the median of ``--repeats`` timed
-passes with the garbage collector off, the passes going round the methods in turn; the slow
+each switch gains, and whether they find the same hits. One warm-up pass on the first 1000
+rays, then the median of ``--repeats`` timed passes with the garbage collector off, the passes
+going round the methods in turn; the slow
 loops (``Object`` and ``scene``) take the first ``--slow-rays`` rays. Each loop's hits are
 checked against Embree's. All methods run on one thread (bpy's ray casts are single-threaded);
 Embree on all cores is printed beside it.

@@ -1,4 +1,5 @@
-"""Simulated LiDAR: the paper's sensor path and ray scheme, cast in batches on Embree (generator.embree).
+"""Simulated LiDAR: the paper's sensor path and ray scheme, cast in batches on Embree
+(:mod:`generator.embree`).
 
 Knows nothing of Blender: it takes triangle arrays (world frame) where every triangle carries a
 color and the index of the part (annotated element) it belongs to.
