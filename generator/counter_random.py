@@ -115,6 +115,11 @@ def stream_seed(rng: np.random.Generator) -> np.uint64:
     return np.uint64(rng.integers(0, 2**64, dtype=np.uint64))
 
 
+# items whose normal draws a kernel makes at a time with :func:`normals` (a buffer that stays
+# in the cache)
+DRAW_CHUNK = 2048
+
+
 @numba.njit(cache=True, nogil=True, inline='always')
 def normals(seed: np.uint64, first: int, stop: int, offset: int, out: np.ndarray) -> None:
     """The standard normal draws of the items ``first`` to ``stop - 1`` into

@@ -31,7 +31,7 @@ from typing import Any, Mapping, Sequence
 import numba
 import numpy as np
 
-from generator.counter_random import normals, stream_seed, uniform
+from generator.counter_random import DRAW_CHUNK, normals, stream_seed, uniform
 from generator.embree import TriangleMeshScene, first_hits
 from synthdet.geometry import grid_cells
 
@@ -168,11 +168,6 @@ _NO_MAP = np.zeros(0, dtype=np.int64)
 _NO_STRAY = np.zeros(0, dtype=bool)
 
 
-# rays whose direction draws the uniform-ray kernel makes at a time (buffers that stay in the
-# cache)
-_DRAW_CHUNK = 2048
-
-
 @numba.njit(cache=True, nogil=True, inline='always')
 def _write_ray(ray: int, path: np.ndarray, step: int, x: float, y: float, z: float, norm: float,
                origins: np.ndarray, directions: np.ndarray, cast_origins: np.ndarray,
@@ -197,10 +192,10 @@ def _path_rays(path: np.ndarray, start: int, seed: np.uint64, origins: np.ndarra
     draws are those of the items 3r, 3r + 1, 3r + 2 of the stream ``seed``
     (:data:`generator.counter_random.ITEM_COUNTERS`), chunk by chunk
     (:func:`generator.counter_random.normals`)."""
-    draws = np.empty(3 * _DRAW_CHUNK)
+    draws = np.empty(3 * DRAW_CHUNK)
     step = start % len(path)
-    for first in range(0, len(origins), _DRAW_CHUNK):
-        stop = min(first + _DRAW_CHUNK, len(origins))
+    for first in range(0, len(origins), DRAW_CHUNK):
+        stop = min(first + DRAW_CHUNK, len(origins))
         normals(seed, 3 * first, 3 * stop, 0, draws)
         for ray in range(first, stop):
             own = 3 * (ray - first)

@@ -13,7 +13,8 @@ from typing import Any, Mapping, Sequence
 import numba
 import numpy as np
 
-from generator.counter_random import ITEM_COUNTERS, normals, stream_seed, uniform
+from generator.counter_random import (DRAW_CHUNK, ITEM_COUNTERS, normals, stream_seed,
+                                     uniform)
 from generator.scanner import ScanResult, Scanner, row_norms
 from generator.sensor_common import (RoomGeometry, _clearance, _inset, _result, _rows_of,
                                      _surface_loss)
@@ -146,11 +147,6 @@ def _tablet_rays(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up:
             cast_origins[ray, axis] = positions[p, axis]
 
 
-# rays whose range errors the returns kernel draws at a time (buffers that stay in
-# the cache)
-_DRAW_CHUNK = 2048
-
-
 @numba.njit(cache=True, nogil=True)
 def _tablet_returns(t_hit: np.ndarray, primitive: np.ndarray, seed: np.uint64,
                     loss: np.ndarray, range_noise: float, far_keep: float, near: float,
@@ -164,10 +160,12 @@ def _tablet_returns(t_hit: np.ndarray, primitive: np.ndarray, seed: np.uint64,
     # branch on a draw)
     kept = np.empty(wanted + 1, dtype=np.int64)
     measured = np.empty(wanted + 1)
-    errors = np.empty(_DRAW_CHUNK)
+    errors = np.empty(DRAW_CHUNK)
     count = 0
-    for first in range(0, len(t_hit), _DRAW_CHUNK):
-        stop = min(first + _DRAW_CHUNK, len(t_hit))
+    for first in range(0, len(t_hit), DRAW_CHUNK):
+        if count == wanted:  # no draws for the rays after the last return wanted
+            break
+        stop = min(first + DRAW_CHUNK, len(t_hit))
         normals(seed, first, stop, 4, errors)  # the range errors
         for ray in range(first, stop):
             if count == wanted:

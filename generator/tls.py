@@ -21,7 +21,8 @@ from typing import Any, Mapping
 import numba
 import numpy as np
 
-from generator.counter_random import ITEM_COUNTERS, normals, stream_seed, uniform, word
+from generator.counter_random import (DRAW_CHUNK, ITEM_COUNTERS, normals, stream_seed,
+                                     uniform, word)
 from generator.scanner import ScanResult, Scanner
 from generator.sensor_common import (RoomGeometry, _cast_grid, _clearance, _depth_edges, _inset,
                                      _result, _rows_of)
@@ -130,19 +131,15 @@ def _grid_points(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: 
     return xyz
 
 
-# beams whose range errors the noise kernel draws at a time (buffers that stay in the cache)
-_NOISE_CHUNK = 2048
-
-
 @numba.njit(cache=True, nogil=True)
 def _add_range_noise(ranges: np.ndarray, seed: np.uint64, a: float, b: float) -> None:
     """Move every finite range by a standard normal draw x (a + b x range), in place: beam k's
     draw from its counters after the first in the stream ``seed``
     (:data:`generator.counter_random.ITEM_COUNTERS`), chunk by chunk
     (:func:`generator.counter_random.normals`)."""
-    draws = np.empty(_NOISE_CHUNK)
-    for start in range(0, len(ranges), _NOISE_CHUNK):
-        stop = min(start + _NOISE_CHUNK, len(ranges))
+    draws = np.empty(DRAW_CHUNK)
+    for start in range(0, len(ranges), DRAW_CHUNK):
+        stop = min(start + DRAW_CHUNK, len(ranges))
         normals(seed, start, stop, 1, draws)
         for beam in range(start, stop):
             measured = ranges[beam]
