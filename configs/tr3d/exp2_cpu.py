@@ -26,13 +26,14 @@ num_points = 40000
 voxel_size = 0.02
 model = dict(
     voxel_size=voxel_size,
-    neck=dict(backbone_fine_level=True),
+    neck=dict(backbone_fine_level=True, generated_reach=1),
     bbox_head=dict(label2level=(2, 1, 1, 1, 0)))
 
-train_pipeline, test_pipeline = (
-    with_structure_thinning(
-        with_num_points(pipeline, num_points), dict(type='ThinRoomStructure', keep=0.1))
-    for pipeline in (_base_.train_pipeline, _base_.test_pipeline))
+structure_thinning = dict(type='ThinRoomStructure', keep=0.1)
+train_pipeline = with_structure_thinning(
+    with_num_points(_base_.train_pipeline, num_points), dict(structure_thinning, cached_rooms=1000))
+test_pipeline = with_structure_thinning(
+    with_num_points(_base_.test_pipeline, num_points), structure_thinning)
 train_pipeline = with_robustness(train_pipeline, _base_.robust_augmentations)
 tta_pipeline = with_test_time_augmentation(test_pipeline)
 train_dataloader = dict(
@@ -47,7 +48,7 @@ train_dataloader = dict(
 val_dataloader = dict(dataset=dict(pipeline=test_pipeline))
 test_dataloader = val_dataloader
 
-train_cfg = dict(max_epochs=12)
+train_cfg = dict(max_epochs=12, val_interval=12)
 param_scheduler = dict(
     type='MultiStepLR', begin=0, end=12, by_epoch=True, milestones=[8, 11], gamma=0.1)
 
