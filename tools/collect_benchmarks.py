@@ -49,6 +49,7 @@ ARGUMENTS = {
     'sensors': ['--rooms', '2', '--repeats', '2'],
     'structure_thinning': ['--rooms', '4'],
     'dist_train': ['--rooms-per-area', '4', '--iters', '16', '--warmup', '4'],
+    'train_recipe': ['--rooms-per-area', '4', '--iters', '16', '--warmup', '4'],
     'freecad': ['--sizes', '500', '1000', '2000', '4000', '10000'],
     'domain_shift': [],  # its defaults are the documented scale (about 1.5 h on 2 cores)
 }
@@ -81,6 +82,10 @@ WHAT = {
     'dist_train':
     'exp2_cpu training speed: 2 processes x 1 thread (`tools/dist_train.sh`, gloo) vs 1 '
     'process x 2 threads, batch of 4 rooms',
+    'train_recipe':
+    'exp2_cpu training: where an iteration\'s time goes (loader steps, voxelisation, backbone, '
+    'neck, head, backward, optimiser) and the whole `make exp2-cpu` training, previous recipe '
+    'vs today\'s',
     'freecad':
     'FreeCAD document of 500 to 10,000 synthetic detections (one parametric part each): build '
     'and save time per detection, wall and CPU seconds of the FreeCAD process',
@@ -93,6 +98,7 @@ GOALS = {
     'scanner': '>= 10x the fastest bpy loop in rays/s, 1 thread each',
     'generate': '<= 600 s for 150 rooms',
     'convert': '>= 3x at equal parallelism',
+    'train_recipe': '>= 2x the previous recipe, <= 60 min on 2 idle cores',
     'corners': 'traced <= 3 cm, >= 95% right count, <= 1 s per 1M points',
     'hall': 'windowed recall >= 0.95 x room recall, peak < 8 GB',
     'sensors': 'a 1M-point room in seconds with every model',
