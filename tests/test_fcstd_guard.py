@@ -23,6 +23,7 @@ from configurator.__main__ import main as configurator_main
 from configurator.freecad_cli import MACRO, build_document
 from synthdet import fcstd_guard
 from synthdet.fcstd_guard import RefusedDocument, check_document
+from tests.freecad_gui import WRITE_REPORT, run_gui_driver
 from tests.test_labels import run_freecad_script
 
 SAFE_PROXY = (b'<Python value="bnVsbA==" encoded="yes" module="synthdet_freecad.library" '
@@ -176,6 +177,32 @@ def test_a_safe_proxy_passes_in_any_attribute_order(documents, tmp_path):
                  b'library" value="bnVsbA=="/>')
     check_document(edited(documents['room'], tmp_path / 'reordered.FCStd',
                           lambda xml: xml.replace(SAFE_PROXY, reordered)))
+
+
+SAVE_IN_GUI = textwrap.dedent('''\
+    # Runs in the FreeCAD GUI: open the document with synthdet's parts loaded (as after the
+    # macro ran), save it as a user does: FreeCAD writes its own GuiDocument.xml.
+    import json, os, sys
+    import FreeCAD as App
+    import FreeCADGui as Gui
+    params = json.load(open(os.environ['SYNTHDET_TEST_PARAMS'], encoding='utf-8'))
+    sys.path.insert(0, os.path.dirname(params['macro']))
+    from synthdet_freecad import library
+    doc = App.openDocument(params['document'])
+    Gui.updateGui()
+    doc.saveAs(params['out'])
+    seen = {'proxies': sum(1 for obj in doc.Objects if getattr(obj, 'Proxy', None) is not None)}
+''') + WRITE_REPORT
+
+
+def test_a_document_saved_in_the_freecad_gui_passes(documents, tmp_path):
+    saved = tmp_path / 'saved.FCStd'
+    seen = run_gui_driver(tmp_path, SAVE_IN_GUI, {'document': str(documents['room']),
+                                                   'out': str(saved)})
+    assert seen['proxies'] == len(DETECTIONS)
+    gui_xml = dict(members(saved))['GuiDocument.xml']
+    assert b'<Camera settings=' in gui_xml and b'type="App::PropertyPythonObject"' in gui_xml
+    check_document(saved)
 
 
 def test_labels_reads_a_document_synthdet_wrote(documents, tmp_path, capsys):
