@@ -12,12 +12,12 @@ import json
 import os
 import subprocess
 import sys
-import zipfile
 from pathlib import Path
 from typing import Iterator
 
 from configurator.freecad_cli import (FreecadFailed, add_program_options, check_timeout,
                                       run_freecad_process)
+from synthdet.fcstd_guard import check_document
 from synthdet.processes import ends_with_parent, work_folder
 
 GUI_SCRIPT = Path(__file__).resolve().parent / 'freecad' / 'screenshot_gui.py'
@@ -94,15 +94,11 @@ def screenshot(document: Path,
     """Open ``document`` in the FreeCAD GUI under Xvfb and save its 3D view to ``out``.
 
     Returns FreeCAD's report (``visible`` and ``objects`` counts). Raises ``ValueError`` for
-    bad arguments and ``FreecadFailed`` when no picture was made.
+    bad arguments (``RefusedDocument`` for a document FreeCAD would run code or open other
+    files for) and ``FreecadFailed`` when no picture was made.
     """
     document, out = Path(document).resolve(), Path(out).resolve()
-    if not document.is_file():
-        raise ValueError(f'{document}: document not found')
-    if not zipfile.is_zipfile(document) or 'Document.xml' not in zipfile.ZipFile(
-            document).namelist():
-        raise ValueError(f'{document}: not a FreeCAD document (an .FCStd is a zip holding '
-                         'Document.xml)')
+    check_document(document)  # RefusedDocument (a ValueError) before FreeCAD starts
     if out.suffix.lower() != '.png':
         raise ValueError(f'{out}: the picture must end with .png')
     if not (16 <= width <= 8000 and 16 <= height <= 8000):
@@ -117,7 +113,8 @@ def screenshot(document: Path,
                 'out': str(out),
                 'width': width,
                 'height': height,
-                'result': str(result_path)
+                'result': str(result_path),
+                'paths': [str(GUI_SCRIPT.parent), str(GUI_SCRIPT.parents[2])]
             }, 'options.json')
         command = [freecad, '-u', str(config), str(GUI_SCRIPT)]
         with virtual_display(width + 200, height + 200) as display:

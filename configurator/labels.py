@@ -18,13 +18,14 @@ own coordinates:
   (``x y z r g b``, millimetres, colors 0-255) for ``tools/create_data.py``.
 
 Boxes overlapping each other, a point inside two boxes, a box without points and a document
-that is not synthdet's are ``LabelsInputError`` with one line naming the document.
+that is not synthdet's are ``LabelsInputError`` with one line naming the document; a document
+FreeCAD would run code or open other files for is refused before FreeCAD starts
+(``synthdet.fcstd_guard``).
 """
 import os
 import re
 import shutil
 import tempfile
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +34,7 @@ from configurator.freecad.synthdet_freecad.schema import LABELS_READ_FORMAT as R
 from configurator.freecad_cli import MACRO, FreecadFailed, check_timeout, run_freecad_process
 from synthdet.classes import GENERATED_CLASSES
 from synthdet.contracts import LABELS_FORMAT, write_labels
+from synthdet.fcstd_guard import check_document
 from synthdet.geometry import box_corners_xy
 from synthdet.processes import work_folder
 from synthdet.scan_io import read_scan
@@ -51,9 +53,11 @@ class LabelsInputError(ValueError):
 
 def read_document(document: Path, freecadcmd: str = 'freecadcmd', timeout: float = 300.0) -> dict:
     """The document's counted parts (``boxes``), ``room`` outline and ``reviewed`` flag, read
-    by FreeCAD. Raises ``LabelsInputError`` for a file that is not a synthdet document."""
+    by FreeCAD. Raises ``RefusedDocument`` for a file FreeCAD would run code or open other
+    files for (``synthdet.fcstd_guard``), ``LabelsInputError`` for one that is not a synthdet
+    document."""
     document = Path(document).resolve()
-    _check_fcstd(document)
+    check_document(document)  # RefusedDocument, a ValueError: exit 2 with one line
     check_timeout(timeout)
     with work_folder('synthdet-labels') as work_dir:
         result_path = work_dir / 'result.json'
@@ -67,56 +71,6 @@ def read_document(document: Path, freecadcmd: str = 'freecadcmd', timeout: float
             raise LabelsInputError(f'{document}: {result.get("error")}')
         raise FreecadFailed(f'{document}: FreeCAD could not read it: {result.get("error")}')
     return result
-
-
-def _check_fcstd(document: Path) -> None:
-    """Refuse a file that is no FCStd archive, or whose objects FreeCAD would restore by running
-    code (Python feature objects: FreeCAD imports their module) or by opening other files
-    (links into external documents). ``Document.xml`` is read in chunks (bounded memory)."""
-    if not document.is_file():
-        raise LabelsInputError(f'{document}: document not found')
-    try:
-        with zipfile.ZipFile(document) as archive:
-            if 'Document.xml' not in archive.namelist():
-                raise zipfile.BadZipFile
-            with archive.open('Document.xml') as stream:
-                found = _first_unsafe_element(stream)
-    except (OSError, zipfile.BadZipFile, EOFError):
-        raise LabelsInputError(f'{document}: not a FreeCAD document (.FCStd)') from None
-    if found is not None:
-        raise LabelsInputError(f'{document}: {found}: labels opens no document FreeCAD would '
-                               'run code or open other files for; delete those objects')
-
-
-# the start of a Python object's element (its module is named after a value of any length),
-# except two that run nothing: synthdet's own part proxy without state (the reader loads that
-# module itself) and a JSON null (what a proxy FreeCAD did not restore is saved as); or of a
-# link whose file (the element's first attribute) is not empty
-SYNTHDET_PROXY = (b'value="bnVsbA==" encoded="yes" module="synthdet_freecad.library" '
-                  b'class="DetectionModel"/>')
-NULL_PROXY = b'value="bnVsbA==" encoded="yes" json="yes"/>'
-UNSAFE_ELEMENTS = re.compile(rb'<Python (?!' + re.escape(SYNTHDET_PROXY) + rb'|' +
-                             re.escape(NULL_PROXY) + rb')|<XLink file="(?!")')
-XML_CHUNK = 1 << 20  # bytes of Document.xml searched at a time
-XML_OVERLAP = 4096  # bytes kept from the previous chunk: a start cut by a chunk boundary
-
-
-def _first_unsafe_element(stream) -> str | None:
-    """The first Python object or external link (its file) in ``stream``, described."""
-    tail = b''
-    while True:
-        chunk = stream.read(XML_CHUNK)
-        text = tail + chunk
-        match = UNSAFE_ELEMENTS.search(text)
-        # a start in the kept tail is judged in the next round, with what follows it
-        if match is not None and (not chunk or match.start() < len(text) - XML_OVERLAP):
-            if match.group().startswith(b'<XLink'):
-                linked = text[match.end():match.end() + 80].split(b'"')[0]
-                return f'a link to another file ({linked.decode("utf-8", "replace")!r})'
-            return 'a Python object (FreeCAD imports its module to restore it)'
-        if not chunk:
-            return None
-        tail = text[-XML_OVERLAP:]
 
 
 def _footprint(box: dict, grow: float = 0.0) -> np.ndarray:
