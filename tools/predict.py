@@ -22,7 +22,7 @@ the checkpoint is loaded weights-only (``projects/synthdet/checkpoint.py``). Bad
 scans, refused checkpoints and clashing outputs end with one line naming the file and exit code
 2; failures at run time with exit code 1. Each JSON is written under a temporary name and
 renamed into place. A scan's name is used as the file system gives it (bytes that are not UTF-8
-included) for its output file and in messages; inside the JSON such bytes show as U+FFFD.
+included) for its output file; inside the JSON, and in messages, such bytes show as U+FFFD.
 """
 import argparse
 from pathlib import Path
@@ -34,7 +34,7 @@ from projects.synthdet.bootstrap import (
 from projects.synthdet.inference.detector import ModelDetector, load_model
 from projects.synthdet.inference.windows import inference_settings
 from synthdet.contracts import write_predictions
-from synthdet.outputs import names_as_given
+from synthdet.outputs import readable
 from synthdet.prepare import prepare_scan
 from synthdet.scan_io import load_scan
 
@@ -75,7 +75,7 @@ def check_scans(scans: list[Path], out_dir: Path, voxel: float | None,
         try:
             load_scan(scan, voxel=voxel, columns=columns)
         except (ValueError, OSError) as error:  # ScanFormatError names the file (and line)
-            raise BadInput(str(error)) from None
+            raise BadInput(readable(str(error))) from None
         targets[target] = scan
     return targets
 
@@ -83,7 +83,6 @@ def check_scans(scans: list[Path], out_dir: Path, voxel: float | None,
 def main(argv: list[str] | None = None) -> list[Path]:
     """Predict every scan and write its JSON; returns the written paths."""
     args = parse_args(argv)
-    names_as_given()
     out_dir = Path(args.out)
     try:
         check_output_dir(out_dir)
@@ -106,11 +105,11 @@ def main(argv: list[str] | None = None) -> list[Path]:
             target_density=density,
             seed=args.seed)
         for line in prepared.report:
-            tqdm.write(f'{scan.name}: {line}')
+            tqdm.write(readable(f'{scan.name}: {line}'))
         try:
             predictions = detector.predictions(prepared, spec, model_name)
         except ValueError as error:
-            raise RuntimeError(f'{scan}: {error}') from None
+            raise RuntimeError(readable(f'{scan}: {error}')) from None
         write_predictions(target, predictions)  # the contract makes names valid UTF-8
         written.append(target)
     return written
