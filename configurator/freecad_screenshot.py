@@ -18,6 +18,7 @@ from typing import Iterator
 from configurator.freecad_cli import (FreecadFailed, add_program_options, check_timeout,
                                       run_freecad_process)
 from synthdet.fcstd_guard import check_document
+from synthdet.outputs import check_output, check_png, write_bytes
 from synthdet.processes import ends_with_parent, work_folder
 
 GUI_SCRIPT = Path(__file__).resolve().parent / 'freecad' / 'screenshot_gui.py'
@@ -95,8 +96,12 @@ def screenshot(document: Path,
 
     Returns FreeCAD's report (``visible`` and ``objects`` counts). Raises ``ValueError`` for
     bad arguments (``RefusedDocument`` for a document FreeCAD would run code or open other
-    files for) and ``FreecadFailed`` when no picture was made.
+    files for; an ``out`` that is the document, a folder, a device or a FIFO) and
+    ``FreecadFailed`` when no picture was made. FreeCAD saves the picture in a work folder; a
+    whole PNG is then written to ``out`` through a checked temporary file (``OutputFailed``
+    if it cannot be, the previous picture kept).
     """
+    check_output(out, '--out', inputs=[document])
     document, out = Path(document).resolve(), Path(out).resolve()
     check_document(document)  # RefusedDocument (a ValueError) before FreeCAD starts
     if out.suffix.lower() != '.png':
@@ -104,13 +109,12 @@ def screenshot(document: Path,
     if not (16 <= width <= 8000 and 16 <= height <= 8000):
         raise ValueError(f'--width/--height {width}x{height}: expected 16 to 8000 pixels')
     check_timeout(timeout)
-    out.parent.mkdir(parents=True, exist_ok=True)
     with work_folder('synthdet-screenshot') as work_dir:
-        result_path = work_dir / 'result.json'
+        result_path, picture = work_dir / 'result.json', work_dir / 'view.png'
         config, options = write_gui_inputs(
             work_dir, {
                 'document': str(document),
-                'out': str(out),
+                'out': str(picture),
                 'width': width,
                 'height': height,
                 'result': str(result_path),
@@ -123,10 +127,13 @@ def screenshot(document: Path,
             env = {key: value for key, value in os.environ.items() if not key.startswith('QT_')}
             env.update(SYNTHDET_SCREENSHOT=str(options), HOME=str(work_dir), DISPLAY=display)
             result = run_freecad_process(command, env, work_dir, timeout, result_path)
-    if result['status'] != 'ok':
-        raise FreecadFailed(f'{document}: {result["error"]}')
-    if not out.is_file():
-        raise FreecadFailed(f'FreeCAD reported success but {out} was not written')
+        if result['status'] != 'ok':
+            raise FreecadFailed(f'{document}: {result["error"]}')
+        if not picture.is_file():
+            raise FreecadFailed(f'FreeCAD reported success but {out} was not written')
+        data = picture.read_bytes()
+        check_png(data, out)
+        write_bytes(out, data)
     return result
 
 

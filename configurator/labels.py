@@ -24,8 +24,6 @@ FreeCAD would run code or open other files for is refused before FreeCAD starts
 """
 import os
 import re
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +34,7 @@ from synthdet.classes import GENERATED_CLASSES
 from synthdet.contracts import LABELS_FORMAT, write_labels
 from synthdet.fcstd_guard import check_document
 from synthdet.geometry import box_corners_xy
+from synthdet.outputs import check_output, replaced_paths
 from synthdet.processes import work_folder
 from synthdet.scan_io import read_scan
 
@@ -178,10 +177,9 @@ def _write_points(path: Path, points: np.ndarray) -> None:
 
 def write_s3dis_room(room_dir: Path, points: np.ndarray, elements: np.ndarray) -> None:
     """Write one S3DIS room (``<room>.txt`` and ``Annotations/<element>.txt``) atomically: in
-    a temporary folder beside ``room_dir``, renamed into place (a previous room replaced)."""
-    room_dir.parent.mkdir(parents=True, exist_ok=True)
-    partial = Path(tempfile.mkdtemp(prefix=f'.{room_dir.name}.partial-', dir=room_dir.parent))
-    try:
+    a temporary folder of this run beside ``room_dir``, renamed into place (a previous room
+    replaced; ``synthdet.outputs``, which also removes the folders of killed runs)."""
+    with replaced_paths([room_dir], folders=True) as (partial, ):
         annotations = partial / 'Annotations'
         annotations.mkdir()
         order = np.argsort(elements, kind='stable')
@@ -189,16 +187,6 @@ def write_s3dis_room(room_dir: Path, points: np.ndarray, elements: np.ndarray) -
         for name, chunk in zip(names, np.split(order, starts[1:])):
             _write_points(annotations / f'{name}.txt', points[chunk])
         _write_points(partial / f'{room_dir.name}.txt', points[order])
-        if room_dir.exists():
-            old = Path(tempfile.mkdtemp(prefix=f'.{room_dir.name}.old-', dir=room_dir.parent))
-            os.replace(room_dir, old / room_dir.name)
-            os.replace(partial, room_dir)
-            shutil.rmtree(old)
-        else:
-            os.replace(partial, room_dir)
-    finally:
-        if partial.exists():
-            shutil.rmtree(partial)
 
 
 def labels_document(read: dict, scan: Path) -> dict:
@@ -231,6 +219,7 @@ def make_labels(document: Path,
                 timeout: float = 300.0) -> dict:
     """Read the document, write the labels file and the S3DIS room into ``out``; returns a
     summary (``labels``, ``room_dir``, ``boxes`` per class, ``points``, ``reviewed``)."""
+    check_output(out, '--out', inputs=[document, scan], folder=True)
     document, scan, out = Path(document), Path(scan), Path(out)
     room_name = room_name or f'{re.sub(r"[^A-Za-z0-9]", "", scan.stem) or "room"}_1'
     if not ROOM_NAME.fullmatch(room_name):
@@ -240,6 +229,8 @@ def make_labels(document: Path,
         raise LabelsInputError(f'--area {area}: expected a positive area number')
     if not scan.is_file():
         raise LabelsInputError(f'{scan}: scan file not found')
+    labels_path = check_output(out / f'{scan.stem}.labels.json', '--out', [document, scan])
+    room_dir = check_output(out / f'Area_{area}' / room_name, '--room', folder=True)
     points = read_scan(scan)
     read = read_document(document, freecadcmd, timeout)
     boxes = read['boxes']
@@ -251,10 +242,7 @@ def make_labels(document: Path,
     elements = background_elements(points[:, :3], read['room'])
     for index, name in enumerate(instance_names(boxes, str(document))):
         elements[owners == index] = name
-    out.mkdir(parents=True, exist_ok=True)
-    room_dir = out / f'Area_{area}' / room_name
     write_s3dis_room(room_dir, points, elements)
-    labels_path = out / f'{scan.stem}.labels.json'
     write_labels(labels_path, labels_document(read, scan))
     counts = {
         name: sum(box['class'] == name for box in boxes)

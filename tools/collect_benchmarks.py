@@ -35,6 +35,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from synthdet.outputs import write_text
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # Arguments per benchmark: the settings their docs report (paper scale where there is one).
 ARGUMENTS = {
@@ -217,9 +219,8 @@ def run_benchmark(name: str, output_dir: Path) -> dict:
     text = scrub(''.join(output).replace('\r', '\n'))
     lines = [line.rstrip() for line in text.splitlines() if line.strip() and '%|' not in line]
     record['last_line'] = lines[-1].strip() if lines else ''
-    output_dir.mkdir(parents=True, exist_ok=True)
-    (output_dir / f'{name}.txt').write_text('\n'.join(lines) + '\n')
-    (output_dir / f'{name}.json').write_text(json.dumps(record, indent=1) + '\n')
+    write_text(output_dir / f'{name}.txt', '\n'.join(lines) + '\n')
+    write_text(output_dir / f'{name}.json', json.dumps(record, indent=1) + '\n')
     return record
 
 
@@ -354,9 +355,10 @@ def main(argv: list[str] | None = None) -> int:
     kept = {name: kept_output(name, args.output_dir) for name in names}
     for name, record in kept.items():  # outputs kept before scrubbing existed: scrubbed now
         if record is not None:
-            (args.output_dir / f'{name}.txt').write_text('\n'.join(record['output']) + '\n')
+            write_text(args.output_dir / f'{name}.txt', '\n'.join(record['output']) + '\n')
     records = [record for record in kept.values() if record is not None]
-    args.out.write_text(
+    write_text(
+        args.out,
         render(records, [name for name, record in kept.items() if record is None],
                args.output_dir.resolve()))
     print(f'[bench] wrote {args.out}')

@@ -20,6 +20,7 @@ from mmengine.config import Config, DictAction
 
 from projects.synthdet.data_config import ConfigFileError, check_data_config, is_data_config
 from projects.synthdet.distributed import prepare_distributed
+from synthdet.outputs import OutputRefused, check_output
 
 
 def run_tool(main: Callable[[], object],
@@ -80,8 +81,7 @@ def float_in(low: float, high: float, include_low: bool = True) -> Callable[[str
     return parse
 
 
-class OutputPathError(ValueError):
-    """An output path that cannot be written; the message names it."""
+OutputPathError = OutputRefused  # an output path that cannot be written; the message names it
 
 
 def _nearest_existing(path: Path) -> Path:
@@ -103,25 +103,23 @@ def _check_can_create_in(folder: Path, output: Path) -> None:
     os.unlink(name)
 
 
-def check_output_dir(path: str | Path) -> None:
+def check_output_dir(path: str | Path, option: str = '--out') -> None:
     """:class:`OutputPathError` unless ``path`` is a writable folder or can be created as one
-    (the folder is not created; a probe file is created and removed)."""
-    path = Path(path)
+    (the folder is not created; a probe file is created and removed); a file, device or FIFO
+    is refused by ``synthdet.outputs.check_output``."""
+    path = check_output(path, option, folder=True)
     existing = _nearest_existing(path)
-    if existing == Path(os.path.abspath(path)) and not existing.is_dir():
-        raise OutputPathError(f'{path}: is a file, expected a folder')
     if not existing.is_dir():
         raise OutputPathError(f'{path}: cannot be created ({existing} is a file)')
     _check_can_create_in(existing, path)
 
 
-def check_output_file(path: str | Path, make_parents: bool = False) -> None:
-    """:class:`OutputPathError` unless the file ``path`` can be written: not a folder, in a
-    writable folder that exists (or, with ``make_parents``, can be created). The file is not
-    created; a probe file beside it is created and removed."""
-    path = Path(path)
-    if path.is_dir():
-        raise OutputPathError(f'{path}: is a folder, expected a file name')
+def check_output_file(path: str | Path, make_parents: bool = False, option: str = '--out') -> None:
+    """:class:`OutputPathError` unless the file ``path`` can be written: not a folder, device
+    or FIFO (``synthdet.outputs.check_output``), in a writable folder that exists (or, with
+    ``make_parents``, can be created). The file is not created; a probe file beside it is
+    created and removed."""
+    path = check_output(path, option)
     if make_parents:
         check_output_dir(path.parent)
         return
