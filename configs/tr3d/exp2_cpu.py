@@ -12,10 +12,14 @@
 #   point dropout, jitter, color jitter, color-less rooms), for real scans' colors and density;
 # - TR3D's 1x schedule: 12 epochs of the training areas repeated 5 times, the learning rate
 #   dropping 10x after epochs 8 and 11; batch 4, 1 loader worker, log every 10 iterations;
-# - the final epoch is the tested model (no best-epoch checkpoint: area 9 is both the validation
-#   and the test set).
-# Nothing here selects a device: the Runner uses a GPU when there is one. On a 2-core machine
-# (2 processes of 1 thread) an iteration of 4 rooms takes about 4-6 s, a test room 0.6 s.
+# - the neck keeps the voxels that TR3D's generative upsampling creates only within one voxel
+#   of the backbone's own (`generated_reach=1`, not in TR3D): unpruned they fill the room's
+#   volume and cost a third of an iteration (benchmarks/bench_train_recipe.py);
+# - the training loader finds each room's floor, walls and ceiling once (`cached_rooms`), the
+#   10 % it keeps are drawn afresh every time;
+# - one validation, after the last epoch; the final epoch is the tested model (no best-epoch
+#   checkpoint: area 9 is both the validation and the test set).
+# Nothing here selects a device: the Runner uses a GPU when there is one.
 _base_ = ['./exp2.py']
 from projects.synthdet.config_helpers import area_datasets, with_num_points  # noqa: E402
 from projects.synthdet.config_helpers import with_robustness  # noqa: E402
