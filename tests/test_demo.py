@@ -242,12 +242,24 @@ def test_report_links_every_artefact(demo):
     assert all((demo / link).is_file() for link in links)
 
 
+def test_the_shipped_model_turns_the_demo_scan_into_a_document_first(demo):
+    document = demo / 'scan' / 'factory_1.FCStd'
+    detections = json.loads(document.with_suffix('.pred.json').read_text())['detections']
+    assert detections and {d['class'] for d in detections} <= set(CLASSES)
+    with Image.open(document.with_suffix('.FCStd.png')) as image:
+        assert np.asarray(image.convert('RGB'), dtype=float).std() > 10
+    report = (demo / 'REPORT.md').read_text()
+    first = report.index('## A scan to a FreeCAD document with the shipped model')
+    assert first < report.index('## Table 1')
+    assert '](scan/factory_1.FCStd.png)' in report
+
+
 def test_second_run_skips_every_step_and_guards_the_work_dir(demo):
     proc = run_demo(demo)
     assert proc.returncode == 0, proc.stderr[-2000:]
     skipped = re.findall(r'\[demo \d+/\d+\] (\w+): outputs exist, skipped', proc.stdout)
     assert skipped == [
-        'generate', 'convert', 'table1', 'train', 'test', 'predict', 'table4', 'corners',
+        'scan2cad', 'generate', 'convert', 'table1', 'train', 'test', 'predict', 'table4', 'corners',
         'freecad', 'pictures'
     ]
     other = subprocess.run(

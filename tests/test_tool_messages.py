@@ -143,8 +143,9 @@ def test_arguments_are_checked_before_the_scans_and_the_model(files, tmp_path):
     not_a_dir.write_text('')
     missing = tmp_path / 'missing.pth'  # never looked at: the arguments fail first
     cases = [
+        # no config first: every argument is a scan for the shipped model, checked first
         (['tools/predict.py', files['scan'], missing, files['scan'], '--out', tmp_path / 'o'],
-         [str(files['scan']), 'not a config file']),
+         [str(missing), 'scan file not found']),
         (['tools/predict.py', TINY, missing, files['scan'], '--out', not_a_dir],
          [str(not_a_dir), 'expected a folder']),
         (['tools/test.py', TINY, files['untrained'], '--out', tmp_path],

@@ -1,5 +1,6 @@
-"""The whole synthdet pipeline in one command (``make demo``): generate, convert, train, test,
-predict, room corners, FreeCAD documents, pictures and a report.
+"""The whole synthdet pipeline in one command (``make demo``): first a scan to a FreeCAD
+document with the shipped model, then generate, convert, train, test, predict, room corners,
+FreeCAD documents, pictures and a report.
 
     python tools/demo.py [--size tiny|demo] [--work-dir work_dirs/demo] [--force]
 
@@ -9,6 +10,10 @@ stopped continues where it stopped (training resumes from its newest checkpoint)
 goes to ``data/``: the generated areas and converted files live in ``WORK/data``.
 
 Steps and outputs (``WORK`` = the work directory):
+ 0. a scan to a document        WORK/scan/factory_1.ply (a generated factory room of its own
+                                seed, as a PLY a user hands over), then tools/scan2cad.py with
+                                the shipped model: WORK/scan/factory_1.FCStd (+ .pred.json,
+                                .corners.json) and WORK/scan/factory_1.FCStd.png (FreeCAD's view)
  1. generate areas 7-9          WORK/data/Stanford3dDataset_v1.2_Aligned_Version/Area_{7,8,9}
                                 (annotations checked with tools/check_annotations.py)
  2. convert                     WORK/data/s3dis_infos_Area_{7,8,9}.pkl, points/, masks
@@ -44,6 +49,8 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 BASE_CONFIG = REPO_ROOT / 'configs/tr3d/exp2_cpu.py'
 AREAS = (7, 8, 9)
 TEST_AREA = 9
+SCAN_AREA = 1  # the shipped model's scan: one factory room, not in areas 7-9
+SCAN_SEED_OFFSET = 1000  # its seed, away from the training areas' seed
 
 
 @dataclass(frozen=True)
@@ -51,6 +58,7 @@ class Size:
     """How big the demo is: data, training schedule and how many test rooms get a CAD model."""
     rooms_per_area: int
     points: int  # points per generated room
+    scan_points: int  # points of the scan that the shipped model turns into a document
     num_points: int  # points sampled per room for the detector
     epochs: int
     repeats: int  # times the training areas are repeated per epoch
@@ -73,6 +81,7 @@ SIZES = {
     Size(
         rooms_per_area=2,
         points=30_000,
+        scan_points=100_000,
         num_points=4_000,
         epochs=1,
         repeats=1,
@@ -88,6 +97,7 @@ SIZES = {
     Size(
         rooms_per_area=12,
         points=200_000,
+        scan_points=1_000_000,
         num_points=40_000,
         epochs=5,
         repeats=2,
@@ -139,6 +149,7 @@ class Demo:
         self.predictions = self.work / 'predictions'
         self.config = self.work / f'exp2_cpu_{size_name}.py'  # its stem names the model
         self.train_dir = self.work / 'train'
+        self.scan_dir = self.work / 'scan'
         self.durations_file = self.work / 'durations.json'
         self.durations: dict[str, float] = (
             json.loads(self.durations_file.read_text()) if self.durations_file.is_file() else {})
@@ -169,6 +180,8 @@ class Demo:
     def steps(self) -> list[tuple[str, Callable[[], bool], Callable[[], None]]]:
         """(name, outputs-exist check, action) of every step, in order."""
         return [
+            ('scan2cad', lambda: self.shipped_document().with_suffix('.FCStd.png').is_file(),
+             self.scan2cad),
             ('generate', self.generated, self.generate),
             ('convert', self.converted, self.convert),
             ('table1', lambda: (self.work / 'table1.json').is_file(), self.table1),
@@ -199,6 +212,27 @@ class Demo:
         rooms = self.held_out_rooms()
         return bool(rooms) and all(
             (self.rooms_dir / f'{room}{suffix}').is_file() for room in rooms)
+
+    def shipped_scan(self) -> Path:
+        """The demo's own scan: a generated factory room written as PLY."""
+        return self.scan_dir / f'Area_{SCAN_AREA}' / 'factory_1' / 'factory_1.ply'
+
+    def shipped_document(self) -> Path:
+        return self.scan_dir / 'factory_1.FCStd'
+
+    def scan2cad(self) -> None:
+        """A generated factory room as PLY -> ``tools/scan2cad.py`` with the shipped model ->
+        the FreeCAD document and a picture of it as FreeCAD shows it."""
+        if not self.shipped_scan().is_file():
+            self.run('scan', '-m', 'generator', '--out', self.scan_dir, '--areas',
+                     str(SCAN_AREA), '--rooms-per-area', '1', '--points',
+                     str(self.size.scan_points), '--seed',
+                     str(self.seed + SCAN_SEED_OFFSET), '--ply')
+        document = self.shipped_document()
+        self.run('scan2cad', 'tools/scan2cad.py', self.shipped_scan(), '--out', document,
+                 '--seed', str(self.seed))
+        self.configurator('screenshot', 'screenshot', document, '--out',
+                          document.with_suffix('.FCStd.png'))
 
     def generated(self) -> bool:
         return all(len(self.room_names(area)) >= self.size.rooms_per_area for area in AREAS)
@@ -338,6 +372,28 @@ class Demo:
         write_text(self.work / 'REPORT.md', self.report_text())
 
     # ------------------------------------------------------------------ the report
+    def shipped_report(self) -> list[str]:
+        """The report's first section: the scan the shipped model turned into a document."""
+        document = self.shipped_document()
+        detections = read_predictions(document.with_suffix('.pred.json'))['detections']
+        counts = {}
+        for detection in detections:
+            counts[detection['class']] = counts.get(detection['class'], 0) + 1
+        found = ', '.join(f'{count} {name}' for name, count in sorted(counts.items())) or 'none'
+        picture = document.with_suffix('.FCStd.png').relative_to(self.work)
+        return [
+            '## A scan to a FreeCAD document with the shipped model',
+            '',
+            f'`tools/scan2cad.py {self.shipped_scan().relative_to(self.work)} --out '
+            f'{document.relative_to(self.work)}`: a generated factory room '
+            f'({self.size.scan_points:,} points, seed {self.seed + SCAN_SEED_OFFSET}) read as '
+            f'a PLY, detected by the model that ships with synthdet (no training), its corners '
+            f'traced and its document built. Detections: {found}.',
+            '',
+            f'![The document as FreeCAD shows it]({picture})',
+            '',
+        ]
+
     def report_text(self) -> str:
         """REPORT.md: the tables, the pictures, the corners and the FreeCAD documents."""
         size = self.size
@@ -350,6 +406,7 @@ class Demo:
             f'points, {size.epochs} epoch(s), areas repeated {size.repeats}x), tested on area 9. '
             f'Data: `{self.data}`. Logs of every step: `logs/`.',
             '',
+            *self.shipped_report(),
             '## Table 1: instances per class and area',
             '',
             '```',

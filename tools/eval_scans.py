@@ -1,8 +1,12 @@
 """Evaluate a model on labelled scans: what it finds and what it invents, per scan and in total.
 
-Usage: python tools/eval_scans.py CONFIG CHECKPOINT SCANS_OR_DIR... --out DIR [--score-thr 0.3]
-                                  [--device cpu|cuda:0] [--seed 0] [--voxel M] [--tta]
-                                  [--columns x,y,z,r,g,b] [--cfg-options k=v ...]
+Usage: python tools/eval_scans.py [CONFIG CHECKPOINT] SCANS_OR_DIR... --out DIR
+                                  [--score-thr 0.3] [--device cpu|cuda:0] [--seed 0]
+                                  [--voxel M] [--tta] [--columns x,y,z,r,g,b]
+                                  [--cfg-options k=v ...]
+
+Without CONFIG and CHECKPOINT the model is the one that ships with synthdet
+(``projects/synthdet/weights/``, as ``tools/predict.py``); a line says which model ran.
 
 A labelled scan is ``X.<suffix>`` (any format ``tools/predict.py`` reads) with its truth
 ``X.labels.json`` beside it (``synthdet.labels/1``, docs/evaluation.md); a folder stands for
@@ -29,6 +33,7 @@ from projects.synthdet.evaluation.real_scans import (
     LabelsError, evaluate_scans, find_labelled_scans, format_result)
 from projects.synthdet.inference.detector import load_model
 from projects.synthdet.inference.windows import inference_settings
+from projects.synthdet.shipped_model import resolve_model, split_model_arguments
 from synthdet.scan_io import load_scan
 
 
@@ -40,12 +45,19 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Parse the command line."""
     parser = argparse.ArgumentParser(
         description='Evaluate a checkpoint on labelled scans (X.ply + X.labels.json).')
-    parser.add_argument('config', help='config file, e.g. configs/tr3d/exp2_cpu.py')
-    parser.add_argument('checkpoint', help='checkpoint file')
-    parser.add_argument('scans', nargs='+', help='labelled scans, or folders of them')
+    parser.add_argument(
+        'inputs',
+        nargs='+',
+        metavar='[CONFIG CHECKPOINT] SCAN',
+        help='a config file (.py, .json, .yaml) and its checkpoint, then labelled scans or '
+        'folders of them; without a config, the shipped model')
     parser.add_argument('--out', required=True, help='output directory')
     add_detection_arguments(parser, voxel=None)
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    args.config, args.checkpoint, args.scans = split_model_arguments(args.inputs)
+    if not args.scans:
+        parser.error('no labelled scan or folder given')
+    return args
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -62,11 +74,13 @@ def main(argv: list[str] | None = None) -> dict:
     for line in skipped:
         print(line)
     try:
-        cfg = load_config(args.config, args.cfg_options)
-        inference_settings(cfg, args.config)
-        model = load_model(cfg, args.checkpoint, args.device, args.tta)
+        config, checkpoint, model_line = resolve_model(args.config, args.checkpoint)
+        cfg = load_config(config, args.cfg_options)
+        inference_settings(cfg, config)
+        model = load_model(cfg, checkpoint, args.device, args.tta)
     except ValueError as error:  # a bad config or checkpoint, no inference settings, no --tta
         raise BadInput(str(error)) from None
+    print(model_line, flush=True)
     result = evaluate_scans(
         cfg,
         model,
@@ -76,7 +90,7 @@ def main(argv: list[str] | None = None) -> dict:
         seed=args.seed,
         voxel=args.voxel,
         columns=args.columns,
-        model_name=Path(args.config).stem)
+        model_name=Path(config).stem)
     print(format_result(result))
     return result
 

@@ -1,10 +1,12 @@
 """Detect objects in scans and write one ``<scan>.pred.json`` per scan.
 
-Usage: python tools/predict.py CONFIG CHECKPOINT POINTS... --out DIR [--score-thr 0.3]
+Usage: python tools/predict.py [CONFIG CHECKPOINT] POINTS... --out DIR [--score-thr 0.3]
                                [--device cpu|cuda:0] [--seed 0] [--voxel M]
                                [--columns x,y,z,r,g,b] [--cfg-options k=v ...]
 
-POINTS are scans in any format of ``synthdet.scan_io``, read with ``load_scan`` into a local
+Without CONFIG and CHECKPOINT (the first argument is a config when it ends with .py, .json,
+.yaml or .yml) the model is the one that ships with synthdet (``projects/synthdet/weights/``);
+a line says which model ran. POINTS are scans in any format of ``synthdet.scan_io``, read with ``load_scan`` into a local
 float64 frame (every point, or one per ``--voxel`` as ``python -m configurator corners``; the
 voxels are those of the scan's coordinates) and prepared
 with ``synthdet.prepare.prepare_scan`` (outliers, up axis, floor levelling, walls along the
@@ -33,6 +35,7 @@ from projects.synthdet.bootstrap import (
     add_detection_arguments, check_output_dir, load_config, run_tool)
 from projects.synthdet.inference.detector import ModelDetector, load_model
 from projects.synthdet.inference.windows import inference_settings
+from projects.synthdet.shipped_model import resolve_model, split_model_arguments
 from synthdet.contracts import write_predictions
 from synthdet.outputs import readable
 from synthdet.prepare import prepare_scan
@@ -46,13 +49,19 @@ class BadInput(ValueError):
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Parse the command line."""
     parser = argparse.ArgumentParser(description='Detect objects in scans with a checkpoint.')
-    parser.add_argument('config', help='config file, e.g. configs/tr3d/exp2.py')
-    parser.add_argument('checkpoint', help='checkpoint file')
     parser.add_argument(
-        'points', nargs='+', help='scans: .e57, .las/.laz, .ply, .pcd, .xyz/.pts/.csv, .txt, .bin')
+        'inputs',
+        nargs='+',
+        metavar='[CONFIG CHECKPOINT] SCAN',
+        help='a config file (.py, .json, .yaml) and its checkpoint, then the scans: .e57, '
+        '.las/.laz, .ply, .pcd, .xyz/.pts/.csv, .txt, .bin; without a config, the shipped model')
     parser.add_argument('--out', required=True, help='output directory for <scan>.pred.json')
     add_detection_arguments(parser, voxel=None)
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    args.config, args.checkpoint, args.points = split_model_arguments(args.inputs)
+    if not args.points:
+        parser.error('no scan given')
+    return args
 
 
 def output_path(scan: Path, out_dir: Path) -> Path:
@@ -86,17 +95,19 @@ def main(argv: list[str] | None = None) -> list[Path]:
     out_dir = Path(args.out)
     try:
         check_output_dir(out_dir)
-        cfg = load_config(args.config, args.cfg_options)
-        spec, density = inference_settings(cfg, args.config)
+        config, checkpoint, model_line = resolve_model(args.config, args.checkpoint)
+        cfg = load_config(config, args.cfg_options)
+        spec, density = inference_settings(cfg, config)
     except ValueError as error:  # OutputPathError, ConfigFileError
         raise BadInput(str(error)) from None
     targets = check_scans([Path(p) for p in args.points], out_dir, args.voxel, args.columns)
     try:
-        model = load_model(cfg, args.checkpoint, args.device, args.tta)
+        model = load_model(cfg, checkpoint, args.device, args.tta)
     except ValueError as error:  # CheckpointError
         raise BadInput(str(error)) from None
+    print(model_line, flush=True)
     detector = ModelDetector(model, args.score_thr, args.seed)
-    model_name = Path(args.config).stem
+    model_name = Path(config).stem
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     for target, scan in tqdm(targets.items(), desc='predict', unit='scan'):

@@ -1,6 +1,6 @@
 """Turn a training checkpoint into an inference checkpoint (state_dict and meta only).
 
-Usage: python tools/publish_model.py IN_FILE OUT_FILE
+Usage: python tools/publish_model.py IN_FILE OUT_FILE [--half]
 
 Like mmdet's ``publish_model``: the optimizer, parameter scheduler and message hub are dropped,
 ``meta`` keeps only plain values (classes, epoch, config text, ...), and the output is named
@@ -9,7 +9,9 @@ Like mmdet's ``publish_model``: the optimizer, parameter scheduler and message h
 line naming it, exit 2); the output loads with plain ``torch.load(weights_only=True)``. The output
 folder is checked first (it must exist and be writable, exit 2 otherwise); the file is written
 under a temporary name and renamed into place (exit 1 if that fails); OUT_FILE itself is never
-written, so IN_FILE may have the same name.
+written, so IN_FILE may have the same name. ``--half`` stores the floating-point weights in
+float16, half the size (the shipped model, ``projects/synthdet/weights/``); a model loads them
+into its float32 parameters.
 """
 import argparse
 import sys
@@ -20,9 +22,11 @@ from projects.synthdet.checkpoint import (
     load_checkpoint_file, save_inference_checkpoint)
 
 
-def publish(in_file: str | Path, out_file: str | Path) -> Path:
-    """Write the inference checkpoint of ``in_file`` as ``<out stem>-<sha256[:8]>.pth``."""
-    return save_inference_checkpoint(load_checkpoint_file(in_file), out_file, digest_suffix=True)
+def publish(in_file: str | Path, out_file: str | Path, half: bool = False) -> Path:
+    """Write the inference checkpoint of ``in_file`` as ``<out stem>-<sha256[:8]>.pth``
+    (``half``: float16 weights)."""
+    return save_inference_checkpoint(
+        load_checkpoint_file(in_file), out_file, digest_suffix=True, half=half)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -31,10 +35,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('in_file', help='training checkpoint, e.g. work_dirs/exp2/epoch_12.pth')
     parser.add_argument('out_file', help='output name, e.g. tr3d_exp2.pth')
+    parser.add_argument(
+        '--half', action='store_true', help='store the floating-point weights in float16')
     args = parser.parse_args(argv)
     try:
         check_output_file(args.out_file)
-        final = publish(args.in_file, args.out_file)
+        final = publish(args.in_file, args.out_file, args.half)
     except ValueError as error:  # CheckpointError, OutputPathError
         print(f'publish_model.py: error: {error}', file=sys.stderr)
         return 2

@@ -1,10 +1,12 @@
 """One command from a scan to a FreeCAD document: read, prepare, detect, trace corners, build.
 
-Usage: python tools/scan2cad.py SCAN --config CFG --checkpoint CKPT --out hall.FCStd
+Usage: python tools/scan2cad.py SCAN --out hall.FCStd [--config CFG --checkpoint CKPT]
                                 [--score-thr 0.3] [--device cpu] [--seed 0] [--voxel 0.02]
                                 [--columns x,y,z,r,g,b] [--library DIR] [--wall-thickness 0.1]
 
-The stages are the ones a user runs one by one, on the same prepared scan:
+Without ``--config`` and ``--checkpoint`` the detector is the model that ships with synthdet
+(``projects/synthdet/weights/``, its model card beside it); the first line says which model
+ran. The stages are the ones a user runs one by one, on the same prepared scan:
 1. ``synthdet.scan_io.load_scan`` (one point per ``--voxel``, 2 cm by default as the corners:
    a hall's memory stays bounded) and ``synthdet.prepare.prepare_scan`` (each step reported;
    for detection a scan denser than the config's training density is resampled down to it,
@@ -35,6 +37,7 @@ from projects.synthdet.bootstrap import (
     add_detection_arguments, check_output_file, load_config)
 from projects.synthdet.inference.detector import ModelDetector, load_model
 from projects.synthdet.inference.windows import inference_settings
+from projects.synthdet.shipped_model import resolve_model
 from synthdet.contracts import write_corners, write_predictions
 from synthdet.outputs import check_output, copy_into_place, names_as_given, readable
 from synthdet.prepare import align_scan, resample_to_density
@@ -46,8 +49,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Parse the command line."""
     parser = argparse.ArgumentParser(description='Scan -> detections, corners -> FreeCAD .FCStd')
     parser.add_argument('scan', help='.e57, .las/.laz, .ply, .pcd, .xyz/.pts/.csv, .txt or .bin')
-    parser.add_argument('--config', required=True, help='model config, e.g. configs/tr3d/exp2.py')
-    parser.add_argument('--checkpoint', required=True, help='checkpoint file')
+    parser.add_argument(
+        '--config', help='model config, e.g. configs/tr3d/exp2.py (default: the shipped model)')
+    parser.add_argument('--checkpoint', help='checkpoint file (default: the shipped model)')
     parser.add_argument('--out', required=True, help='FreeCAD document to write (.FCStd)')
     parser.add_argument('--library', help='folder of <class>.step files replacing built-ins')
     parser.add_argument('--wall-thickness', type=float, default=0.1, help='metres (default 0.1)')
@@ -68,12 +72,14 @@ def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
     if out.suffix.lower() != '.fcstd':
         raise ValueError(f'{out}: the output must end with .FCStd')
     predictions_path, corners_path = output_paths(out)
-    inputs = [scan, args.config, args.checkpoint, args.library]
+    inputs = [p for p in (scan, args.config, args.checkpoint, args.library) if p is not None]
     for path in (out, predictions_path, corners_path):  # the arguments before any work
         check_output(path, '--out', inputs)
         check_output_file(path)
-    cfg = load_config(args.config, args.cfg_options)
-    spec, density = inference_settings(cfg, args.config)
+    config, checkpoint, model_line = resolve_model(args.config, args.checkpoint)
+    report(model_line)
+    cfg = load_config(config, args.cfg_options)
+    spec, density = inference_settings(cfg, config)
     start = time.perf_counter()
     loaded = load_scan(scan, voxel=args.voxel, columns=args.columns)
     # the corners, as `configurator corners`, use every point; detection the resampled ones
@@ -82,11 +88,11 @@ def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
     for line in prepared.report:
         report(f'prepare: {line}')
     detector = ModelDetector(
-        load_model(cfg, args.checkpoint, args.device, args.tta), args.score_thr, args.seed)
+        load_model(cfg, checkpoint, args.device, args.tta), args.score_thr, args.seed)
     with work_folder('synthdet-scan2cad') as work:
         # the document's label is its file's stem, as when FreeCAD saves it where it belongs
         staged = [work / 'room.pred.json', work / 'room.corners.json', work / readable(out.name)]
-        predictions = detector.predictions(prepared, spec, Path(args.config).stem)
+        predictions = detector.predictions(prepared, spec, Path(config).stem)
         write_predictions(staged[0], predictions)
         report(f'detect: {len(predictions["detections"])} objects -> {predictions_path}')
         outline = outline_in_scan(room_outline(outlined.points), outlined)

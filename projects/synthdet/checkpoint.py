@@ -192,25 +192,35 @@ def _plain(value: object) -> object:
     return _DROP
 
 
-def inference_checkpoint(checkpoint: dict) -> dict:
-    """``state_dict`` and the plain-typed part of ``meta`` of a training checkpoint."""
+def inference_checkpoint(checkpoint: dict, half: bool = False) -> dict:
+    """``state_dict`` and the plain-typed part of ``meta`` of a training checkpoint; with
+    ``half`` its floating-point tensors in float16 (a model loads them into its own float32
+    parameters)."""
     meta = _plain(checkpoint.get('meta') or {})
-    return {'meta': meta if isinstance(meta, dict) else {}, 'state_dict': checkpoint['state_dict']}
+    state_dict = checkpoint['state_dict']
+    if half:
+        state_dict = {
+            key: value.half() if torch.is_floating_point(value) else value
+            for key, value in state_dict.items()
+        }
+    return {'meta': meta if isinstance(meta, dict) else {}, 'state_dict': state_dict}
 
 
 def save_inference_checkpoint(checkpoint: dict,
                               out: str | os.PathLike,
-                              digest_suffix: bool = False) -> Path:
+                              digest_suffix: bool = False,
+                              half: bool = False) -> Path:
     """Write :func:`inference_checkpoint` of ``checkpoint`` to ``out`` atomically; returns it.
 
     With ``digest_suffix`` the file is named ``<out stem>-<first 8 hex digits of its
-    SHA-256>.pth`` (mmdet's published-model name) and ``out`` itself is never written. The
+    SHA-256>.pth`` (mmdet's published-model name) and ``out`` itself is never written; ``half``
+    stores the floating-point weights in float16. The
     checkpoint is serialised in memory, reloaded with plain ``weights_only=True`` and written
     through a checked temporary file of this run, renamed into place (``synthdet.outputs``).
     """
     out = Path(out)
     buffer = io.BytesIO()
-    torch.save(inference_checkpoint(checkpoint), buffer)
+    torch.save(inference_checkpoint(checkpoint, half), buffer)
     data = buffer.getvalue()
     torch.load(io.BytesIO(data), map_location='cpu', weights_only=True)
     if digest_suffix:
