@@ -31,6 +31,7 @@ import numpy as np
 
 from configurator.freecad.synthdet_freecad.schema import LABELS_READ_FORMAT as READ_FORMAT
 from configurator.freecad_cli import MACRO, FreecadFailed, check_timeout, run_freecad_process
+from synthdet.cli import check_input_file
 from synthdet.classes import GENERATED_CLASSES
 from synthdet.contracts import LABELS_FORMAT, write_labels
 from synthdet.geometry import box_corners_xy
@@ -284,8 +285,7 @@ def make_labels(document: Path,
                                'e.g. hall_1 (an S3DIS room name)')
     if area < 1:
         raise LabelsInputError(f'--area {area}: expected a positive area number')
-    if not scan.is_file():
-        raise LabelsInputError(f'{scan}: scan file not found')
+    check_input_file(scan, 'scan file')
     points = read_scan(scan)
     read = read_document(document, freecadcmd, timeout)
     boxes = read['boxes']

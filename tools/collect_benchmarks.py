@@ -35,6 +35,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from synthdet.cli import OneLineParser
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # Arguments per benchmark: the settings their docs report (paper scale where there is one).
 ARGUMENTS = {
@@ -312,7 +314,7 @@ def render(records: list[dict], not_run: list[str], output_dir: Path) -> str:
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser = OneLineParser(description=__doc__.split('\n')[0])
     parser.add_argument(
         '--only', nargs='+', metavar='NAME', help='run only these benchmarks (bench_<NAME>.py)')
     parser.add_argument('--out', type=Path, default=REPO_ROOT / 'docs/benchmarks.md')

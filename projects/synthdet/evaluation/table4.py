@@ -13,7 +13,7 @@ import torch
 from mmdet3d.structures import DepthInstance3DBoxes
 
 from synthdet.classes import DETECTION_CLASSES
-from synthdet.info_files import load_info_pickle
+from synthdet.info_files import InfoFileError, labelled_boxes
 
 TABLE4_FORMAT = 'synthdet.table4/1'
 
@@ -21,25 +21,17 @@ TABLE4_FORMAT = 'synthdet.table4/1'
 TrueBox = tuple[str, list[float]]
 
 
-def boxes_from_info(info: dict, categories: dict[str, int]) -> list[TrueBox]:
-    """The true boxes of one info-pickle sample's instances."""
-    names = {label: name for name, label in categories.items()}
-    return [(names[inst['bbox_label_3d']], [float(v) for v in inst['bbox_3d'][:6]])
-            for inst in info.get('instances', []) if inst['bbox_label_3d'] in names]
-
-
 def truth_from_infos(paths: list[str]) -> dict[str, list[TrueBox]]:
-    """Map points file name (e.g. ``Area_9_lab_3.bin``) to its true boxes."""
+    """Map points file name (e.g. ``Area_9_lab_3.bin``) to its true boxes; ``InfoFileError``
+    naming the pickle for one that is not the converter's (``labelled_boxes``)."""
     truth = {}
     for path in paths:
-        infos = load_info_pickle(path)
-        categories = infos.get('metainfo', {}).get('categories') or {
-            name: i
-            for i, name in enumerate(DETECTION_CLASSES)
-        }
-        for info in infos['data_list']:
-            truth[Path(info['lidar_points']['lidar_path']).name] = boxes_from_info(
-                info, categories)
+        for scan, boxes in labelled_boxes(path, DETECTION_CLASSES):
+            try:
+                truth[scan] = [(name, [float(v) for v in box[:6]]) for name, box in boxes]
+            except (TypeError, ValueError):
+                raise InfoFileError(f'{path}: {scan}: a bbox_3d that is not 6 or more '
+                                    'numbers') from None
     return truth
 
 
