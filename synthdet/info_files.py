@@ -99,16 +99,17 @@ def rooms_scanned_by(info_file: str | os.PathLike, sensor: str) -> list[int]:
     return [index for index, model in enumerate(room_sensors(info_file)) if model == sensor]
 
 
-def labelled_boxes(path: str | os.PathLike,
-                   default_classes: Sequence[str] | None = None) -> list[tuple[str, list]]:
+def labelled_boxes(
+        path: str | os.PathLike,
+        default_classes: Sequence[str] | None = None) -> list[tuple[str | None, list]]:
     """``(points file name, [(class name, bbox_3d), ...])`` for every sample of an info
-    pickle; class names come from its ``metainfo['categories']`` (``name -> label``), or from
-    ``default_classes`` (label = index) when it has none. Instances labelled -1 (ignored
-    classes) are left out.
+    pickle (the name None for a sample without ``lidar_points``); class names come from its
+    ``metainfo['categories']`` (``name -> label``), or from ``default_classes`` (label =
+    index) when it has none. Instances labelled -1 (ignored classes) are left out.
 
     Raises ``InfoFileError`` naming the file (and the sample) for a pickle without categories
-    (and no ``default_classes``), a label it does not name, or a sample without
-    ``lidar_points.lidar_path``, ``instances`` or ``bbox_3d``.
+    (and no ``default_classes``), a label it does not name, ``lidar_points`` without
+    ``lidar_path``, or an instance without ``bbox_label_3d`` or ``bbox_3d``.
     """
     infos = load_info_pickle(path)
     categories = infos['metainfo'].get('categories')
@@ -123,7 +124,8 @@ def labelled_boxes(path: str | os.PathLike,
     samples = []
     for index, info in enumerate(infos['data_list']):
         try:
-            scan = Path(info['lidar_points']['lidar_path']).name
+            points = info.get('lidar_points')
+            scan = None if points is None else Path(points['lidar_path']).name
             boxes = [(names[inst['bbox_label_3d']], list(inst['bbox_3d']))
                      for inst in info.get('instances', []) if inst['bbox_label_3d'] != -1]
         except KeyError as error:

@@ -24,18 +24,17 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from projects.synthdet.bootstrap import run_tool
+from projects.synthdet.evaluation.table4 import (TrueBox, format_table4, table4,
+                                                 truth_from_infos)
+from projects.synthdet.evaluation.table_files import write_table
 from synthdet.classes import DETECTION_CLASSES
 from synthdet.cli import InputFileError, OneLineParser, check_input_file, float_in
 from synthdet.contracts import SchemaError, read_predictions, read_room
 from synthdet.info_files import InfoFileError
-
-if TYPE_CHECKING:
-    from projects.synthdet.evaluation.table4 import TrueBox
 
 
 class BadInput(ValueError):
@@ -92,9 +91,7 @@ def truth_from_meta(meta_path: Path) -> list[TrueBox]:
 
 def main(argv: list[str] | None = None) -> dict:
     """Load predictions and ground truth, print Table 4 and optionally write it."""
-    args = parse_args(argv)  # bad options end here, before torch and mmdet3d are loaded
-    from projects.synthdet.evaluation.table4 import format_table4, table4, truth_from_infos
-    from projects.synthdet.evaluation.table_files import write_table
+    args = parse_args(argv)
     for path in args.infos or []:
         check_input_file(path, 'info pickle')
     infos = truth_from_infos(args.infos) if args.infos else None
