@@ -315,6 +315,20 @@ def test_an_output_folder_that_cannot_be_written_is_exit_1(inputs):
     one_line_error(proc, 1, '/sys/model.pth', 'cannot write')
 
 
+def test_the_test_tool_names_the_show_dir_it_cannot_use(tmp_path):
+    """A file given as ``--show-dir`` is bad input naming that option; a folder that cannot be
+    written is exit 1 (both before the checkpoint is read)."""
+    picture = tmp_path / 'show.png'
+    picture.write_bytes(b'not a folder')
+    proc, _ = cli('tools/test.py', TINY, 'missing.pth', '--show-dir', picture,
+                  library_warnings=False)
+    one_line_error(proc, 2, f'--show-dir {picture}: is a file, expected a folder')
+    unwritable = Path('/sys/synthdet-show')
+    proc, _ = cli('tools/test.py', TINY, 'missing.pth', '--show-dir', unwritable,
+                  library_warnings=False)
+    one_line_error(proc, 1, unwritable, 'cannot write')
+
+
 # --------------------------------------------------------------------------- bounded work
 
 

@@ -29,10 +29,11 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from projects.synthdet.bootstrap import (
-    add_detection_arguments, check_device, check_output_dir, load_config, run_tool)
+from projects.synthdet.bootstrap import (add_detection_arguments, check_device, load_config,
+                                         run_tool)
 from synthdet.cli import OneLineParser
 from synthdet.contracts import write_predictions
+from synthdet.outputs import check_output_dir, readable
 from synthdet.prepare import prepare_scan
 from synthdet.scan_io import load_scan
 
@@ -56,12 +57,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 def output_path(scan: Path, out_dir: Path) -> Path:
     """``<out_dir>/<scan stem>.pred.json``."""
     return out_dir / f'{scan.stem}.pred.json'
-
-
-def readable(text: str) -> str:
-    """``text`` as valid Unicode: bytes of a file name that are not UTF-8 (which Python keeps as
-    lone surrogates) become U+FFFD."""
-    return text.encode('utf-8', 'surrogateescape').decode('utf-8', 'replace')
 
 
 def check_scans(scans: list[Path], out_dir: Path, voxel: float | None,
@@ -95,7 +90,7 @@ def main(argv: list[str] | None = None) -> list[Path]:
         from projects.synthdet.inference.windows import inference_settings
         spec, density = inference_settings(cfg, args.config)
         device = check_device(args.device)
-    except ValueError as error:  # OutputPathError, ConfigFileError, DeviceError
+    except ValueError as error:  # OutputRefused, ConfigFileError, DeviceError
         raise BadInput(str(error)) from None
     targets = check_scans([Path(p) for p in args.points], out_dir, args.voxel, args.columns)
     try:

@@ -14,8 +14,8 @@ OUT_FILE itself is never written, so IN_FILE may have the same name.
 import sys
 from pathlib import Path
 
-from projects.synthdet.bootstrap import UnwritableOutputError, check_output_file
 from synthdet.cli import OneLineParser
+from synthdet.outputs import OutputFailed, check_output_file
 
 
 def publish(in_file: str | Path, out_file: str | Path) -> Path:
@@ -34,10 +34,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         check_output_file(args.out_file)
         final = publish(args.in_file, args.out_file)
-    except ValueError as error:  # CheckpointError, OutputPathError
+    except ValueError as error:  # CheckpointError, OutputRefused
         print(f'publish_model.py: error: {error}', file=sys.stderr)
         return 2
-    except UnwritableOutputError as error:
+    except OutputFailed as error:
         print(f'publish_model.py: error: {error}', file=sys.stderr)
         return 1
     except (OSError, RuntimeError) as error:  # torch.save reports some write errors as these

@@ -37,12 +37,12 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from projects.synthdet.bootstrap import (
-    ConfigFileError, ErrorTypes, OutputPathError, TTAConfigError, check_output_dir,
-    check_output_file, parse_runner_args, run_tool, runner_config, tta_settings)
+from projects.synthdet.bootstrap import (ConfigFileError, ErrorTypes, TTAConfigError,
+                                         parse_runner_args, run_tool, runner_config, tta_settings)
 from synthdet.cli import OneLineParser, float_in
 from synthdet.contracts import SENSOR_MODELS
 from synthdet.info_files import InfoFileError, load_info_pickle, rooms_scanned_by
+from synthdet.outputs import OutputRefused, check_output_dir, check_output_file
 
 if TYPE_CHECKING:
     from mmengine.config import Config
@@ -165,7 +165,7 @@ def main(argv: list[str] | None = None) -> dict:
     if args.out:
         check_output_file(args.out, make_parents=True)
     if args.show_dir:
-        check_output_dir(args.show_dir)
+        check_output_dir(args.show_dir, '--show-dir')
     if args.tta:
         use_test_time_augmentation(cfg)
     check_test_data(cfg)
@@ -210,7 +210,7 @@ def main(argv: list[str] | None = None) -> dict:
 def bad_inputs() -> ErrorTypes:
     """The errors that are bad input (exit 2), imported only when the test fails."""
     from projects.synthdet.checkpoint import CheckpointError
-    return (CheckpointError, ConfigFileError, InfoFileError, OutputPathError, TTAConfigError)
+    return (CheckpointError, ConfigFileError, InfoFileError, OutputRefused, TTAConfigError)
 
 
 if __name__ == '__main__':

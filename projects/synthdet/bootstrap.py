@@ -1,10 +1,11 @@
 """The shared start of ``tools/train.py``, ``test.py`` and ``predict.py``.
 
 Command-line options common to the tools (numbers checked against their ranges with short
-messages), config loading with ``--cfg-options`` (loading a config imports its
-``custom_imports``, which registers the plugin's modules with mmdet3d; a file that is not a
-config is one line naming it), the checks of output paths before any work, the work directory
-and the launcher. Checkpoints are loaded weights-only
+messages), config loading with ``--cfg-options`` (a ``.py`` config is code: loading it runs it
+and imports its ``custom_imports``, which registers the plugin's modules with mmdet3d; a JSON
+or YAML config is data, refused if it would import or run anything: ``data_config``; a file
+that is not a config is one line naming it), the work directory and the launcher (output
+paths are checked by ``synthdet.outputs``). Checkpoints are loaded weights-only
 (``projects/synthdet/checkpoint.py``); nothing here changes how ``torch.load`` unpickles.
 
 Importing this module loads neither torch nor mmengine: a tool builds its parser and refuses
@@ -16,11 +17,11 @@ import argparse
 import os
 import re
 import sys
-import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, NoReturn
 
 from projects.synthdet.config_checks import ConfigValueError, check_config_values
+from projects.synthdet.data_config import ConfigFileError, check_data_config, is_data_config
 from synthdet.cli import float_in, int_in, shown
 
 if TYPE_CHECKING:
@@ -48,68 +49,6 @@ def run_tool(main: Callable[[], object],
         print(f'{prog}: error: {error}', file=sys.stderr)
         sys.exit(2 if isinstance(error, kinds) else 1)
     sys.exit(0)
-
-
-class ConfigFileError(ValueError):
-    """A CONFIG that cannot be loaded as an mmengine config; the message names the file."""
-
-
-class OutputPathError(ValueError):
-    """An output path that is not what the option needs (a file for a folder, a folder that
-    does not exist); the message names it. Exit code 2."""
-
-
-class UnwritableOutputError(OSError):
-    """An output folder this process cannot write in (read-only, no permission): a failure at
-    run time, exit code 1 (docs/safety.md); the message names it."""
-
-
-def _nearest_existing(path: Path) -> Path:
-    path = Path(os.path.abspath(path))
-    while not os.path.lexists(path) and path != path.parent:
-        path = path.parent
-    return path
-
-
-def _check_can_create_in(folder: Path, output: Path) -> None:
-    """Create and remove a temporary file in ``folder``: the one check that also holds for root
-    and read-only file systems."""
-    try:
-        descriptor, name = tempfile.mkstemp(prefix='.write-check-', dir=folder)
-    except OSError as error:
-        raise UnwritableOutputError(f'{output}: cannot write in {folder} '
-                                    f'({error.strerror or type(error).__name__})') from None
-    os.close(descriptor)
-    os.unlink(name)
-
-
-def check_output_dir(path: str | Path) -> None:
-    """:class:`OutputPathError` unless ``path`` is a folder or can be created as one,
-    :class:`UnwritableOutputError` if it cannot be written (the folder is not created; a probe
-    file is created and removed)."""
-    path = Path(path)
-    existing = _nearest_existing(path)
-    if existing == Path(os.path.abspath(path)) and not existing.is_dir():
-        raise OutputPathError(f'{path}: is a file, expected a folder')
-    if not existing.is_dir():
-        raise OutputPathError(f'{path}: cannot be created ({existing} is a file)')
-    _check_can_create_in(existing, path)
-
-
-def check_output_file(path: str | Path, make_parents: bool = False) -> None:
-    """:class:`OutputPathError` unless the file ``path`` is not a folder and its folder exists
-    (or, with ``make_parents``, can be created); :class:`UnwritableOutputError` if that folder
-    cannot be written. The file is not created; a probe file beside it is created and
-    removed."""
-    path = Path(path)
-    if path.is_dir():
-        raise OutputPathError(f'{path}: is a folder, expected a file name')
-    if make_parents:
-        check_output_dir(path.parent)
-        return
-    if not path.parent.is_dir():
-        raise OutputPathError(f'{path}: the folder {path.parent} does not exist')
-    _check_can_create_in(path.parent, path)
 
 
 SEED_RANGE = (0, 2**32 - 1)  # numpy's and torch's seeds
@@ -268,12 +207,19 @@ def check_config_path(path: str | Path) -> None:
 
 
 def load_config(path: str | Path, cfg_options: dict | None = None) -> Config:
-    """Load a config (registering its ``custom_imports``) and apply ``--cfg-options``;
-    :class:`ConfigFileError` naming the file (and line) if it cannot be loaded."""
+    """Load a config and apply ``--cfg-options``; :class:`ConfigFileError` naming the file
+    (and line) if it cannot be loaded. A ``.py`` config is Python code, run with its
+    ``custom_imports``; a JSON or YAML config is data, refused if it would import or run code
+    (``data_config.check_data_config``, which registers the plugin's classes) and read without
+    mmengine's text substitutions (what was checked is what is read)."""
     check_config_path(path)
     from mmengine.config import Config
+    data_only = is_data_config(path)
+    if data_only:
+        check_data_config(path)
     try:
-        cfg = Config.fromfile(path)
+        cfg = Config.fromfile(path, use_predefined_variables=not data_only,
+                              use_environment_variables=not data_only)
         if cfg_options:
             cfg.merge_from_dict(cfg_options)
     except SyntaxError as error:
