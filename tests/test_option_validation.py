@@ -32,6 +32,7 @@ import pytest
 
 from synthdet.scan_io import write_scan
 from tests.room_scans import make_room
+from tests.tool_process import special_files
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = REPO / 'configs' / 'tr3d' / 'tiny.py'
@@ -227,12 +228,7 @@ def test_checkpoint_classes_and_devices_are_checked_before_detection(inputs, tmp
 
 
 def test_a_scan_that_is_no_regular_file_says_what_it_is(inputs, tmp_path):
-    fifo = tmp_path / 'pipe.xyz'
-    os.mkfifo(fifo)
-    zeros = tmp_path / 'zeros.xyz'
-    zeros.symlink_to('/dev/zero')
-    folder = tmp_path / 'folder.xyz'
-    folder.mkdir()
+    fifo, zeros, folder = special_files(tmp_path, '.xyz', '/dev/zero')
     for scan, kind in ((folder, 'is a folder'), (fifo, 'is a FIFO'),
                        (zeros, 'is a character device (/dev/zero)')):
         proc, _ = cli('-m', 'configurator', 'corners', scan, '--out', tmp_path / 'c.json')
