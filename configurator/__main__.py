@@ -1,8 +1,8 @@
 """``python -m configurator {corners,freecad,labels,screenshot} ...``: run a sub-command."""
-import argparse
 import importlib
 import sys
 
+from synthdet.cli import OneLineParser
 from synthdet.outputs import names_as_given
 
 # sub-command -> module exposing ``add_arguments(parser)`` and ``run(args) -> int``
@@ -16,7 +16,7 @@ COMMANDS = {
 
 def main(argv: list[str] | None = None) -> int:
     """Parse the sub-command and run it; returns the process exit code."""
-    parser = argparse.ArgumentParser(prog='python -m configurator', description=__doc__)
+    parser = OneLineParser(prog='python -m configurator', description=__doc__)
     subparsers = parser.add_subparsers(dest='command', required=True)
     modules = {}
     for name, module_name in COMMANDS.items():

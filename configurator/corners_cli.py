@@ -11,7 +11,7 @@ import sys
 
 from configurator.corners import (SCAN_VOXEL, CornerDetectionError, CornerParams, detect_corners,
                                   outline_in_scan, outline_to_dict, room_outline)
-from synthdet.contracts import write_corners
+from synthdet.contracts import SchemaError, write_corners
 from synthdet.outputs import OutputFailed, OutputRefused, check_output
 from synthdet.prepare import prepare_scan
 from synthdet.scan_io import SCAN_SUFFIXES, load_scan
@@ -96,6 +96,9 @@ def run(args: argparse.Namespace) -> int:
     result = outline_to_dict(outline, args.scan)
     try:
         write_corners(args.out, result)
+    except SchemaError as error:  # an outline the scan's coordinates cannot hold exactly
+        print(f'corners: no room found: {args.scan}: {error}', file=sys.stderr)
+        return 2
     except OutputFailed as error:
         print(f'corners: {error}', file=sys.stderr)
         return 1

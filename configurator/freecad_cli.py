@@ -9,7 +9,6 @@ checked.
 """
 import argparse
 import json
-import math
 import os
 import signal
 import subprocess
@@ -18,6 +17,7 @@ from pathlib import Path
 from typing import Callable, TypeVar
 
 from configurator.freecad.synthdet_freecad.schema import JOB_FORMAT, RESULT_FORMAT
+from synthdet.cli import MAX_TIMEOUT, check_input_file, float_in, seconds
 from synthdet.contracts import load_json, read_corners, read_predictions, validate_corners
 from synthdet.outputs import check_output, copy_into_place, readable
 from synthdet.processes import ends_with_parent, work_folder
@@ -25,6 +25,8 @@ from synthdet.processes import ends_with_parent, work_folder
 T = TypeVar('T')
 
 MACRO = Path(__file__).resolve().parent / 'freecad' / 'ImportSynthdet.FCMacro'
+MAX_WALL_THICKNESS = 2.0  # metres
+wall_thickness_option = float_in(0.0, MAX_WALL_THICKNESS, include_low=False)
 
 
 class FreecadFailed(RuntimeError):
@@ -40,11 +42,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--library', help='folder of <class>.step files replacing built-ins')
     parser.add_argument(
         '--min-score',
-        type=float,
+        type=float_in(0.0, 1.0),
         default=0.3,
-        help='skip detections scoring below this (default 0.3)')
+        help='skip detections scoring below this, in [0, 1] (default 0.3)')
     parser.add_argument(
-        '--wall-thickness', type=float, default=0.1, help='wall thickness in metres (default 0.1)')
+        '--wall-thickness',
+        type=wall_thickness_option,
+        default=0.1,
+        help=f'wall thickness in metres, up to {MAX_WALL_THICKNESS:g} (default 0.1)')
     add_program_options(parser, 'freecadcmd', 'FreeCAD command-line executable', timeout=900.0)
 
 
@@ -57,22 +62,25 @@ def add_program_options(parser: argparse.ArgumentParser, program: str, what: str
         help=f'{what} (default: {program})')
     parser.add_argument(
         '--timeout',
-        type=float,
+        type=seconds,
         default=timeout,
-        help=f'seconds to wait for FreeCAD (default {timeout:.0f})')
+        help=f'seconds to wait for FreeCAD, up to {MAX_TIMEOUT:.0f} (default {timeout:.0f})')
 
 
-def _check_scan(scan: Path) -> None:
-    if not scan.is_file():
-        raise ValueError(f'{scan}: scan file not found')
+def check_input_scan(scan: Path) -> None:
+    """``InputFileError`` (a ``ValueError``) unless ``scan`` is a regular file that is not
+    empty: a folder, a FIFO or a link to a device is named as such."""
+    check_input_file(scan, 'scan file')
     if scan.stat().st_size == 0:
         raise ValueError(f'{scan}: the scan is empty')
 
 
 def check_timeout(timeout: float) -> None:
-    """Raise ``ValueError`` unless ``timeout`` is a positive, finite number of seconds."""
-    if not (math.isfinite(timeout) and timeout > 0.0):
-        raise ValueError(f'--timeout {timeout:g}: expected a positive number of seconds')
+    """Raise ``ValueError`` unless ``timeout`` is a positive number of seconds, at most
+    ``MAX_TIMEOUT`` (a week)."""
+    if not 0.0 < timeout <= MAX_TIMEOUT:  # NaN fails too
+        raise ValueError(f'--timeout {timeout:g}: expected a number of seconds in '
+                         f'(0, {MAX_TIMEOUT:.0f}]')
 
 
 def _corners_from_scan(scan: Path) -> dict:
@@ -165,17 +173,17 @@ def build_document(scan: Path,
     """
     check_output(out, '--out', inputs=[scan, predictions, corners])
     scan, predictions, out = Path(scan), Path(predictions), Path(out).resolve()
-    _check_scan(scan)
+    check_input_scan(scan)
     read_predictions(str(predictions))
     if out.suffix.lower() != '.fcstd':
         raise ValueError(f'{out}: the output must end with .FCStd')
     if library is not None and not Path(library).is_dir():
         raise ValueError(f'{library}: library folder not found')
-    if not 0.0 <= min_score <= 1.0:
+    if not 0.0 <= min_score <= 1.0:  # NaN fails too
         raise ValueError(f'--min-score {min_score}: expected a score in [0, 1]')
-    if not (math.isfinite(wall_thickness) and wall_thickness > 0.0):
-        raise ValueError(f'--wall-thickness {wall_thickness:g}: expected a positive thickness '
-                         'in metres')
+    if not 0.0 < wall_thickness <= MAX_WALL_THICKNESS:
+        raise ValueError(f'--wall-thickness {wall_thickness:g}: expected a thickness in metres '
+                         f'in (0, {MAX_WALL_THICKNESS:g}]')
     check_timeout(timeout)
     with work_folder('synthdet-freecad') as work_dir:
         if corners is not None:

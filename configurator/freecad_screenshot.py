@@ -17,10 +17,12 @@ from typing import Iterator
 
 from configurator.freecad_cli import (FreecadFailed, add_program_options, check_timeout,
                                       run_freecad_process)
+from synthdet.cli import int_in
 from synthdet.fcstd_guard import check_document
 from synthdet.outputs import check_output, check_png, write_bytes
 from synthdet.processes import ends_with_parent, work_folder
 
+PIXELS = (16, 8000)  # the accepted --width and --height
 GUI_SCRIPT = Path(__file__).resolve().parent / 'freecad' / 'screenshot_gui.py'
 # A user configuration that opens no Start page (its web view cannot start as root).
 USER_CONFIG = '''<?xml version="1.0" encoding="UTF-8" standalone="yes"?>
@@ -45,8 +47,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Register the ``screenshot`` sub-command's options."""
     parser.add_argument('document', help='FreeCAD document (.FCStd)')
     parser.add_argument('--out', required=True, help='PNG to write')
-    parser.add_argument('--width', type=int, default=1000, help='pixels (default 1000)')
-    parser.add_argument('--height', type=int, default=750, help='pixels (default 750)')
+    parser.add_argument(
+        '--width', type=int_in(*PIXELS), default=1000, help='pixels, 16 to 8000 (default 1000)')
+    parser.add_argument(
+        '--height', type=int_in(*PIXELS), default=750, help='pixels, 16 to 8000 (default 750)')
     add_program_options(parser, 'freecad', 'FreeCAD GUI executable', timeout=300.0)
 
 
@@ -106,8 +110,9 @@ def screenshot(document: Path,
     check_document(document)  # RefusedDocument (a ValueError) before FreeCAD starts
     if out.suffix.lower() != '.png':
         raise ValueError(f'{out}: the picture must end with .png')
-    if not (16 <= width <= 8000 and 16 <= height <= 8000):
-        raise ValueError(f'--width/--height {width}x{height}: expected 16 to 8000 pixels')
+    if not (PIXELS[0] <= width <= PIXELS[1] and PIXELS[0] <= height <= PIXELS[1]):
+        raise ValueError(f'--width/--height {width}x{height}: expected {PIXELS[0]} to '
+                         f'{PIXELS[1]} pixels')
     check_timeout(timeout)
     with work_folder('synthdet-screenshot') as work_dir:
         result_path, picture = work_dir / 'result.json', work_dir / 'view.png'

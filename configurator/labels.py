@@ -30,6 +30,7 @@ import numpy as np
 
 from configurator.freecad.synthdet_freecad.schema import LABELS_READ_FORMAT as READ_FORMAT
 from configurator.freecad_cli import MACRO, FreecadFailed, check_timeout, run_freecad_process
+from synthdet.cli import check_input_file
 from synthdet.classes import GENERATED_CLASSES
 from synthdet.contracts import LABELS_FORMAT, write_labels
 from synthdet.fcstd_guard import check_document
@@ -227,8 +228,7 @@ def make_labels(document: Path,
                                'e.g. hall_1 (an S3DIS room name)')
     if area < 1:
         raise LabelsInputError(f'--area {area}: expected a positive area number')
-    if not scan.is_file():
-        raise LabelsInputError(f'{scan}: scan file not found')
+    check_input_file(scan, 'scan file')
     labels_path = check_output(out / f'{scan.stem}.labels.json', '--out', [document, scan])
     room_dir = check_output(out / f'Area_{area}' / room_name, '--room', folder=True)
     points = read_scan(scan)

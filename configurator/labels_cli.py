@@ -9,6 +9,7 @@ Writes ``DIR/<scan stem>.labels.json`` (``synthdet.labels/1``, for ``tools/eval_
 import argparse
 
 from configurator.freecad_cli import add_program_options, run_reporting_errors
+from synthdet.cli import MAX_AREA, int_in
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -16,8 +17,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('document', help='the corrected FreeCAD document (.FCStd)')
     parser.add_argument('--scan', required=True, help='the scan the document was made from')
     parser.add_argument('--out', required=True, help='output folder')
-    parser.add_argument('--area', type=int, default=10,
-                        help='S3DIS area number (default 10, the area teach_finetune.py trains)')
+    parser.add_argument('--area', type=int_in(1, MAX_AREA), default=10,
+                        help=f'S3DIS area number, 1 to {MAX_AREA} (default 10, the area '
+                        'teach_finetune.py trains)')
     parser.add_argument('--room', help='S3DIS room name <name>_<number> (default: <scan stem>_1)')
     add_program_options(parser, 'freecadcmd', 'FreeCAD command-line executable', timeout=300.0)
 

@@ -7,20 +7,15 @@ import sys
 import time
 from pathlib import Path
 
+from synthdet.cli import MAX_AREA, OneLineParser, shown
 
 PROFILES = Path(__file__).resolve().parent / 'profiles'
 # the accepted ranges of the integer options (docs/generator.md); a hall of 10-50 million
 # points is the largest scan the generator is made for
 MAX_POINTS = 100_000_000
-MAX_AREA = 9_999
 MAX_ROOMS_PER_AREA = 100_000
 MAX_WORKERS = 256
 MAX_SEED = 2**63 - 1
-
-
-def shown(text: str, limit: int = 24) -> str:
-    """``text`` for a message, at most ``limit`` characters (a 300-digit number is cut)."""
-    return text if len(text) <= limit else f'{text[:limit - 3]}...'
 
 
 def whole_number(text: str) -> int:
@@ -52,7 +47,7 @@ def profile_names() -> list[str]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog='python -m generator',
         description='Generate synthetic factory rooms (Blender scenes + simulated LiDAR) as S3DIS '
         'areas: OUT/Area_N/factory_<k>/{factory_<k>.txt, Annotations/, meta.json}.')

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from synthdet.classes import GENERATED_CLASSES
+from synthdet.cli import InputFileError, check_input_file
 
 
 DEFAULTS: dict[str, Any] = {
@@ -208,6 +209,53 @@ class ConfigError(ValueError):
     """A bad generator configuration; the message names the source and the key."""
 
 
+MAX_CONFIG_BYTES = 1 << 20  # a configuration file is a few KB; a larger one is refused
+
+
+def _read_text(path: Path) -> str:
+    """The UTF-8 text of a configuration file of at most ``MAX_CONFIG_BYTES``; ``ConfigError``
+    naming the file (and the line of a byte that is not UTF-8) otherwise."""
+    try:
+        check_input_file(path, 'configuration file')
+    except InputFileError as error:
+        raise ConfigError(str(error)) from None
+    with open(path, 'rb') as stream:
+        data = stream.read(MAX_CONFIG_BYTES + 1)
+    if len(data) > MAX_CONFIG_BYTES:
+        raise ConfigError(f'{path}: larger than {MAX_CONFIG_BYTES:,} bytes; a configuration '
+                          'file holds a few settings')
+    try:
+        return data.decode('utf-8')
+    except UnicodeDecodeError as error:
+        line = data[:error.start].count(b'\n') + 1
+        raise ConfigError(f'{path}:{line}: not UTF-8 text (byte 0x{data[error.start]:02x})') \
+            from None
+
+
+def _parse_yaml(text: str, path: Path) -> Any:
+    """YAML without aliases: ``*name`` would let a kilobyte expand to gigabytes (each alias
+    level repeats the ones below), so a file using one is refused naming its line."""
+    import yaml
+
+    class NoAliasLoader(yaml.SafeLoader):
+        """``yaml.SafeLoader`` that refuses aliases before composing them."""
+
+        def compose_node(self, parent: Any, index: Any) -> Any:
+            if self.check_event(yaml.AliasEvent):
+                mark = self.peek_event().start_mark
+                raise ConfigError(f'{path}:{mark.line + 1}: YAML aliases (*name) are not '
+                                  'accepted in a configuration; write the values out')
+            return super().compose_node(parent, index)
+
+    try:
+        return yaml.load(text, Loader=NoAliasLoader)
+    except yaml.YAMLError as error:  # its text names the line and column
+        raise ConfigError(f'{path}: cannot parse configuration: '
+                          f'{" ".join(str(error).split())[:300]}') from None
+    except RecursionError:
+        raise ConfigError(f'{path}: cannot parse configuration: nested too deeply') from None
+
+
 def load_config(path: str | Path | None = None) -> dict[str, Any]:
     """Return the defaults overridden by the JSON or YAML file at ``path``, validated."""
     config = copy.deepcopy(DEFAULTS)
@@ -215,17 +263,14 @@ def load_config(path: str | Path | None = None) -> dict[str, Any]:
     if path is not None:
         path = Path(path)
         source = str(path)
-        if not path.is_file():
-            raise ConfigError(f'{path}: configuration file not found')
-        text = path.read_text()
-        try:
-            if path.suffix.lower() in ('.yaml', '.yml'):
-                import yaml
-                user = yaml.safe_load(text)
-            else:
+        text = _read_text(path)
+        if path.suffix.lower() in ('.yaml', '.yml'):
+            user = _parse_yaml(text, path)
+        else:
+            try:
                 user = json.loads(text)
-        except Exception as err:  # parse errors carry the line number in their message
-            raise ConfigError(f'{path}: cannot parse configuration: {err}') from err
+            except (ValueError, RecursionError) as err:  # the message names line and column
+                raise ConfigError(f'{path}: cannot parse configuration: {err}') from None
         if user is None:
             user = {}
         if not isinstance(user, dict):

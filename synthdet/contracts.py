@@ -36,7 +36,7 @@ SENSOR_MODELS = ('paper', 'tls', 'tablet', 'depth_frame', 'reconstruction')
 MAX_NAME_LENGTH = 200
 MAX_DETECTIONS = 100_000
 MAX_OBJECTS = 100_000
-MAX_CORNERS = 10_000
+MAX_CORNERS = 1_000  # a traced hall has tens; FreeCAD builds a wall per corner
 MAX_EXTENT = 1000.0  # metres: no box size or room height beyond this
 MIN_CORNER_GAP = 1e-6  # metres: closer consecutive corners count as one repeated corner
 MM = 1000.0  # FreeCAD's lengths are millimetres ...
@@ -174,6 +174,21 @@ def _name(value: object, source: str, where: str) -> str:
     if len(value) > MAX_NAME_LENGTH:
         fail(source, where, f'name longer than {MAX_NAME_LENGTH} characters ({len(value)})')
     return value
+
+
+def class_names(value: object, source: str, where: str) -> list[str]:
+    """``value`` as a model's class names: a list (or tuple) of distinct non-empty names of at
+    most ``MAX_NAME_LENGTH`` characters; a string (``'table'``, not ``['table']``) is refused
+    rather than read as one class per letter."""
+    if not isinstance(value, (list, tuple)) or not value:
+        fail(source, where, f'expected a non-empty list of class names, got {_describe(value)}')
+    names = [_name(name, source, f'{where}[{index}]') for index, name in enumerate(value)]
+    seen = set()
+    for index, name in enumerate(names):
+        if name in seen:
+            fail(source, f'{where}[{index}]', f'class {name!r} is listed twice')
+        seen.add(name)
+    return names
 
 
 def _bounded_list(data: dict, key: str, most: int, source: str) -> list:
@@ -334,13 +349,7 @@ def validate_labels(data: object, source: str = '<labels>') -> dict:
     (``source``, ``frame``) are kept as they are.
     """
     data = _document(data, LABELS_FORMAT, source, ('scan', 'classes', 'boxes'))
-    classes = data['classes']
-    if not isinstance(classes, list) or not classes:
-        fail(source, 'classes', f'expected a non-empty list of names, got {_describe(classes)}')
-    names = [_name(name, source, f'classes[{i}]') for i, name in enumerate(classes)]
-    for index, name in enumerate(names):
-        if name in names[:index]:
-            fail(source, f'classes[{index}]', f'class {name!r} is listed twice')
+    names = class_names(data['classes'], source, 'classes')
     boxes = _bounded_list(data, 'boxes', MAX_OBJECTS, source)
     checked = []
     for index, box in enumerate(boxes):

@@ -21,11 +21,16 @@ def _pairs(polygon) -> list:
 
 
 def signed_area(polygon) -> float:
-    """Shoelace area of a closed polygon: positive counter-clockwise, negative clockwise."""
+    """Shoelace area of a closed polygon: positive counter-clockwise, negative clockwise.
+    Taken around the first corner, so coordinates far from the origin (a georeferenced room
+    at 1e15 m) do not drown the area in rounding."""
     points = _pairs(polygon)
+    if not points:
+        return 0.0
+    ox, oy = points[0]
     total = 0.0
     for (x0, y0), (x1, y1) in zip(points, points[1:] + points[:1]):
-        total += x0 * y1 - x1 * y0
+        total += (x0 - ox) * (y1 - oy) - (x1 - ox) * (y0 - oy)
     return total / 2.0
 
 
@@ -49,18 +54,31 @@ def segments_touch(p, q, r, s, eps: float = EPS) -> bool:
 
 
 def first_self_crossing(polygon) -> tuple[int, int] | None:
-    """The first pair ``(i, j)`` of non-adjacent edges (edge i runs from corner i to i+1) of a
-    closed polygon that cross or touch, or None for a simple polygon."""
+    """The first pair ``(i, j)``, ``i < j``, of non-adjacent edges (edge i runs from corner i
+    to i+1) of a closed polygon that cross or touch, or None for a simple polygon.
+
+    A sweep along x: only edges whose x and y extents overlap are tested, so a room outline of
+    a thousand corners costs about as many tests as it has edges, not half a million pairs."""
     points = _pairs(polygon)
     count = len(points)
-    for i in range(count):
-        for j in range(i + 2, count):
-            if i == 0 and j == count - 1:
-                continue  # adjacent through the closing edge
-            if segments_touch(points[i], points[(i + 1) % count], points[j],
-                              points[(j + 1) % count]):
-                return i, j
-    return None
+    edges = [(points[i], points[(i + 1) % count]) for i in range(count)]
+    active: list[tuple[float, int]] = []  # (right end, edge) of the edges the sweep is inside
+    found = None
+    for i in sorted(range(count), key=lambda k: min(edges[k][0][0], edges[k][1][0])):
+        (px, py), (qx, qy) = edges[i]
+        active = [(right, j) for right, j in active if right >= min(px, qx) - EPS]
+        for _, j in active:
+            first, second = min(i, j), max(i, j)
+            if second == first + 1 or (first == 0 and second == count - 1):
+                continue  # adjacent edges share a corner
+            (rx, ry), (sx, sy) = edges[j]
+            if max(ry, sy) < min(py, qy) - EPS or min(ry, sy) > max(py, qy) + EPS:
+                continue
+            if (found is None or (first, second) < found) and segments_touch(
+                    edges[first][0], edges[first][1], edges[second][0], edges[second][1]):
+                found = (first, second)
+        active.append((max(px, qx), i))
+    return found
 
 
 def clockwise(polygon) -> np.ndarray:

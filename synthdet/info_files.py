@@ -9,6 +9,7 @@ import os
 import pickle
 import re
 from pathlib import Path
+from typing import Sequence
 
 from synthdet.contracts import SchemaError, read_room
 
@@ -96,3 +97,44 @@ def rooms_scanned_by(info_file: str | os.PathLike, sensor: str) -> list[int]:
     """Indices into the info pickle's ``data_list`` of the rooms that ``sensor`` scanned
     (:func:`room_sensors`)."""
     return [index for index, model in enumerate(room_sensors(info_file)) if model == sensor]
+
+
+def labelled_boxes(
+        path: str | os.PathLike,
+        default_classes: Sequence[str] | None = None) -> list[tuple[str | None, list]]:
+    """``(points file name, [(class name, bbox_3d), ...])`` for every sample of an info
+    pickle (the name None for a sample without ``lidar_points``); class names come from its
+    ``metainfo['categories']`` (``name -> label``), or from ``default_classes`` (label =
+    index) when it has none. Instances labelled -1 (ignored classes) are left out.
+
+    Raises ``InfoFileError`` naming the file (and the sample) for a pickle without categories
+    (and no ``default_classes``), a label it does not name, ``lidar_points`` without
+    ``lidar_path``, or an instance without ``bbox_label_3d`` or ``bbox_3d``.
+    """
+    infos = load_info_pickle(path)
+    categories = infos['metainfo'].get('categories')
+    if categories is None and default_classes is not None:
+        categories = {name: label for label, name in enumerate(default_classes)}
+    if not isinstance(categories, dict) or not all(
+            isinstance(name, str) and isinstance(label, int) for name, label in
+            categories.items()):
+        raise InfoFileError(f'{path}: not an info pickle of tools/create_data.py (metainfo '
+                            'has no "categories" dict of class name -> label)')
+    names = {label: name for name, label in categories.items()}
+    samples = []
+    for index, info in enumerate(infos['data_list']):
+        try:
+            points = info.get('lidar_points')
+            scan = None if points is None else Path(points['lidar_path']).name
+            boxes = [(names[inst['bbox_label_3d']], list(inst['bbox_3d']))
+                     for inst in info.get('instances', []) if inst['bbox_label_3d'] != -1]
+        except KeyError as error:
+            key = error.args[0]
+            what = (f'label {key} is not in metainfo["categories"]' if isinstance(key, int)
+                    else f'no "{key}"')
+            raise InfoFileError(f'{path}: data_list[{index}]: {what}') from None
+        except TypeError as error:
+            raise InfoFileError(f'{path}: data_list[{index}]: malformed sample ({error})') \
+                from None
+        samples.append((scan, boxes))
+    return samples

@@ -4,6 +4,10 @@ temporary name of the run beside the target, checked and renamed into place.
 - :func:`check_output` (before any work): an output that is a folder (or, for a folder output,
   a file), a device, a FIFO, a socket or the same file as one of the inputs is refused with
   :class:`OutputRefused` (a ``ValueError``: exit 2), one line naming the option and the path.
+- :func:`check_output_file`, :func:`check_output_dir` (before any work, by the tools that
+  write into a folder they may have to create): :func:`check_output`, then the folder must
+  exist (or be creatable) and take a new file: one that cannot (read-only, no permission) is
+  :class:`OutputFailed`, exit 1.
 - :func:`replaced_file`, :func:`replaced_paths`, :func:`write_bytes`, :func:`write_text`,
   :func:`copy_into_place`: the data goes to ``.<name>.<pid>.<random>.partial<suffix>`` in the
   target's folder, is flushed and synced, its size compared with what was written, then renamed
@@ -25,6 +29,7 @@ import secrets
 import shutil
 import stat
 import sys
+import tempfile
 from pathlib import Path
 from typing import BinaryIO, Iterable, Iterator, Sequence
 
@@ -51,7 +56,8 @@ class OutputRefused(ValueError):
 
 
 class OutputFailed(OSError):
-    """An output that could not be written whole; the previous file is kept."""
+    """An output that cannot be written (a folder this process cannot write in) or could not
+    be written whole; the previous file is kept."""
 
 
 def shown(path: PathLike) -> str:
@@ -117,6 +123,59 @@ def _same_file(a: PathLike, b: PathLike) -> bool:
         return os.path.samefile(a, b)
     except OSError:
         return False
+
+
+def _nearest_existing(path: Path) -> Path:
+    """``path`` made absolute, or the closest of its parent folders that exists."""
+    path = Path(os.path.abspath(path))
+    while not os.path.lexists(path) and path != path.parent:
+        path = path.parent
+    return path
+
+
+def _check_can_create_in(folder: Path, output: Path) -> None:
+    """Create and remove a probe file in ``folder`` (the one check that also holds for root
+    and read-only file systems); :class:`OutputFailed` naming ``output`` if it cannot be."""
+    try:
+        descriptor, name = tempfile.mkstemp(prefix='.write-check-', dir=folder)
+    except OSError as error:
+        raise OutputFailed(f'{shown(output)}: cannot write in {shown(folder)} '
+                           f'({error.strerror or type(error).__name__})') from None
+    os.close(descriptor)
+    os.unlink(name)
+
+
+def check_output_dir(path: PathLike,
+                     option: str = '--out',
+                     inputs: Iterable[PathLike | None] = ()) -> Path:
+    """:func:`check_output` for a folder output, then :class:`OutputRefused` unless the folder
+    exists or can be created (no file on its way) and :class:`OutputFailed` if this process
+    cannot write in it. Nothing is created but a probe file, removed at once."""
+    path = check_output(path, option, inputs, folder=True)
+    existing = _nearest_existing(path)
+    if not existing.is_dir():
+        raise OutputRefused(f'{option} {shown(path)}: cannot be created ({shown(existing)} is '
+                            'a file)')
+    _check_can_create_in(existing, path)
+    return path
+
+
+def check_output_file(path: PathLike,
+                      make_parents: bool = False,
+                      option: str = '--out',
+                      inputs: Iterable[PathLike | None] = ()) -> Path:
+    """:func:`check_output` for a file output, then :class:`OutputRefused` unless its folder
+    exists (with ``make_parents``: can be created) and :class:`OutputFailed` if this process
+    cannot write in it. Nothing is created but a probe file beside it, removed at once."""
+    path = check_output(path, option, inputs)
+    if make_parents:
+        check_output_dir(path.parent, option)
+    elif not path.parent.is_dir():
+        raise OutputRefused(f'{option} {shown(path)}: the folder {shown(path.parent)} does not '
+                            'exist')
+    else:
+        _check_can_create_in(path.parent, path)
+    return path
 
 
 def temporary_beside(target: Path, folder: bool = False) -> Path:

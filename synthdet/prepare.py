@@ -181,11 +181,13 @@ def align_scan(loaded: LoadedScan,
 
 def _packed_cells(xyz: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
     """Cell keys of the points packed into one int64 (21 bits an axis around the points'
-    median cell) and whether each point's cell fits that range (+-2^20 cells)."""
-    keys = np.floor(xyz / cell).astype(np.int64)
-    keys -= np.median(keys[::max(1, len(keys) // 100_000)], axis=0).astype(np.int64)
-    fits = (np.abs(keys) < 2**20 - 2).all(axis=1)
-    keys += 2**20
+    median cell) and whether each point's cell fits that range (+-2^20 cells). The cells are
+    counted in float64 first, so a stray point at 1e300 m is a cell that does not fit, not an
+    int64 overflow."""
+    cells = np.floor(xyz / cell)
+    cells -= np.trunc(np.median(cells[::max(1, len(cells) // 100_000)], axis=0))
+    fits = (np.abs(cells) < 2**20 - 2).all(axis=1)
+    keys = np.where(fits[:, None], cells, 0.0).astype(np.int64) + 2**20
     return (keys[:, 0] << 42) | (keys[:, 1] << 21) | keys[:, 2], fits
 
 

@@ -18,7 +18,7 @@ import numpy as np
 from synthdet.classes import SEMANTIC_CLASSES
 from synthdet.contracts import read_corners, read_predictions, read_room
 from synthdet.geometry import box_corners_xy
-from synthdet.info_files import load_info_pickle
+from synthdet.info_files import labelled_boxes
 from synthdet.ply import write_ply
 from synthdet.scan_io import ply_vertex, read_scan
 
@@ -117,18 +117,13 @@ def boxes_from_meta(path: str | os.PathLike) -> list[Box]:
 
 def boxes_from_info(path: str | os.PathLike, scan_name: str) -> list[Box]:
     """Axis-aligned ground-truth boxes of the room ``scan_name`` (e.g. ``Area_9_factory_1.bin``)
-    in an mmdet3d info pickle written by ``tools/create_data.py``."""
-    path = Path(path)
-    infos = load_info_pickle(path)
-    categories = infos['metainfo']['categories']
-    names = {index: name for name, index in categories.items()}
-    for entry in infos['data_list']:
-        if Path(entry['lidar_points']['lidar_path']).name == scan_name:
+    in an mmdet3d info pickle written by ``tools/create_data.py`` (``InfoFileError`` naming
+    the file for one that is not the converter's)."""
+    for scan, boxes in labelled_boxes(path):
+        if scan == scan_name:
             return [
-                Box(
-                    names.get(int(item['bbox_label_3d']), 'unknown'),
-                    tuple(map(float, item['bbox_3d'][:3])),
-                    tuple(map(float, item['bbox_3d'][3:6]))) for item in entry['instances']
+                Box(name, tuple(map(float, box[:3])), tuple(map(float, box[3:6])))
+                for name, box in boxes
             ]
     raise ValueError(f'{path}: no room with lidar_path {scan_name!r}')
 

@@ -38,7 +38,7 @@ class VoxelFilter:
         self.voxel = voxel
         self.origin_key = np.floor(origin / voxel)
         self.seen = np.zeros(0, dtype=np.int64)
-        self.wide: set[tuple[int, int, int]] = set()  # voxels beyond the packed key range
+        self.wide: set[tuple[float, float, float]] = set()  # voxels beyond the packed range
 
     def new_points(self, xyz: np.ndarray) -> np.ndarray:
         """Indices (ascending) of the points of ``xyz`` (scan coordinates) in voxels not seen
@@ -52,15 +52,16 @@ class VoxelFilter:
         self.seen = np.sort(np.concatenate([self.seen, packed[fresh]]))
         far = []
         for index in np.flatnonzero(packed < 0):  # points kilometres away: rare, kept exact
-            key = tuple(int(value) for value in self._keys(xyz[index]))
+            key = tuple(float(value) for value in self._keys(xyz[index]))
             if key not in self.wide:
                 self.wide.add(key)
                 far.append(index)
         return np.sort(np.concatenate([fresh, np.array(far, dtype=np.int64)]))
 
     def _keys(self, point: np.ndarray) -> np.ndarray:
-        """The integer voxel coordinates (3,) of one point, relative to the origin's voxel."""
-        return (np.floor(point / self.voxel) - self.origin_key).astype(np.int64)
+        """The whole-number voxel coordinates (3,) of one point, relative to the origin's
+        voxel, in float64 (a point at 1e300 m has no int64 voxel number)."""
+        return np.floor(point / self.voxel) - self.origin_key
 
 
 @numba.njit(cache=True, nogil=True)
@@ -69,10 +70,10 @@ def packed_key(point: np.ndarray, voxel: float, origin_key: np.ndarray) -> np.in
     ``origin_key``, 21 bits each, packed; -1 for a point 2**20 voxels or more away."""
     key = np.int64(0)
     for axis in range(3):
-        index = np.int64(np.floor(point[axis] / voxel) - origin_key[axis])
-        if abs(index) >= 2**20:
+        offset = np.floor(point[axis] / voxel) - origin_key[axis]
+        if not abs(offset) < 2**20:  # checked before the cast: 1e300 has no int64
             return np.int64(-1)
-        key = (key << 21) | (index + 2**20)
+        key = (key << 21) | (np.int64(offset) + 2**20)
     return key
 
 

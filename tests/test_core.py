@@ -13,6 +13,7 @@ import pytest
 from synthdet import contracts, scan_io
 from synthdet.classes import (CLASS_COLORS, DETECTION_CLASSES, DETECTION_SEMANTIC_IDS,
                               GENERATED_CLASSES, SEMANTIC_CLASSES, STRUCTURE_CLASSES)
+from synthdet.cli import InputFileError
 from synthdet.contracts import SchemaError
 from synthdet.geometry import (box_corners_xy, clockwise, distance_to_polygon, edges_cross,
                                first_self_crossing, grid_cells, points_in_polygon, rotation2d,
@@ -340,7 +341,7 @@ def test_bad_binary_and_other_files(tmp_path):
     path.write_bytes(b'\0')
     with pytest.raises(ScanFormatError, match="unknown scan type '.obj'"):
         read_scan(path)
-    with pytest.raises(FileNotFoundError, match='missing.txt'):
+    with pytest.raises(InputFileError, match='missing.txt: scan file not found'):
         read_scan(tmp_path / 'missing.txt')
 
 

@@ -27,6 +27,7 @@ from tests.checkpoints import initial_checkpoint
 from tests.room_scans import NoiseModel, make_room
 from tests.test_faults import assert_clean_error
 from tests.test_freecad_outputs import dead_pid, write_inputs
+from tests.tool_process import special_files
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = REPO / 'configs' / 'tr3d' / 'tiny.py'
@@ -79,12 +80,7 @@ def test_an_output_that_is_the_scan_is_refused_before_any_work(room, tmp_path):
 
 
 def test_an_output_that_is_a_device_a_fifo_or_a_folder_is_refused(room, tmp_path):
-    fifo = tmp_path / 'fifo.json'
-    os.mkfifo(fifo)
-    device = tmp_path / 'full.json'
-    device.symlink_to('/dev/full')
-    folder = tmp_path / 'folder.json'
-    folder.mkdir()
+    fifo, device, folder = special_files(tmp_path, '.json', '/dev/full')
     for output, kind in ((fifo, 'a FIFO'), (device, 'a device'), (folder, 'a folder')):
         proc = run('-m', 'configurator', 'corners', room, '--out', output, timeout=120)
         assert_clean_error(proc, 2, '--out', str(output), kind)

@@ -25,7 +25,7 @@ from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.evaluation.box_fit import best_fits, summarize_fits
 from projects.synthdet.evaluation.table3 import format_table3, table3, table3_rows
 from projects.synthdet.evaluation.table4 import truth_from_infos
-from synthdet.contracts import ROOM_FORMAT
+from synthdet.contracts import ROOM_FORMAT, SchemaError
 from synthdet.info_files import InfoFileError, load_info_pickle
 from synthdet.scan_io import read_scan, write_scan
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
@@ -531,7 +531,7 @@ def test_count_table_counts_correct_and_incorrect_detections(tmp_path: Path) -> 
 
     bad = tmp_path / 'bad.pred.json'
     bad.write_text(json.dumps({'format': 'synthdet.predictions/0'}))
-    with pytest.raises(SystemExit, match='bad.pred.json'):
+    with pytest.raises(SchemaError, match='bad.pred.json'):
         count_table.main([str(bad)])
 
 

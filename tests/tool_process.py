@@ -26,6 +26,17 @@ def run_tool(*args, timeout: float = 900) -> subprocess.CompletedProcess:
     return proc
 
 
+def special_files(folder: Path, suffix: str, device: str) -> tuple[Path, Path, Path]:
+    """A FIFO, a symbolic link to the character ``device`` and an empty folder in ``folder``,
+    named ``fifo<suffix>``, ``device<suffix>`` and ``folder<suffix>``: paths a tool must name,
+    never read or write as files."""
+    fifo, link, empty = (folder / f'{name}{suffix}' for name in ('fifo', 'device', 'folder'))
+    os.mkfifo(fifo)
+    link.symlink_to(device)
+    empty.mkdir()
+    return fifo, link, empty
+
+
 def train_tiny(data_root: Path, ann_file: str, work: Path, epochs: int,
                pipeline: Callable | None = None) -> list[dict]:
     """Train ``configs/tr3d/tiny.py`` on ``ann_file`` of ``data_root`` for ``epochs`` with

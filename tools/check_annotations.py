@@ -25,6 +25,7 @@ from tqdm import tqdm
 
 from synthdet.annotation_check import (
     MAX_OUTSIDE, TOLERANCE, check_room, describe, format_summary, offenders, summarize)
+from synthdet.cli import MAX_AREA, OneLineParser, float_in, int_in
 from synthdet.contracts import SchemaError
 from synthdet.outputs import OutputFailed, OutputRefused, check_output, write_text
 from synthdet.point_text import PointFileError
@@ -32,16 +33,18 @@ from synthdet.point_text import PointFileError
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Parse the command line."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument('raw_dir', type=Path, help='folder of Area_N/<room>/ folders')
-    parser.add_argument('--areas', type=int, nargs='+', help='areas (default: every Area_N)')
     parser.add_argument(
-        '--tolerance', type=float, default=TOLERANCE,
-        help=f'metres the box grows per side before a point counts as outside '
+        '--areas', type=int_in(1, MAX_AREA), nargs='+', help='areas (default: every Area_N)')
+    parser.add_argument(
+        '--tolerance', type=float_in(0.0, 1.0), default=TOLERANCE,
+        help=f'metres the box grows per side before a point counts as outside, in [0, 1] '
         f'(default {TOLERANCE})')
     parser.add_argument(
-        '--max-outside', type=float, default=MAX_OUTSIDE,
-        help=f'largest share of an object\'s points allowed outside (default {MAX_OUTSIDE})')
+        '--max-outside', type=float_in(0.0, 1.0), default=MAX_OUTSIDE,
+        help=f'largest share of an object\'s points allowed outside, in [0, 1] '
+        f'(default {MAX_OUTSIDE})')
     parser.add_argument('--out', type=Path, help='also write the rows and offenders as JSON')
     return parser.parse_args(argv)
 

@@ -35,6 +35,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from synthdet.cli import OneLineParser
 from synthdet.outputs import write_text
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -319,7 +320,7 @@ def render(records: list[dict], not_run: list[str], output_dir: Path) -> str:
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser = OneLineParser(description=__doc__.split('\n')[0])
     parser.add_argument(
         '--only', nargs='+', metavar='NAME', help='run only these benchmarks (bench_<NAME>.py)')
     parser.add_argument('--out', type=Path, default=REPO_ROOT / 'docs/benchmarks.md')

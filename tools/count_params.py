@@ -3,14 +3,15 @@
 Usage: python tools/count_params.py CONFIG [--depth N] [--cfg-options key=value ...]
 Exit codes: 0, or 2 with one line naming the file for a CONFIG that cannot be loaded.
 """
-import argparse
+from __future__ import annotations
 
-from mmdet3d.registry import MODELS
-from mmdet3d.utils import register_all_modules
-from mmengine.config import DictAction
-from torch import nn
+from typing import TYPE_CHECKING
 
-from projects.synthdet.bootstrap import ConfigFileError, load_config, run_tool
+from projects.synthdet.bootstrap import ConfigFileError, add_cfg_options, load_config, run_tool
+from synthdet.cli import OneLineParser, int_in
+
+if TYPE_CHECKING:
+    from torch import nn
 
 
 def count_parameters(module: nn.Module) -> int:
@@ -37,15 +38,14 @@ def parameter_table(model: nn.Module, depth: int) -> list[tuple[str, int]]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument('config', help='mmdet3d config file with a `model` entry')
-    parser.add_argument('--depth', type=int, default=2, help='module levels to list')
     parser.add_argument(
-        '--cfg-options',
-        nargs='+',
-        action=DictAction,
-        help='override config entries, e.g. model.voxel_size=0.02')
-    args = parser.parse_args()
+        '--depth', type=int_in(1, 100), default=2, help='module levels to list, 1 to 100')
+    add_cfg_options(parser)
+    args = parser.parse_args()  # bad options end here, before torch and mmdet3d are loaded
+    from mmdet3d.registry import MODELS
+    from mmdet3d.utils import register_all_modules
     register_all_modules(init_default_scope=True)
     cfg = load_config(args.config, args.cfg_options)
     model = MODELS.build(cfg.model)

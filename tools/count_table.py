@@ -15,29 +15,46 @@ model, as the paper compares Baseline and TR3D-sd. Ground truth comes from
 The counting rule is in ``projects/synthdet/evaluation/table4.py``. Cells read
 ``correct(incorrect)``; '-' marks a class the model does not predict. ``--out`` writes the
 table as JSON (``synthdet.table4/1``) and as text next to it (``table4.txt``).
+
+Bad input (an option out of range, a missing or invalid predictions file, info pickle or
+``meta.json``) ends with one line naming it and exit code 2, before any counting; an output that
+cannot be written with exit code 1.
 """
+from __future__ import annotations
+
 import argparse
 from pathlib import Path
 
 import numpy as np
 
-from projects.synthdet.evaluation.table4 import (
-    TrueBox, format_table4, table4, truth_from_infos)
+from projects.synthdet.bootstrap import run_tool
+from projects.synthdet.evaluation.table4 import (TrueBox, format_table4, table4,
+                                                 truth_from_infos)
 from projects.synthdet.evaluation.table_files import write_table
 from synthdet.classes import DETECTION_CLASSES
+from synthdet.cli import InputFileError, OneLineParser, check_input_file, float_in
 from synthdet.contracts import SchemaError, read_predictions, read_room
+from synthdet.info_files import InfoFileError
 
+
+class BadInput(ValueError):
+    """A predictions file, info pickle or meta.json the table cannot use; names the file."""
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Parse the command line."""
-    parser = argparse.ArgumentParser(description="The paper's Table 4 from predictions.")
+    parser = OneLineParser(description="The paper's Table 4 from predictions.")
     parser.add_argument('predictions', nargs='+', help='.pred.json files or directories')
     parser.add_argument('--infos', nargs='+', help='info pickles holding the ground truth')
     parser.add_argument(
         '--scan-root', default='.', help='directory that relative "scan" paths are relative to')
-    parser.add_argument('--score-thr', type=float, default=0.3)
-    parser.add_argument('--iou-thr', type=float, default=0.25)
+    parser.add_argument(
+        '--score-thr', type=float_in(0.0, 1.0), default=0.3, help='in [0, 1] (default 0.3)')
+    parser.add_argument(
+        '--iou-thr',
+        type=float_in(0.0, 1.0, include_low=False),
+        default=0.25,
+        help='in (0, 1] (default 0.25)')
     parser.add_argument('--out', help='write the table to this JSON file and a .txt next to it')
     return parser.parse_args(argv)
 
@@ -46,25 +63,20 @@ def load_predictions(paths: list[str]) -> list[tuple[Path, dict]]:
     """``(file, document)`` of ``.pred.json`` files (directories are searched for them)."""
     files: list[Path] = []
     for path in map(Path, paths):
-        found = sorted(path.glob('*.pred.json')) if path.is_dir() else [path]
-        if not found:
-            raise SystemExit(f'{path}: no *.pred.json files')
+        if path.is_dir():
+            found = sorted(path.glob('*.pred.json'))
+            if not found:
+                raise BadInput(f'{path}: no *.pred.json files in the folder')
+        else:
+            check_input_file(path, 'predictions file')
+            found = [path]
         files += found
-    documents = []
-    for file in files:
-        try:
-            documents.append((file, read_predictions(file)))
-        except SchemaError as error:
-            raise SystemExit(str(error)) from None
-    return documents
+    return [(file, read_predictions(file)) for file in files]
 
 
 def truth_from_meta(meta_path: Path) -> list[TrueBox]:
     """Axis-aligned enclosing boxes ``(class, [cx, cy, cz, dx, dy, dz])`` of a ``meta.json``."""
-    try:
-        meta = read_room(meta_path)
-    except SchemaError as error:
-        raise SystemExit(str(error)) from None
+    meta = read_room(meta_path)
     boxes = []
     for obj in meta['objects']:
         if obj['class'] not in DETECTION_CLASSES:
@@ -80,22 +92,24 @@ def truth_from_meta(meta_path: Path) -> list[TrueBox]:
 def main(argv: list[str] | None = None) -> dict:
     """Load predictions and ground truth, print Table 4 and optionally write it."""
     args = parse_args(argv)
+    for path in args.infos or []:
+        check_input_file(path, 'info pickle')
     infos = truth_from_infos(args.infos) if args.infos else None
     predictions, truth_of = [], {}
     for file, document in load_predictions(args.predictions):
         scan = Path(document['scan'])
         if infos is not None:
             if scan.name not in infos:
-                raise SystemExit(f'{file}: scan {scan.name} is in none of the info pickles '
-                                 f'{args.infos}')
+                raise BadInput(f'{file}: scan {scan.name} is in none of the info pickles '
+                               f'{" ".join(args.infos)}')
             key = scan.name
             truth_of[key] = infos[key]
         else:
             path = scan if scan.is_absolute() else Path(args.scan_root) / scan
             meta_path = path.parent / 'meta.json'
             if not meta_path.is_file():
-                raise SystemExit(f'{file}: no ground truth for scan {scan}: {meta_path} '
-                                 'does not exist (pass --infos for converted scans)')
+                raise BadInput(f'{file}: no ground truth for scan {scan}: {meta_path} '
+                               'does not exist (pass --infos for converted scans)')
             key = str(path.resolve())
             truth_of.setdefault(key, truth_from_meta(meta_path))
         predictions.append((key, document))
@@ -109,4 +123,5 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 if __name__ == '__main__':
-    main()
+    run_tool(main, 'count_table.py',
+             bad_input=(BadInput, InputFileError, SchemaError, InfoFileError))

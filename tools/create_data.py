@@ -9,12 +9,15 @@ import sys
 
 from projects.synthdet.datasets.s3dis_converter import (
     OutputOverflowError, S3DISLayoutError, convert_s3dis)
+from synthdet.cli import MAX_AREA, OneLineParser, int_in
 from synthdet.point_text import PointFileError
 from synthdet.processes import Interrupted, stop_on_signals
 
+MAX_WORKERS = 256
+
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest='dataset', required=True)
     s3dis = sub.add_parser('s3dis', help='S3DIS-format areas (real areas 1-6, synthetic 7-9)')
     s3dis.add_argument(
@@ -22,8 +25,16 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         required=True,
         help='folder holding Stanford3dDataset_v1.2_Aligned_Version/')
     s3dis.add_argument('--out-dir', required=True, help='output folder (e.g. the same data/s3dis)')
-    s3dis.add_argument('--areas', type=int, nargs='+', help='area numbers (default: all found)')
-    s3dis.add_argument('--workers', type=int, default=1, help='parallel processes over rooms')
+    s3dis.add_argument(
+        '--areas',
+        type=int_in(1, MAX_AREA),
+        nargs='+',
+        help=f'area numbers, 1 to {MAX_AREA} (default: all found)')
+    s3dis.add_argument(
+        '--workers',
+        type=int_in(1, MAX_WORKERS),
+        default=1,
+        help=f'parallel processes over rooms, 1 to {MAX_WORKERS} (default 1)')
     s3dis.add_argument(
         '--on-error',
         choices=('raise', 'skip'),

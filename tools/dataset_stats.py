@@ -10,16 +10,16 @@ Counts come from the info pickles ``<data_root>/s3dis_infos_Area_N.pkl`` written
 ``meta.json``), one per line in the order of ``synthdet.contracts.SENSOR_MODELS``: the sensors
 ``tools/test.py --sensor`` has rooms for (``make exp2-cpu`` tests each of them).
 """
-import argparse
 import sys
 from pathlib import Path
 
 from projects.synthdet.evaluation.table1 import (
     count_instances, find_info_areas, format_table1, info_path, table1)
+from projects.synthdet.evaluation.table_files import write_table
+from synthdet.cli import MAX_AREA, OneLineParser, int_in
 from synthdet.contracts import SENSOR_MODELS
 from synthdet.info_files import InfoFileError, room_sensors
 from synthdet.outputs import OutputFailed, OutputRefused, check_output
-from projects.synthdet.evaluation.table_files import write_table
 
 
 def sensors_of_areas(data_root: str, areas: list[int] | None, extra_tag: str) -> list[str]:
@@ -38,9 +38,13 @@ def sensors_of_areas(data_root: str, areas: list[int] | None, extra_tag: str) ->
 
 def main(argv: list[str] | None = None) -> int:
     """Count, print Table 1 and optionally write it; returns the exit code."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument('data_root', help='folder holding s3dis_infos_Area_N.pkl')
-    parser.add_argument('--areas', type=int, nargs='+', help='areas (default: every pickle found)')
+    parser.add_argument(
+        '--areas',
+        type=int_in(1, MAX_AREA),
+        nargs='+',
+        help='areas (default: every pickle found)')
     parser.add_argument('--out', help='write the table to this JSON file and a .txt next to it')
     parser.add_argument(
         '--extra-tag', default='s3dis', help='the pickles are <extra-tag>_infos_Area_N.pkl')

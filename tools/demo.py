@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Callable
 
 from projects.synthdet.config_helpers import with_num_points
+from synthdet.cli import OneLineParser, int_in
 from synthdet.contracts import read_corners, read_predictions, read_room
 from synthdet.info_files import RAW_DIR
 from synthdet.outputs import write_text
@@ -506,18 +507,22 @@ def _table3_markdown(table3: dict) -> str:
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0].replace('\n', ' '))
+    parser = OneLineParser(description=__doc__.split('\n\n')[0].replace('\n', ' '))
     parser.add_argument(
         '--size',
         choices=sorted(SIZES),
         default='demo',
         help='tiny: smoke test (minutes); demo: about 30 min on 2 cores')
     parser.add_argument('--work-dir', type=Path, default=REPO_ROOT / 'work_dirs/demo')
-    parser.add_argument('--seed', type=int, default=0, help='generator and training seed')
+    parser.add_argument(
+        '--seed',
+        type=int_in(0, 2**32 - 1),
+        default=0,
+        help='generator and training seed, 0 to 2^32-1 (default 0)')
     parser.add_argument('--force', action='store_true', help='rerun steps whose outputs exist')
     parser.add_argument(
         '--threads',
-        type=int,
+        type=int_in(1, 256),
         help='OpenMP threads per step (OMP_NUM_THREADS); 1 is much faster on a '
         'machine busy with other work')
     return parser.parse_args(argv)

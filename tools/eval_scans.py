@@ -28,12 +28,9 @@ import argparse
 from pathlib import Path
 
 from projects.synthdet.bootstrap import (
-    add_detection_arguments, load_config, run_tool)
-from projects.synthdet.evaluation.real_scans import (
-    LabelsError, evaluate_scans, find_labelled_scans, format_result)
-from projects.synthdet.inference.detector import load_model
-from projects.synthdet.inference.windows import inference_settings
+    add_detection_arguments, check_device, load_config, run_tool)
 from projects.synthdet.shipped_model import resolve_model, split_model_arguments
+from synthdet.cli import OneLineParser
 from synthdet.scan_io import load_scan
 
 
@@ -43,7 +40,7 @@ class BadInput(ValueError):
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Parse the command line."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         description='Evaluate a checkpoint on labelled scans (X.ply + X.labels.json).')
     parser.add_argument(
         'inputs',
@@ -62,7 +59,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> dict:
     """Evaluate and print; returns the figures (``synthdet.real_scans/1``)."""
-    args = parse_args(argv)
+    args = parse_args(argv)  # bad options end here, before torch and mmdet3d are loaded
+    from projects.synthdet.evaluation.real_scans import (LabelsError, evaluate_scans,
+                                                         find_labelled_scans, format_result)
+    from projects.synthdet.inference.detector import load_model
+    from projects.synthdet.inference.windows import inference_settings
     try:
         scans, skipped = find_labelled_scans(args.scans)
         for item in scans:  # every scan readable before the model is loaded
@@ -77,8 +78,8 @@ def main(argv: list[str] | None = None) -> dict:
         config, checkpoint, model_line = resolve_model(args.config, args.checkpoint)
         cfg = load_config(config, args.cfg_options)
         inference_settings(cfg, config)
-        model = load_model(cfg, checkpoint, args.device, args.tta)
-    except ValueError as error:  # a bad config or checkpoint, no inference settings, no --tta
+        model = load_model(cfg, checkpoint, check_device(args.device), args.tta)
+    except ValueError as error:  # a bad config, checkpoint or device, no inference settings
         raise BadInput(str(error)) from None
     print(model_line, flush=True)
     result = evaluate_scans(

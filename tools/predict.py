@@ -31,13 +31,12 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from projects.synthdet.bootstrap import (
-    add_detection_arguments, check_output_dir, load_config, run_tool)
-from projects.synthdet.inference.detector import ModelDetector, load_model
-from projects.synthdet.inference.windows import inference_settings
+from projects.synthdet.bootstrap import (add_detection_arguments, check_device, load_config,
+                                         run_tool)
 from projects.synthdet.shipped_model import resolve_model, split_model_arguments
+from synthdet.cli import OneLineParser
 from synthdet.contracts import write_predictions
-from synthdet.outputs import readable
+from synthdet.outputs import check_output_dir, readable
 from synthdet.prepare import prepare_scan
 from synthdet.scan_io import load_scan
 
@@ -48,7 +47,7 @@ class BadInput(ValueError):
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Parse the command line."""
-    parser = argparse.ArgumentParser(description='Detect objects in scans with a checkpoint.')
+    parser = OneLineParser(description='Detect objects in scans with a checkpoint.')
     parser.add_argument(
         'inputs',
         nargs='+',
@@ -91,18 +90,21 @@ def check_scans(scans: list[Path], out_dir: Path, voxel: float | None,
 
 def main(argv: list[str] | None = None) -> list[Path]:
     """Predict every scan and write its JSON; returns the written paths."""
-    args = parse_args(argv)
+    args = parse_args(argv)  # before the heavy imports: bad options are refused at once
     out_dir = Path(args.out)
     try:
         check_output_dir(out_dir)
         config, checkpoint, model_line = resolve_model(args.config, args.checkpoint)
         cfg = load_config(config, args.cfg_options)
+        from projects.synthdet.inference.detector import ModelDetector, load_model
+        from projects.synthdet.inference.windows import inference_settings
         spec, density = inference_settings(cfg, config)
-    except ValueError as error:  # OutputPathError, ConfigFileError
+        device = check_device(args.device)
+    except ValueError as error:  # OutputRefused, ConfigFileError, DeviceError
         raise BadInput(str(error)) from None
     targets = check_scans([Path(p) for p in args.points], out_dir, args.voxel, args.columns)
     try:
-        model = load_model(cfg, checkpoint, args.device, args.tta)
+        model = load_model(cfg, checkpoint, device, args.tta)
     except ValueError as error:  # CheckpointError
         raise BadInput(str(error)) from None
     print(model_line, flush=True)

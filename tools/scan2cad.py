@@ -32,14 +32,13 @@ from pathlib import Path
 
 from configurator.corners import SCAN_VOXEL, CornerDetectionError, room_outline
 from configurator.corners import outline_in_scan, outline_to_dict
-from configurator.freecad_cli import FreecadFailed, build_document
-from projects.synthdet.bootstrap import (
-    add_detection_arguments, check_output_file, load_config)
-from projects.synthdet.inference.detector import ModelDetector, load_model
-from projects.synthdet.inference.windows import inference_settings
+from configurator.freecad_cli import (FreecadFailed, build_document, check_input_scan,
+                                      wall_thickness_option)
+from projects.synthdet.bootstrap import add_detection_arguments, check_device, load_config
 from projects.synthdet.shipped_model import resolve_model
+from synthdet.cli import OneLineParser
 from synthdet.contracts import write_corners, write_predictions
-from synthdet.outputs import check_output, copy_into_place, names_as_given, readable
+from synthdet.outputs import check_output_file, copy_into_place, names_as_given, readable
 from synthdet.prepare import align_scan, resample_to_density
 from synthdet.processes import work_folder
 from synthdet.scan_io import load_scan
@@ -47,14 +46,18 @@ from synthdet.scan_io import load_scan
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Parse the command line."""
-    parser = argparse.ArgumentParser(description='Scan -> detections, corners -> FreeCAD .FCStd')
+    parser = OneLineParser(description='Scan -> detections, corners -> FreeCAD .FCStd')
     parser.add_argument('scan', help='.e57, .las/.laz, .ply, .pcd, .xyz/.pts/.csv, .txt or .bin')
     parser.add_argument(
         '--config', help='model config, e.g. configs/tr3d/exp2.py (default: the shipped model)')
     parser.add_argument('--checkpoint', help='checkpoint file (default: the shipped model)')
     parser.add_argument('--out', required=True, help='FreeCAD document to write (.FCStd)')
     parser.add_argument('--library', help='folder of <class>.step files replacing built-ins')
-    parser.add_argument('--wall-thickness', type=float, default=0.1, help='metres (default 0.1)')
+    parser.add_argument(
+        '--wall-thickness',
+        type=wall_thickness_option,
+        default=0.1,
+        help='metres, up to 2 (default 0.1)')
     parser.add_argument('--freecadcmd', default='freecadcmd', help='FreeCAD command line')
     add_detection_arguments(parser, voxel=SCAN_VOXEL)
     return parser.parse_args(argv)
@@ -72,14 +75,17 @@ def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
     if out.suffix.lower() != '.fcstd':
         raise ValueError(f'{out}: the output must end with .FCStd')
     predictions_path, corners_path = output_paths(out)
-    inputs = [p for p in (scan, args.config, args.checkpoint, args.library) if p is not None]
+    check_input_scan(scan)
+    inputs = [scan, args.config, args.checkpoint, args.library]
     for path in (out, predictions_path, corners_path):  # the arguments before any work
-        check_output(path, '--out', inputs)
-        check_output_file(path)
+        check_output_file(path, inputs=inputs)
     config, checkpoint, model_line = resolve_model(args.config, args.checkpoint)
     report(model_line)
     cfg = load_config(config, args.cfg_options)
+    from projects.synthdet.inference.detector import ModelDetector, load_model
+    from projects.synthdet.inference.windows import inference_settings
     spec, density = inference_settings(cfg, config)
+    device = check_device(args.device)
     start = time.perf_counter()
     loaded = load_scan(scan, voxel=args.voxel, columns=args.columns)
     # the corners, as `configurator corners`, use every point; detection the resampled ones
@@ -88,7 +94,7 @@ def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
     for line in prepared.report:
         report(f'prepare: {line}')
     detector = ModelDetector(
-        load_model(cfg, checkpoint, args.device, args.tta), args.score_thr, args.seed)
+        load_model(cfg, checkpoint, device, args.tta), args.score_thr, args.seed)
     with work_folder('synthdet-scan2cad') as work:
         # the document's label is its file's stem, as when FreeCAD saves it where it belongs
         staged = [work / 'room.pred.json', work / 'room.corners.json', work / readable(out.name)]

@@ -31,33 +31,26 @@ duplicate, another class, a loose box, or the annotation of the scan's points in
 ``clutter/crate``) with the AP the class would have without each cause
 (``projects/synthdet/evaluation/false_positives.py``), in ``false_positives.json`` / ``.txt``.
 """
+from __future__ import annotations
+
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from mmengine.config import Config
-from mmengine.dist import is_main_process
-from mmengine.model import BaseTTAModel, is_model_wrapper
-from mmengine.runner import Runner
-
-from projects.synthdet.bootstrap import (
-    ConfigFileError, OutputPathError, TTAConfigError, check_output_dir, check_output_file,
-    parse_runner_args, run_tool, runner_config, tta_settings)
-from projects.synthdet.checkpoint import (
-    CheckpointError, load_checkpoint_file, load_state_into)
-from projects.synthdet.evaluation.box_fit import (
-    SynthdetBoxFit, box_fit_document, format_box_fit)
-from projects.synthdet.evaluation.false_positives import (
-    SynthdetFalsePositives, false_positives_document, format_false_positives)
-from projects.synthdet.evaluation.table3 import format_table3, table3
-from projects.synthdet.evaluation.table_files import write_table
-from projects.synthdet.visualization import TopViewHook
+from projects.synthdet.bootstrap import (ConfigFileError, ErrorTypes, TTAConfigError,
+                                         parse_runner_args, run_tool, runner_config, tta_settings)
+from synthdet.cli import OneLineParser, float_in
 from synthdet.contracts import SENSOR_MODELS
 from synthdet.info_files import InfoFileError, load_info_pickle, rooms_scanned_by
+from synthdet.outputs import OutputRefused, check_output_dir, check_output_file
+
+if TYPE_CHECKING:
+    from mmengine.config import Config
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Parse the command line."""
-    parser = argparse.ArgumentParser(description='Test a synthdet 3D detector (Table 3).')
+    parser = OneLineParser(description='Test a synthdet 3D detector (Table 3).')
     parser.add_argument('config', help='config file, e.g. configs/tr3d/exp2.py')
     parser.add_argument('checkpoint', help='checkpoint file')
     parser.add_argument('--out', help='Table 3 JSON path (default <work_dir>/table3.json)')
@@ -65,9 +58,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         '--show-dir', help='save a top-view picture of every test scan (truth and predictions)')
     parser.add_argument(
         '--score-thr',
-        type=float,
+        type=float_in(0.0, 1.0),
         default=0.1,
-        help='lowest score of the predictions drawn with --show-dir (default 0.1)')
+        help='lowest score of the predictions drawn with --show-dir, in [0, 1] (default 0.1)')
     parser.add_argument(
         '--sensor',
         choices=SENSOR_MODELS,
@@ -91,6 +84,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 def add_show_hook(cfg: Config, show_dir: str | None, score_thr: float) -> None:
     """With ``show_dir``, add the hook that draws every test scan (``TopViewHook``)."""
     if show_dir:
+        from projects.synthdet.visualization import TopViewHook
         cfg.custom_hooks = [
             *cfg.get('custom_hooks', []),
             dict(type=TopViewHook.__name__, out_dir=show_dir, score_thr=score_thr)
@@ -148,6 +142,7 @@ def check_test_data(cfg: Config) -> None:
 
 def report(path: Path, document: dict, title: str, table: str) -> None:
     """Print a table under its title; write its document to ``path`` and the text beside it."""
+    from projects.synthdet.evaluation.table_files import write_table
     text = f'{title}:\n{table}'
     print(text)
     print(f'written to {path} and {write_table(path, document, text)}')
@@ -155,12 +150,22 @@ def report(path: Path, document: dict, title: str, table: str) -> None:
 
 def main(argv: list[str] | None = None) -> dict:
     """Run the test loop, print Table 3 and write it; returns the JSON document."""
-    args = parse_args(argv)
+    args = parse_args(argv)  # bad options end here, before torch and mmengine are loaded
+    from mmengine.dist import is_main_process
+    from mmengine.model import BaseTTAModel, is_model_wrapper
+    from mmengine.runner import Runner
+
+    from projects.synthdet.checkpoint import load_checkpoint_file, load_state_into
+    from projects.synthdet.evaluation.box_fit import (SynthdetBoxFit, box_fit_document,
+                                                      format_box_fit)
+    from projects.synthdet.evaluation.false_positives import (
+        SynthdetFalsePositives, false_positives_document, format_false_positives)
+    from projects.synthdet.evaluation.table3 import format_table3, table3
     cfg = runner_config(args)
     if args.out:
         check_output_file(args.out, make_parents=True)
     if args.show_dir:
-        check_output_dir(args.show_dir)
+        check_output_dir(args.show_dir, '--show-dir')
     if args.tta:
         use_test_time_augmentation(cfg)
     check_test_data(cfg)
@@ -202,9 +207,11 @@ def main(argv: list[str] | None = None) -> dict:
     return document
 
 
+def bad_inputs() -> ErrorTypes:
+    """The errors that are bad input (exit 2), imported only when the test fails."""
+    from projects.synthdet.checkpoint import CheckpointError
+    return (CheckpointError, ConfigFileError, InfoFileError, OutputRefused, TTAConfigError)
+
+
 if __name__ == '__main__':
-    run_tool(
-        main,
-        'test.py',
-        bad_input=(CheckpointError, ConfigFileError, InfoFileError, OutputPathError,
-                   TTAConfigError))
+    run_tool(main, 'test.py', bad_input=bad_inputs)

@@ -15,29 +15,27 @@ text file, a truncated one), one refused by the weights-only load and one withou
 (an inference checkpoint) each end with one line naming the file and exit code 2. At the end
 the final weights are also written as ``<work_dir>/inference.pth`` (state_dict and meta only).
 """
+from __future__ import annotations
+
 import argparse
 import pickle
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import torch
-from mmengine.config import Config
-from mmengine.dist import is_main_process
-from mmengine.runner import Runner, find_latest_checkpoint
-
-from projects.synthdet.bootstrap import (
-    parse_runner_args, runner_config)
-from projects.synthdet.checkpoint import (
-    TRAINING_CHECKPOINT_TYPES, CheckpointError, check_resumable, load_checkpoint_file, refused,
-    save_inference_checkpoint, trusted_resume_path)
+from projects.synthdet.bootstrap import parse_runner_args, runner_config
+from synthdet.cli import OneLineParser
 from synthdet.info_files import InfoFileError
+
+if TYPE_CHECKING:
+    from mmengine.config import Config
 
 INFERENCE_CHECKPOINT = 'inference.pth'
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Parse the command line."""
-    parser = argparse.ArgumentParser(description='Train a synthdet 3D detector.')
+    parser = OneLineParser(description='Train a synthdet 3D detector.')
     parser.add_argument('config', help='config file, e.g. configs/tr3d/exp2.py')
     parser.add_argument(
         '--resume',
@@ -77,6 +75,10 @@ def apply_precision_and_lr_options(cfg: Config, amp: bool, auto_scale_lr: bool) 
 
 def build_config(args: argparse.Namespace) -> Config:
     """Load the config and apply the command-line overrides and the resume choice."""
+    from mmengine.runner import find_latest_checkpoint
+
+    from projects.synthdet.checkpoint import (CheckpointError, check_resumable,
+                                              trusted_resume_path)
     cfg = runner_config(args)
     apply_precision_and_lr_options(cfg, args.amp, args.auto_scale_lr)
     if args.resume == 'auto':
@@ -96,6 +98,7 @@ def build_config(args: argparse.Namespace) -> Config:
 
 def publish_final_checkpoint(work_dir: str | Path) -> Path | None:
     """Write the last saved checkpoint of ``work_dir`` as ``<work_dir>/inference.pth``."""
+    from projects.synthdet.checkpoint import load_checkpoint_file, save_inference_checkpoint
     last = Path(work_dir) / 'last_checkpoint'
     if not last.is_file():
         return None
@@ -109,7 +112,12 @@ def main(argv: list[str] | None = None) -> int:
     Returns 0, or 2 with a one-line message for a bad option or a checkpoint the weights-only
     load refuses.
     """
-    args = parse_args(argv)
+    args = parse_args(argv)  # bad options end here, before torch and mmengine are loaded
+    import torch
+    from mmengine.dist import is_main_process
+    from mmengine.runner import Runner
+
+    from projects.synthdet.checkpoint import TRAINING_CHECKPOINT_TYPES, CheckpointError, refused
     if args.amp and not torch.cuda.is_available():
         print('train: error: --amp needs a CUDA GPU (mmengine\'s AmpOptimWrapper); none found',
               file=sys.stderr)

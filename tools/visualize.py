@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from synthdet.cli import OneLineParser, float_in
 from synthdet.outputs import check_output, names_as_given
 from synthdet.room_data import (boxes_from_predictions, corner_polygon,
                                  load_ground_truth, load_scan, write_labelled_ply)
@@ -23,7 +24,7 @@ from synthdet.topview import draw_top_view
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=' '.join(__doc__.split('\n\n')[0].split()))
+    parser = OneLineParser(description=' '.join(__doc__.split('\n\n')[0].split()))
     parser.add_argument('scan', help='S3DIS room .txt, a points/*.bin or any scan (docs/scans.md)')
     parser.add_argument('--gt', help='ground truth: generator meta.json or info .pkl')
     parser.add_argument('--pred', help='predictions JSON (synthdet.predictions/1)')
@@ -36,9 +37,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help='point colors (default: class if annotated, else rgb/height)')
     parser.add_argument(
         '--min-score',
-        type=float,
+        type=float_in(0.0, 1.0),
         default=0.3,
-        help='draw predictions scoring at least this (default 0.3)')
+        help='draw predictions scoring at least this, in [0, 1] (default 0.3)')
     parser.add_argument('--title', default='', help='figure title (default: the scan name)')
     return parser.parse_args(argv)
 

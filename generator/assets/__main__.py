@@ -11,18 +11,26 @@ import time
 from pathlib import Path
 
 from generator.assets.library import ASSET_CLASSES, build_library, load_library
+from synthdet.cli import OneLineParser, int_in
 from synthdet.outputs import OutputFailed, OutputRefused, check_output
+
+MAX_INSTANCES = 10_000
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog='python -m generator.assets',
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument(
         '--out', type=Path, required=True, help='folder for the <class>.blend files')
-    parser.add_argument('--instances', type=int, default=24, help='instances per class')
-    parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument(
+        '--instances',
+        type=int_in(1, MAX_INSTANCES),
+        default=24,
+        help=f'instances per class, 1 to {MAX_INSTANCES:,} (default 24)')
+    parser.add_argument(
+        '--seed', type=int_in(0, 2**63 - 1), default=0, help='0 to 2^63-1 (default 0)')
     parser.add_argument(
         '--classes',
         nargs='+',
@@ -35,12 +43,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         type=Path,
         default=None,
         help='also draw one PNG per class of the built library into this folder')
-    args = parser.parse_args(argv)
-    if args.instances < 1:
-        parser.error(f'--instances must be >= 1, got {args.instances}')
-    if args.seed < 0:
-        parser.error(f'--seed must be >= 0, got {args.seed}')
-    return args
+    return parser.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -4,131 +4,106 @@ Command-line options common to the tools (numbers checked against their ranges w
 messages), config loading with ``--cfg-options`` (a ``.py`` config is code: loading it runs it
 and imports its ``custom_imports``, which registers the plugin's modules with mmdet3d; a JSON
 or YAML config is data, refused if it would import or run anything: ``data_config``; a file
-that is not a config is one line naming it), the checks of output paths before any work, the
-work directory and the launcher. Checkpoints are loaded weights-only
+that is not a config is one line naming it), the work directory and the launcher (output
+paths are checked by ``synthdet.outputs``). Checkpoints are loaded weights-only
 (``projects/synthdet/checkpoint.py``); nothing here changes how ``torch.load`` unpickles.
+
+Importing this module loads neither torch nor mmengine: a tool builds its parser and refuses
+bad options (``--cfg-options bogus``, ``--device gpu``) before its heavy imports.
 """
+from __future__ import annotations
+
 import argparse
-import math
 import os
+import re
 import sys
-import tempfile
 from pathlib import Path
-from typing import Callable, NoReturn
+from typing import TYPE_CHECKING, Callable, NoReturn
 
-from mmengine.config import Config, DictAction
-
+from projects.synthdet.config_checks import ConfigValueError, check_config_values
 from projects.synthdet.data_config import ConfigFileError, check_data_config, is_data_config
-from projects.synthdet.distributed import prepare_distributed
-from synthdet.outputs import OutputRefused, check_output
+from synthdet.cli import float_in, int_in, shown
+
+if TYPE_CHECKING:
+    from mmengine.config import Config
+
+
+ErrorTypes = tuple[type[BaseException], ...]
 
 
 def run_tool(main: Callable[[], object],
              prog: str,
-             bad_input: tuple[type[BaseException], ...],
-             failure: tuple[type[BaseException], ...] = (OSError, )) -> NoReturn:
+             bad_input: ErrorTypes | Callable[[], ErrorTypes],
+             failure: ErrorTypes = (OSError, )) -> NoReturn:
     """Run a tool's ``main`` with the project's exit codes (README, "Safety"): 0 on success,
-    2 with one line for ``bad_input`` errors, 1 with one line for ``failure`` errors."""
+    2 with one line for ``bad_input`` errors, 1 with one line for ``failure`` errors.
+
+    ``bad_input`` may be a function returning the error types, called only when ``main``
+    fails: a tool whose errors live in modules that load torch parses its options first."""
     try:
         main()
-    except bad_input as error:
+    except Exception as error:  # sorted into the two kinds below; anything else is a bug
+        kinds = bad_input() if callable(bad_input) else bad_input
+        if not isinstance(error, (*kinds, *failure)):
+            raise
         print(f'{prog}: error: {error}', file=sys.stderr)
-        sys.exit(2)
-    except failure as error:
-        print(f'{prog}: error: {error}', file=sys.stderr)
-        sys.exit(1)
+        sys.exit(2 if isinstance(error, kinds) else 1)
     sys.exit(0)
 
 
-def shown(text: object, limit: int = 24) -> str:
-    """``text`` for a message: at most ``limit`` characters (a 300-digit number is cut)."""
-    text = str(text)
-    return text if len(text) <= limit else f'{text[:limit - 3]}...'
-
-
-def int_in(low: int, high: int) -> Callable[[str], int]:
-    """An argparse ``type``: an integer in ``[low, high]``, with a short message otherwise."""
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f'expected an integer, got {shown(text)}') from None
-        if not low <= value <= high:
-            raise argparse.ArgumentTypeError(
-                f'expected an integer from {low:,} to {high:,}, got {shown(text)}')
-        return value
-
-    return parse
-
-
-def float_in(low: float, high: float, include_low: bool = True) -> Callable[[str], float]:
-    """An argparse ``type``: a finite number in ``[low, high]`` (``(low, high]`` without
-    ``include_low``), with a short message otherwise."""
-
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f'expected a number, got {shown(text)}') from None
-        if not (math.isfinite(value) and (low <= value if include_low else low < value)
-                and value <= high):
-            interval = f'{"[" if include_low else "("}{low:g}, {high:g}]'
-            raise argparse.ArgumentTypeError(
-                f'expected a number in {interval}, got {shown(text)}')
-        return value
-
-    return parse
-
-
-OutputPathError = OutputRefused  # an output path that cannot be written; the message names it
-
-
-def _nearest_existing(path: Path) -> Path:
-    path = Path(os.path.abspath(path))
-    while not os.path.lexists(path) and path != path.parent:
-        path = path.parent
-    return path
-
-
-def _check_can_create_in(folder: Path, output: Path) -> None:
-    """Create and remove a temporary file in ``folder``: the one check that also holds for root
-    and read-only file systems."""
-    try:
-        descriptor, name = tempfile.mkstemp(prefix='.write-check-', dir=folder)
-    except OSError as error:
-        raise OutputPathError(f'{output}: cannot write in {folder} '
-                              f'({error.strerror or type(error).__name__})') from None
-    os.close(descriptor)
-    os.unlink(name)
-
-
-def check_output_dir(path: str | Path, option: str = '--out') -> None:
-    """:class:`OutputPathError` unless ``path`` is a writable folder or can be created as one
-    (the folder is not created; a probe file is created and removed); a file, device or FIFO
-    is refused by ``synthdet.outputs.check_output``."""
-    path = check_output(path, option, folder=True)
-    existing = _nearest_existing(path)
-    if not existing.is_dir():
-        raise OutputPathError(f'{path}: cannot be created ({existing} is a file)')
-    _check_can_create_in(existing, path)
-
-
-def check_output_file(path: str | Path, make_parents: bool = False, option: str = '--out') -> None:
-    """:class:`OutputPathError` unless the file ``path`` can be written: not a folder, device
-    or FIFO (``synthdet.outputs.check_output``), in a writable folder that exists (or, with
-    ``make_parents``, can be created). The file is not created; a probe file beside it is
-    created and removed."""
-    path = check_output(path, option)
-    if make_parents:
-        check_output_dir(path.parent)
-        return
-    if not path.parent.is_dir():
-        raise OutputPathError(f'{path}: the folder {path.parent} does not exist')
-    _check_can_create_in(path.parent, path)
-
-
 SEED_RANGE = (0, 2**32 - 1)  # numpy's and torch's seeds
+
+
+CONFIG_KEY = re.compile(r'[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_0-9][A-Za-z0-9_]*)*')
+DEVICE = re.compile(r'cpu|cuda(:\d{1,4})?')
+
+
+class ConfigOptionsAction(argparse.Action):
+    """``--cfg-options key=value ...``: every item must be ``dotted.key=value`` (a usage error
+    naming the item otherwise); the values are read as mmengine's ``DictAction`` reads them
+    (numbers, booleans, None, lists and tuples)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: list[str], option_string: str | None = None) -> None:
+        for item in values:
+            key = item.split('=', 1)[0]
+            if '=' not in item or not CONFIG_KEY.fullmatch(key):
+                raise argparse.ArgumentError(
+                    self, f'expected key=value items such as train_cfg.max_epochs=2, got '
+                    f'{shown(item, 40)!r}')
+        from mmengine.config import DictAction
+        try:
+            DictAction(self.option_strings, self.dest)(parser, namespace, values, option_string)
+        except (ValueError, IndexError, AssertionError) as error:  # unbalanced brackets
+            raise argparse.ArgumentError(self, f'cannot read the values ({error})') from None
+
+
+def device_name(text: str) -> str:
+    """An argparse ``type``: ``cpu``, ``cuda`` or ``cuda:N`` (checked against this machine's
+    devices by :func:`check_device` once torch is loaded)."""
+    if not DEVICE.fullmatch(text):
+        raise argparse.ArgumentTypeError(f'expected cpu, cuda or cuda:N, got {shown(text)}')
+    return text
+
+
+class DeviceError(ValueError):
+    """A ``--device`` this machine does not have."""
+
+
+def check_device(device: str | None) -> str:
+    """The device to run on: ``device``, or ``cuda:0`` when a GPU is present and ``cpu``
+    otherwise for None; :class:`DeviceError` for a CUDA device this machine lacks."""
+    import torch
+    if device is None:
+        return 'cuda:0' if torch.cuda.is_available() else 'cpu'
+    if device.startswith('cuda'):
+        count = torch.cuda.device_count() if torch.cuda.is_available() else 0
+        index = int(device.partition(':')[2] or 0)
+        if index >= count:
+            raise DeviceError(f'--device {device}: this machine has '
+                              f'{count or "no"} CUDA device{"" if count == 1 else "s"}; '
+                              'use --device cpu')
+    return device
 
 
 def add_cfg_options(parser: argparse.ArgumentParser) -> None:
@@ -136,7 +111,7 @@ def add_cfg_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         '--cfg-options',
         nargs='+',
-        action=DictAction,
+        action=ConfigOptionsAction,
         help='override config keys, e.g. train_cfg.max_epochs=2 '
         'test_dataloader.dataset.ann_file=s3dis_infos_Area_9.pkl')
 
@@ -145,13 +120,15 @@ def add_detection_arguments(parser: argparse.ArgumentParser, voxel: float | None
     """Add the options of detecting in scans (``predict.py``, ``scan2cad.py``): ``--score-thr``,
     ``--device``, ``--seed``, ``--tta`` and the reading options ``--voxel`` (default ``voxel``;
     None keeps every point) and ``--columns``."""
-    import torch
     parser.add_argument(
         '--score-thr',
         type=float_in(0.0, 1.0),
         default=0.3,
         help='keep detections with at least this score, in [0, 1] (default 0.3)')
-    parser.add_argument('--device', default='cuda:0' if torch.cuda.is_available() else 'cpu')
+    parser.add_argument(
+        '--device',
+        type=device_name,
+        help='cpu or cuda:N (default: cuda:0 when there is a GPU, else cpu)')
     parser.add_argument(
         '--seed',
         type=int_in(*SEED_RANGE),
@@ -184,6 +161,14 @@ def tta_settings(cfg: Config) -> tuple[dict, list]:
     return dict(cfg.tta_model), list(cfg.tta_pipeline)
 
 
+# what each distributed launcher sets, read by mmengine's init_dist
+LAUNCH_ENVIRONMENT = {
+    'pytorch': ('RANK', 'WORLD_SIZE', 'MASTER_ADDR', 'MASTER_PORT'),
+    'slurm': ('SLURM_PROCID', 'SLURM_NTASKS', 'SLURM_NODELIST'),
+    'mpi': ('OMPI_COMM_WORLD_RANK', 'OMPI_COMM_WORLD_SIZE', 'OMPI_COMM_WORLD_LOCAL_RANK'),
+}
+
+
 def parse_runner_args(parser: argparse.ArgumentParser, work_dir_help: str,
                       argv: list[str] | None = None) -> argparse.Namespace:
     """Add the options every runner tool has (``--work-dir``, described by ``work_dir_help``,
@@ -196,8 +181,14 @@ def parse_runner_args(parser: argparse.ArgumentParser, work_dir_help: str,
         choices=['none', 'pytorch', 'slurm', 'mpi'],
         default='none',
         help='job launcher for distributed runs (tools/dist_train.sh uses pytorch)')
-    parser.add_argument('--local-rank', '--local_rank', type=int, default=0)
+    parser.add_argument('--local-rank', '--local_rank', type=int_in(0, 4095), default=0)
     args = parser.parse_args(argv)
+    missing = [name for name in LAUNCH_ENVIRONMENT.get(args.launcher, ())
+               if name not in os.environ]
+    if missing:
+        parser.error(f'--launcher {args.launcher}: not started by that launcher '
+                     f'({", ".join(missing)} not set); tools/dist_train.sh, dist_test.sh '
+                     'and slurm_train.sh start distributed runs')
     os.environ.setdefault('LOCAL_RANK', str(args.local_rank))
     return args
 
@@ -222,6 +213,7 @@ def load_config(path: str | Path, cfg_options: dict | None = None) -> Config:
     (``data_config.check_data_config``, which registers the plugin's classes) and read without
     mmengine's text substitutions (what was checked is what is read)."""
     check_config_path(path)
+    from mmengine.config import Config
     data_only = is_data_config(path)
     if data_only:
         check_data_config(path)
@@ -236,6 +228,10 @@ def load_config(path: str | Path, cfg_options: dict | None = None) -> Config:
     except Exception as error:  # mmengine raises what the file's code raises
         message = str(error).strip().split('\n')[0] or type(error).__name__
         raise ConfigFileError(f'{path}: cannot load the config ({shown(message, 160)})') from None
+    try:
+        check_config_values(cfg, str(path))
+    except ConfigValueError as error:
+        raise ConfigFileError(str(error)) from None
     return cfg
 
 
@@ -243,6 +239,7 @@ def runner_config(args: argparse.Namespace) -> Config:
     """The config for mmengine's Runner: ``load_config`` plus the launcher and the work dir
     (``--work-dir``, else the config's ``work_dir``, else ``work_dirs/<config name>``); on a
     machine without CUDA a ``pytorch`` launcher uses gloo (``distributed.prepare_distributed``)."""
+    from projects.synthdet.distributed import prepare_distributed
     cfg = load_config(args.config, args.cfg_options)
     cfg.launcher = args.launcher
     prepare_distributed(cfg)

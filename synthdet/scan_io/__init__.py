@@ -36,6 +36,7 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
+from synthdet.cli import check_input_file
 from synthdet.outputs import replaced_paths
 from synthdet.scan_io import e57, las, pcd, ply, points_bin, s3dis_txt, text_columns
 from synthdet.scan_io.common import (CHUNK_POINTS, MAX_LINE_BYTES, TEXT_BYTES_PER_POINT,
@@ -95,11 +96,11 @@ def read_scan_chunks(path: str | os.PathLike,
     Coordinates are the file's own (georeferenced ones exact in float64). ``columns`` names
     the values of a text scan's lines (``'x,y,z,i'``). One-line notes (no colors...) are
     appended to ``notes``. Raises ``ScanFormatError`` naming the file on an unknown suffix,
-    malformed, empty or non-finite input, ``FileNotFoundError`` if it does not exist.
+    malformed, empty or non-finite input, ``InputFileError`` if it is missing or not a regular
+    file (a folder, a FIFO, a link to a device: the message says which).
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f'{path}: scan file not found')
+    check_input_file(path, 'scan file')
     reader = READERS.get(path.suffix.lower())
     if reader is None:
         raise ScanFormatError(f'{path}: unknown scan type {path.suffix.lower()!r}, expected one '
@@ -184,6 +185,9 @@ def load_scan(path: str | os.PathLike,
         points[start:start + len(part)] = part
         start += len(part)
     check_units(points, path)
+    precision = coordinate_precision(origin, path)
+    if precision is not None:
+        notes.append(precision)
     report = notes + [
         f'read {total:,} points from {path}' +
         (f', kept {len(points):,} (one per {voxel * 100:g} cm voxel)' if voxel else '') +
@@ -191,6 +195,21 @@ def load_scan(path: str | os.PathLike,
     ]
     return LoadedScan(
         points=points, origin=origin, source=str(path), report=report, points_read=total)
+
+
+def coordinate_precision(origin: np.ndarray, path: str | os.PathLike,
+                         tolerance: float = 0.001) -> str | None:
+    """A warning naming ``path`` when a scan's coordinates (around ``origin``) are too far
+    from the origin for floating point to keep them to ``tolerance`` metres: at 1e15 m even
+    float64 holds only every 0.125 m, so the points sit on a coarse grid before any step sees
+    them. None for coordinates that keep millimetres."""
+    largest = float(np.abs(origin).max())
+    step = float(np.spacing(largest))
+    if step <= tolerance:
+        return None
+    return (f'warning: {path}: coordinates {largest:.3g} m from the origin are too far from it '
+            f'for floating point, exact only to {step:.3g} m; subtract the georeference '
+            '(move the scan near the origin) and read it again')
 
 
 def check_units(points: np.ndarray, path: str | os.PathLike) -> None:

@@ -85,6 +85,7 @@ def no_color_note(path: Path, has_intensity: bool) -> str:
 
 _SPLIT = {',': b',', ';': b';', ' ': None}
 NUMBER = re.compile(rb'^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$')
+NON_FINITE = re.compile(rb'^[+-]?(nan|inf|infinity)$', re.IGNORECASE)
 
 
 def split_tokens(line: bytes, delimiter: str) -> list[bytes]:
@@ -155,18 +156,36 @@ def text_blocks(path: Path, skip: int, chunk_points: int) -> Iterator[tuple[int,
                 return
 
 
-def bad_line(block: bytes, count: int, delimiter: str) -> int:
-    """Offset in the block of its first line that is not ``count`` numbers (0 if none)."""
+def token_problem(tokens: list[bytes]) -> str | None:
+    """What is wrong with the first token of a line that is not a finite number, or None."""
+    for token in tokens:
+        if not NUMBER.match(token):
+            text = token.decode(errors='replace')[:40]
+            if NON_FINITE.match(token):
+                return f'non-finite value {text!r} (values must be finite numbers)'
+            return f'cannot read {text!r} as a number'
+    return None
+
+
+def bad_line(block: bytes, count: int, delimiter: str) -> tuple[int, str]:
+    """Offset in the block of its first line that is not ``count`` finite numbers, and what is
+    wrong with it (``(0, '')`` if every line is good)."""
     for offset, line in enumerate(block.split(b'\n')):
         tokens = split_tokens(line, delimiter)
-        if tokens and (len(tokens) != count or not all(NUMBER.match(t) for t in tokens)):
-            return offset
-    return 0
+        if not tokens:
+            continue
+        problem = token_problem(tokens)
+        if problem is None and len(tokens) != count:
+            problem = f'expected {count} values per line, found {len(tokens)}'
+        if problem is not None:
+            return offset, problem
+    return 0, ''
 
 
 def one_line(error: Exception) -> str:
-    """An exception's message on one line."""
-    return ' '.join(str(error).split())
+    """An exception's message on one line, without numpy's advice on its own arguments
+    (``use `usecols` to select a subset``), which a user reading a scan cannot follow."""
+    return ' '.join(str(error).split('; use `usecols`')[0].split())
 
 
 def colors_0_255(points: np.ndarray) -> np.ndarray:

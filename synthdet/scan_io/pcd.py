@@ -167,8 +167,9 @@ def _pcd_ascii_rows(path: Path, first_line: int, block: bytes, header: _PcdHeade
             ndmin=1,
             usecols=[starts[header.fields.index(name)] for name in single])
     except ValueError as error:
-        raise ScanFormatError(f'{path}:{first_line + bad_line(block, sum(widths), " ")}'
-                              f': {one_line(error)}') from None
+        offset, problem = bad_line(block, sum(widths), ' ')
+        raise ScanFormatError(f'{path}:{first_line + offset}: '
+                              f'{problem or one_line(error)}') from None
     table = np.zeros(len(rows), header.dtype)
     for name in single:
         table[name] = rows[name]

@@ -12,8 +12,9 @@ from typing import Iterable, Iterator, Sequence
 
 import numpy as np
 
-from synthdet.scan_io.common import (NUMBER, Scale, ScanFormatError, bad_line, colors_0_255, grey,
-                                     no_color_note, one_line, read_line, split_tokens, text_blocks)
+from synthdet.scan_io.common import (NON_FINITE, NUMBER, Scale, ScanFormatError, bad_line,
+                                     colors_0_255, grey, no_color_note, one_line, read_line,
+                                     split_tokens, text_blocks, token_problem)
 
 COLUMN_NAMES = ('x', 'y', 'z', 'r', 'g', 'b', 'i')
 
@@ -62,6 +63,9 @@ def _text_layout(path: Path, columns: tuple[str, ...] | None) -> tuple[str, int,
     delimiter = ',' if b',' in sample else ';' if b';' in sample else ' '
     for index, line in enumerate(head):
         tokens = split_tokens(line, delimiter)
+        if len(tokens) >= 3 and all(NUMBER.match(t) or NON_FINITE.match(t) for t in tokens) \
+                and not all(NUMBER.match(t) for t in tokens):
+            raise ScanFormatError(f'{path}:{index + 1}: {token_problem(tokens)}')
         if not tokens or not all(NUMBER.match(token) for token in tokens):
             continue
         following = [split_tokens(other, delimiter) for other in head[index + 1:] if other.strip()]
@@ -104,11 +108,15 @@ def _parse_text_blocks(path: Path, blocks: Iterable[tuple[int, bytes]], names: S
                 ndmin=2,
                 dtype=np.float64)
         except ValueError as error:
-            raise ScanFormatError(f'{path}:{bad_line(block, len(names), delimiter) + first_line}'
-                                  f': {one_line(error)}') from None
+            offset, problem = bad_line(block, len(names), delimiter)
+            raise ScanFormatError(f'{path}:{first_line + offset}: {problem or one_line(error)}'
+                                  ) from None
         if values.shape[1] != len(names):
             raise ScanFormatError(f'{path}:{first_line}: expected {len(names)} values per line '
                                   f'({",".join(names)}), found {values.shape[1]}')
+        if not np.isfinite(values).all():
+            offset, problem = bad_line(block, len(names), delimiter)
+            raise ScanFormatError(f'{path}:{first_line + offset}: {problem}')
         for start in range(0, len(values), chunk_points):
             part = values[start:start + chunk_points]
             chunk = np.zeros((len(part), 6))

@@ -4,7 +4,7 @@ from pathlib import Path
 from typing import Sequence
 
 from synthdet.classes import REAL_AREAS
-from synthdet.info_files import load_info_pickle
+from synthdet.info_files import labelled_boxes
 
 TABLE1_FORMAT = 'synthdet.table1/1'
 TABLE1_CLASSES = ('chair', 'table', 'sofa', 'bookcase', 'board', 'yumi', '3dprinter')
@@ -39,10 +39,8 @@ def count_instances(data_root: str | Path,
         path = info_path(data_root, area, prefix)
         if not path.is_file():
             raise FileNotFoundError(f'{path}: info pickle not found (run tools/create_data.py)')
-        infos = load_info_pickle(path)
-        names = {label: name for name, label in infos['metainfo']['categories'].items()}
-        counts[area] = Counter(names[inst['bbox_label_3d']] for info in infos['data_list']
-                               for inst in info['instances'] if inst['bbox_label_3d'] >= 0)
+        counts[area] = Counter(name for _, boxes in labelled_boxes(path)
+                               for name, _ in boxes)
     return counts
 
 

@@ -6,14 +6,17 @@ which it has the highest 3D IoU (mmdet3d's ``DepthInstance3DBoxes.overlaps``, th
 IndoorMetric). It is correct if that IoU is >= the IoU threshold, otherwise incorrect (a
 duplicate of a matched object is incorrect). A class the model does not predict is ``None``.
 """
-from pathlib import Path
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
-from mmdet3d.structures import DepthInstance3DBoxes
 
 from synthdet.classes import DETECTION_CLASSES
-from synthdet.info_files import load_info_pickle
+from synthdet.info_files import InfoFileError, labelled_boxes
+
+if TYPE_CHECKING:
+    from mmdet3d.structures import DepthInstance3DBoxes
 
 TABLE4_FORMAT = 'synthdet.table4/1'
 
@@ -21,30 +24,28 @@ TABLE4_FORMAT = 'synthdet.table4/1'
 TrueBox = tuple[str, list[float]]
 
 
-def boxes_from_info(info: dict, categories: dict[str, int]) -> list[TrueBox]:
-    """The true boxes of one info-pickle sample's instances."""
-    names = {label: name for name, label in categories.items()}
-    return [(names[inst['bbox_label_3d']], [float(v) for v in inst['bbox_3d'][:6]])
-            for inst in info.get('instances', []) if inst['bbox_label_3d'] in names]
-
-
 def truth_from_infos(paths: list[str]) -> dict[str, list[TrueBox]]:
-    """Map points file name (e.g. ``Area_9_lab_3.bin``) to its true boxes."""
+    """Map points file name (e.g. ``Area_9_lab_3.bin``) to its true boxes; ``InfoFileError``
+    naming the pickle for one that is not the converter's (``labelled_boxes``)."""
     truth = {}
     for path in paths:
-        infos = load_info_pickle(path)
-        categories = infos.get('metainfo', {}).get('categories') or {
-            name: i
-            for i, name in enumerate(DETECTION_CLASSES)
-        }
-        for info in infos['data_list']:
-            truth[Path(info['lidar_points']['lidar_path']).name] = boxes_from_info(
-                info, categories)
+        for index, (scan, boxes) in enumerate(labelled_boxes(path, DETECTION_CLASSES)):
+            if scan is None:
+                raise InfoFileError(f'{path}: data_list[{index}]: no "lidar_points"')
+            try:
+                truth[scan] = [(name, [float(v) for v in box[:6]]) for name, box in boxes]
+            except (TypeError, ValueError):
+                raise InfoFileError(f'{path}: {scan}: a bbox_3d that is not 6 or more '
+                                    'numbers') from None
     return truth
 
 
 def _depth_boxes(boxes: list[list[float]], yaws: list[float]) -> DepthInstance3DBoxes:
-    """Gravity-centre boxes ``[cx, cy, cz, dx, dy, dz]`` with yaws as mmdet3d depth boxes."""
+    """Gravity-centre boxes ``[cx, cy, cz, dx, dy, dz]`` with yaws as mmdet3d depth boxes
+    (torch and mmdet3d load here, once there are boxes to match: the inputs are checked
+    without them)."""
+    import torch
+    from mmdet3d.structures import DepthInstance3DBoxes
     tensor = torch.tensor([[*b, y] for b, y in zip(boxes, yaws)], dtype=torch.float32)
     return DepthInstance3DBoxes(tensor.reshape(-1, 7), origin=(0.5, 0.5, 0.5))
 
@@ -60,7 +61,7 @@ def count_class(truth: list[list[float]], detections: list[dict],
     pred = _depth_boxes([[*d['center'], *d['size']] for d in detections],
                         [d.get('yaw', 0.0) for d in detections])
     gt = _depth_boxes(truth, [0.0] * len(truth))
-    ious = DepthInstance3DBoxes.overlaps(pred, gt).numpy()
+    ious = type(gt).overlaps(pred, gt).numpy()
     matched = np.zeros(len(truth), dtype=bool)
     correct = 0
     for row in ious:

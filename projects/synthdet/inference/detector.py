@@ -18,7 +18,7 @@ from mmengine.runner import set_random_seed
 from projects.synthdet.bootstrap import tta_settings
 from projects.synthdet.checkpoint import CheckpointError, load_model_weights
 from projects.synthdet.inference.windows import Detections, WindowSpec, detect_in_windows
-from synthdet.contracts import PREDICTIONS_FORMAT
+from synthdet.contracts import PREDICTIONS_FORMAT, SchemaError, class_names
 from synthdet.prepare import PreparedScan
 
 
@@ -37,7 +37,8 @@ def load_model(cfg: Config, checkpoint: str, device: str, tta: bool = False) -> 
     if not isinstance(meta.get('dataset_meta'), dict) or 'classes' not in meta['dataset_meta']:
         raise CheckpointError(f'{checkpoint}: the checkpoint\'s meta names no classes '
                               '(dataset_meta)')
-    model.dataset_meta = meta['dataset_meta']
+    model.dataset_meta = dict(meta['dataset_meta'],
+                              classes=checkpoint_classes(model, meta, checkpoint))
     if not tta:
         return model
     wrapper = MODELS.build(dict(tta_model, module=model))
@@ -45,6 +46,23 @@ def load_model(cfg: Config, checkpoint: str, device: str, tta: bool = False) -> 
     wrapper.cfg.test_dataloader.dataset.pipeline = tta_pipeline
     wrapper.dataset_meta = model.dataset_meta
     return wrapper.eval()
+
+
+def checkpoint_classes(model: torch.nn.Module, meta: dict, checkpoint: str) -> list[str]:
+    """The class names of a checkpoint's ``meta.dataset_meta.classes``, one per class the
+    model's head predicts; :class:`CheckpointError` naming the file otherwise (a string, a
+    name of thousands of characters, fewer names than the head has classes)."""
+    try:
+        classes = class_names(meta['dataset_meta']['classes'], checkpoint,
+                              'meta.dataset_meta.classes')
+    except SchemaError as error:
+        raise CheckpointError(str(error)) from None
+    head = getattr(model, 'bbox_head', None)
+    predicted = getattr(head, 'num_classes', len(classes))
+    if len(classes) != predicted:
+        raise CheckpointError(f'{checkpoint}: meta.dataset_meta.classes: {len(classes)} class '
+                              f'names for a model that predicts {predicted} classes')
+    return classes
 
 
 class ModelDetector:
