@@ -136,24 +136,28 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
     supported = sum(line.support * _edge_length(outline, i) for i, line in enumerate(lines))
     perimeter = sum(_edge_length(outline, i) for i in range(len(outline)))
     seen = supported / perimeter
-    if supported < params.min_wall_support * perimeter:
-        raise CornerDetectionError(
-            f'no walls found: wall points back only {supported / perimeter:.0%} of the room '
-            f'outline (need {params.min_wall_support:.0%})')
-    lines = _drop_wall_less_bumps(lines, params)
-    lines = _snap_directions(lines, params.snap_angle)
-    corners = _intersect_lines(lines, params.min_edge, params.min_turn)
-    if len(corners) < 3:
-        raise CornerDetectionError('no walls found: fewer than 3 wall lines were fitted')
-    crossing = first_self_crossing(corners)
-    if crossing is not None:
-        raise CornerDetectionError(f'the fitted outline crosses itself (walls {crossing[0]} and '
-                                   f'{crossing[1]}); the scan is too sparse or not one room')
+    failure = None
+    if seen < params.min_wall_support:
+        failure = (f'no walls found: wall points back only {seen:.0%} of the room outline '
+                   f'(need {params.min_wall_support:.0%})')
+    else:
+        lines = _drop_wall_less_bumps(lines, params)
+        lines = _snap_directions(lines, params.snap_angle)
+        corners = _intersect_lines(lines, params.min_edge, params.min_turn)
+        failure = _outline_failure(corners)
+    walled = None
+    if failure or seen < params.min_seen_walls:  # the footprint follows occlusions: walls first
+        from configurator.wall_evidence import walls_first_outline  # it imports this module
+        walled = walls_first_outline(xyz, levels, to_frame, failure, params)
+    if walled is not None:
+        corners, seen, lines = walled.corners, walled.seen, []
 
     corners = corners @ rotation2d(angle).T
     corners = _canonical_order(corners)
     quality = _quality(corners, xyz, floor_z, ceiling_z, lines, params)
     quality['walls_seen'] = seen
+    if walled is not None:
+        quality['min_wall_support'] = float(walled.supports.min())
     _check_floor(xyz, levels, quality, far_points, params)
     notes = list(levels.notes)
     if seen < params.min_seen_walls:
@@ -166,6 +170,17 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
         wall_angle=float(angle % (math.pi / 2)),
         quality=quality,
         notes=notes)
+
+
+def _outline_failure(corners: np.ndarray) -> str | None:
+    """Why fitted corners are no room outline (too few, crossing), or None."""
+    if len(corners) < 3:
+        return 'no walls found: fewer than 3 wall lines were fitted'
+    crossing = first_self_crossing(corners)
+    if crossing is not None:
+        return (f'the fitted outline crosses itself (walls {crossing[0]} and {crossing[1]}); '
+                'the scan is too sparse or not one room')
+    return None
 
 
 def _checked_xyz(points: np.ndarray) -> np.ndarray:
