@@ -3,6 +3,8 @@ import argparse
 import importlib
 import sys
 
+from synthdet.outputs import names_as_given
+
 # sub-command -> module exposing ``add_arguments(parser)`` and ``run(args) -> int``
 COMMANDS = {
     'corners': 'configurator.corners_cli',
@@ -22,6 +24,7 @@ def main(argv: list[str] | None = None) -> int:
         modules[name] = module
         module.add_arguments(subparsers.add_parser(name, help=module.__doc__.splitlines()[0]))
     args = parser.parse_args(argv)
+    names_as_given()
     return modules[args.command].run(args)
 
 

@@ -12,6 +12,7 @@ import sys
 from configurator.corners import (SCAN_VOXEL, CornerDetectionError, CornerParams, detect_corners,
                                   outline_in_scan, outline_to_dict, room_outline)
 from synthdet.contracts import write_corners
+from synthdet.outputs import OutputFailed, OutputRefused, check_output
 from synthdet.prepare import prepare_scan
 from synthdet.scan_io import SCAN_SUFFIXES, load_scan
 
@@ -55,15 +56,21 @@ def _cannot_write(path: str | None) -> str | None:
     """Why the output file ``path`` cannot be written, checked before any work; else None."""
     if path is None:
         return None
-    if os.path.isdir(path):
-        return 'it is a folder'
     folder = os.path.dirname(os.path.abspath(path))
     return None if os.path.isdir(folder) else f'no folder {folder}'
 
 
 def run(args: argparse.Namespace) -> int:
-    """Detect the corners of ``args.scan``; returns 0, 2 with a message on bad input, or 1 if
-    an output cannot be written (checked before the scan is read)."""
+    """Detect the corners of ``args.scan``; returns 0, 2 with a message on bad input (an output
+    that is the scan, a folder, a device or a FIFO too), or 1 if an output cannot be written
+    (its folder checked before the scan is read)."""
+    try:
+        for option, output in (('--out', args.out), ('--preview', args.preview)):
+            if output is not None:
+                check_output(output, option, inputs=[args.scan])
+    except OutputRefused as error:
+        print(f'corners: {error}', file=sys.stderr)
+        return 2
     for output in (args.out, args.preview):
         problem = _cannot_write(output)
         if problem:
@@ -89,8 +96,8 @@ def run(args: argparse.Namespace) -> int:
     result = outline_to_dict(outline, args.scan)
     try:
         write_corners(args.out, result)
-    except OSError as error:
-        print(f'corners: cannot write {args.out}: {error.strerror or error}', file=sys.stderr)
+    except OutputFailed as error:
+        print(f'corners: {error}', file=sys.stderr)
         return 1
     ceiling = 'ceiling' if outline.quality.get('ceiling_found', 1.0) else 'no ceiling, walls to'
     print(f'corners: {len(outline.corners)} {"approximate " if outline.approximate else ""}'
@@ -102,10 +109,14 @@ def run(args: argparse.Namespace) -> int:
         from synthdet.topview import draw_top_view
         points = prepared.points.copy()
         points[:, :3] = prepared.points_to_scan(points[:, :3])
-        draw_top_view(
-            args.preview,
-            Scan(points, None, args.scan),
-            corners=outline.corners,
-            title=f'{args.scan}: {len(outline.corners)} corners, clockwise from 0')
+        try:
+            draw_top_view(
+                args.preview,
+                Scan(points, None, args.scan),
+                corners=outline.corners,
+                title=f'{args.scan}: {len(outline.corners)} corners, clockwise from 0')
+        except OutputFailed as error:
+            print(f'corners: {error}', file=sys.stderr)
+            return 1
         print(f'corners: preview -> {args.preview}')
     return 0

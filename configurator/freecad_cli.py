@@ -19,6 +19,7 @@ from typing import Callable, TypeVar
 
 from configurator.freecad.synthdet_freecad.schema import JOB_FORMAT, RESULT_FORMAT
 from synthdet.contracts import load_json, read_corners, read_predictions, validate_corners
+from synthdet.outputs import check_output, copy_into_place, readable
 from synthdet.processes import ends_with_parent, work_folder
 
 T = TypeVar('T')
@@ -156,9 +157,13 @@ def build_document(scan: Path,
                    timeout: float = 900.0) -> dict:
     """Validate the inputs, run FreeCAD and return the macro's result (objects, warnings).
 
-    Raises ``SchemaError``/``ValueError`` for bad inputs and ``FreecadFailed`` when FreeCAD
-    does not produce the document.
+    Raises ``SchemaError``/``ValueError`` for bad inputs (``OutputRefused`` for an ``out`` that
+    is an input, a folder, a device or a FIFO) and ``FreecadFailed`` when FreeCAD does not
+    produce the document. FreeCAD saves in a work folder under a name it can open (bytes that
+    are not UTF-8 replaced); the finished document is then copied to a checked temporary file
+    beside ``out`` and renamed into place (``synthdet.outputs``): ``out`` keeps the name given.
     """
+    check_output(out, '--out', inputs=[scan, predictions, corners])
     scan, predictions, out = Path(scan), Path(predictions), Path(out).resolve()
     _check_scan(scan)
     read_predictions(str(predictions))
@@ -183,15 +188,16 @@ def build_document(scan: Path,
             'format': JOB_FORMAT,
             'predictions': str(predictions.resolve()),
             'corners': str(corners_path),
-            'out': str(out),
+            'out': str(work_dir / readable(out.name)),
             'library': str(Path(library).resolve()) if library is not None else None,
             'min_score': min_score,
             'wall_thickness': wall_thickness
         }
         result = _run_freecad(job, work_dir, freecadcmd, timeout)
-    if not out.is_file():
-        raise FreecadFailed(f'FreeCAD reported success but {out} was not written')
-    return result
+        if not os.path.isfile(job['out']):
+            raise FreecadFailed(f'FreeCAD reported success but {out} was not written')
+        copy_into_place([(job['out'], out)])
+    return dict(result, document=str(out))
 
 
 def run_reporting_errors(step: Callable[[], T]) -> tuple[T | None, int]:

@@ -12,12 +12,13 @@ import json
 import os
 import subprocess
 import sys
-import zipfile
 from pathlib import Path
 from typing import Iterator
 
 from configurator.freecad_cli import (FreecadFailed, add_program_options, check_timeout,
                                       run_freecad_process)
+from synthdet.fcstd_guard import check_document
+from synthdet.outputs import check_output, check_png, write_bytes
 from synthdet.processes import ends_with_parent, work_folder
 
 GUI_SCRIPT = Path(__file__).resolve().parent / 'freecad' / 'screenshot_gui.py'
@@ -94,30 +95,30 @@ def screenshot(document: Path,
     """Open ``document`` in the FreeCAD GUI under Xvfb and save its 3D view to ``out``.
 
     Returns FreeCAD's report (``visible`` and ``objects`` counts). Raises ``ValueError`` for
-    bad arguments and ``FreecadFailed`` when no picture was made.
+    bad arguments (``RefusedDocument`` for a document FreeCAD would run code or open other
+    files for; an ``out`` that is the document, a folder, a device or a FIFO) and
+    ``FreecadFailed`` when no picture was made. FreeCAD saves the picture in a work folder; a
+    whole PNG is then written to ``out`` through a checked temporary file (``OutputFailed``
+    if it cannot be, the previous picture kept).
     """
+    check_output(out, '--out', inputs=[document])
     document, out = Path(document).resolve(), Path(out).resolve()
-    if not document.is_file():
-        raise ValueError(f'{document}: document not found')
-    if not zipfile.is_zipfile(document) or 'Document.xml' not in zipfile.ZipFile(
-            document).namelist():
-        raise ValueError(f'{document}: not a FreeCAD document (an .FCStd is a zip holding '
-                         'Document.xml)')
+    check_document(document)  # RefusedDocument (a ValueError) before FreeCAD starts
     if out.suffix.lower() != '.png':
         raise ValueError(f'{out}: the picture must end with .png')
     if not (16 <= width <= 8000 and 16 <= height <= 8000):
         raise ValueError(f'--width/--height {width}x{height}: expected 16 to 8000 pixels')
     check_timeout(timeout)
-    out.parent.mkdir(parents=True, exist_ok=True)
     with work_folder('synthdet-screenshot') as work_dir:
-        result_path = work_dir / 'result.json'
+        result_path, picture = work_dir / 'result.json', work_dir / 'view.png'
         config, options = write_gui_inputs(
             work_dir, {
                 'document': str(document),
-                'out': str(out),
+                'out': str(picture),
                 'width': width,
                 'height': height,
-                'result': str(result_path)
+                'result': str(result_path),
+                'paths': [str(GUI_SCRIPT.parent), str(GUI_SCRIPT.parents[2])]
             }, 'options.json')
         command = [freecad, '-u', str(config), str(GUI_SCRIPT)]
         with virtual_display(width + 200, height + 200) as display:
@@ -126,10 +127,13 @@ def screenshot(document: Path,
             env = {key: value for key, value in os.environ.items() if not key.startswith('QT_')}
             env.update(SYNTHDET_SCREENSHOT=str(options), HOME=str(work_dir), DISPLAY=display)
             result = run_freecad_process(command, env, work_dir, timeout, result_path)
-    if result['status'] != 'ok':
-        raise FreecadFailed(f'{document}: {result["error"]}')
-    if not out.is_file():
-        raise FreecadFailed(f'FreeCAD reported success but {out} was not written')
+        if result['status'] != 'ok':
+            raise FreecadFailed(f'{document}: {result["error"]}')
+        if not picture.is_file():
+            raise FreecadFailed(f'FreeCAD reported success but {out} was not written')
+        data = picture.read_bytes()
+        check_png(data, out)
+        write_bytes(out, data)
     return result
 
 

@@ -18,13 +18,12 @@ own coordinates:
   (``x y z r g b``, millimetres, colors 0-255) for ``tools/create_data.py``.
 
 Boxes overlapping each other, a point inside two boxes, a box without points and a document
-that is not synthdet's are ``LabelsInputError`` with one line naming the document.
+that is not synthdet's are ``LabelsInputError`` with one line naming the document; a document
+FreeCAD would run code or open other files for is refused before FreeCAD starts
+(``synthdet.fcstd_guard``).
 """
 import os
 import re
-import shutil
-import tempfile
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +32,9 @@ from configurator.freecad.synthdet_freecad.schema import LABELS_READ_FORMAT as R
 from configurator.freecad_cli import MACRO, FreecadFailed, check_timeout, run_freecad_process
 from synthdet.classes import GENERATED_CLASSES
 from synthdet.contracts import LABELS_FORMAT, write_labels
+from synthdet.fcstd_guard import check_document
 from synthdet.geometry import box_corners_xy
+from synthdet.outputs import check_output, replaced_paths
 from synthdet.processes import work_folder
 from synthdet.scan_io import read_scan
 
@@ -51,9 +52,11 @@ class LabelsInputError(ValueError):
 
 def read_document(document: Path, freecadcmd: str = 'freecadcmd', timeout: float = 300.0) -> dict:
     """The document's counted parts (``boxes``), ``room`` outline and ``reviewed`` flag, read
-    by FreeCAD. Raises ``LabelsInputError`` for a file that is not a synthdet document."""
+    by FreeCAD. Raises ``RefusedDocument`` for a file FreeCAD would run code or open other
+    files for (``synthdet.fcstd_guard``), ``LabelsInputError`` for one that is not a synthdet
+    document."""
     document = Path(document).resolve()
-    _check_fcstd(document)
+    check_document(document)  # RefusedDocument, a ValueError: exit 2 with one line
     check_timeout(timeout)
     with work_folder('synthdet-labels') as work_dir:
         result_path = work_dir / 'result.json'
@@ -67,56 +70,6 @@ def read_document(document: Path, freecadcmd: str = 'freecadcmd', timeout: float
             raise LabelsInputError(f'{document}: {result.get("error")}')
         raise FreecadFailed(f'{document}: FreeCAD could not read it: {result.get("error")}')
     return result
-
-
-def _check_fcstd(document: Path) -> None:
-    """Refuse a file that is no FCStd archive, or whose objects FreeCAD would restore by running
-    code (Python feature objects: FreeCAD imports their module) or by opening other files
-    (links into external documents). ``Document.xml`` is read in chunks (bounded memory)."""
-    if not document.is_file():
-        raise LabelsInputError(f'{document}: document not found')
-    try:
-        with zipfile.ZipFile(document) as archive:
-            if 'Document.xml' not in archive.namelist():
-                raise zipfile.BadZipFile
-            with archive.open('Document.xml') as stream:
-                found = _first_unsafe_element(stream)
-    except (OSError, zipfile.BadZipFile, EOFError):
-        raise LabelsInputError(f'{document}: not a FreeCAD document (.FCStd)') from None
-    if found is not None:
-        raise LabelsInputError(f'{document}: {found}: labels opens no document FreeCAD would '
-                               'run code or open other files for; delete those objects')
-
-
-# the start of a Python object's element (its module is named after a value of any length),
-# except two that run nothing: synthdet's own part proxy without state (the reader loads that
-# module itself) and a JSON null (what a proxy FreeCAD did not restore is saved as); or of a
-# link whose file (the element's first attribute) is not empty
-SYNTHDET_PROXY = (b'value="bnVsbA==" encoded="yes" module="synthdet_freecad.library" '
-                  b'class="DetectionModel"/>')
-NULL_PROXY = b'value="bnVsbA==" encoded="yes" json="yes"/>'
-UNSAFE_ELEMENTS = re.compile(rb'<Python (?!' + re.escape(SYNTHDET_PROXY) + rb'|' +
-                             re.escape(NULL_PROXY) + rb')|<XLink file="(?!")')
-XML_CHUNK = 1 << 20  # bytes of Document.xml searched at a time
-XML_OVERLAP = 4096  # bytes kept from the previous chunk: a start cut by a chunk boundary
-
-
-def _first_unsafe_element(stream) -> str | None:
-    """The first Python object or external link (its file) in ``stream``, described."""
-    tail = b''
-    while True:
-        chunk = stream.read(XML_CHUNK)
-        text = tail + chunk
-        match = UNSAFE_ELEMENTS.search(text)
-        # a start in the kept tail is judged in the next round, with what follows it
-        if match is not None and (not chunk or match.start() < len(text) - XML_OVERLAP):
-            if match.group().startswith(b'<XLink'):
-                linked = text[match.end():match.end() + 80].split(b'"')[0]
-                return f'a link to another file ({linked.decode("utf-8", "replace")!r})'
-            return 'a Python object (FreeCAD imports its module to restore it)'
-        if not chunk:
-            return None
-        tail = text[-XML_OVERLAP:]
 
 
 def _footprint(box: dict, grow: float = 0.0) -> np.ndarray:
@@ -224,10 +177,9 @@ def _write_points(path: Path, points: np.ndarray) -> None:
 
 def write_s3dis_room(room_dir: Path, points: np.ndarray, elements: np.ndarray) -> None:
     """Write one S3DIS room (``<room>.txt`` and ``Annotations/<element>.txt``) atomically: in
-    a temporary folder beside ``room_dir``, renamed into place (a previous room replaced)."""
-    room_dir.parent.mkdir(parents=True, exist_ok=True)
-    partial = Path(tempfile.mkdtemp(prefix=f'.{room_dir.name}.partial-', dir=room_dir.parent))
-    try:
+    a temporary folder of this run beside ``room_dir``, renamed into place (a previous room
+    replaced; ``synthdet.outputs``, which also removes the folders of killed runs)."""
+    with replaced_paths([room_dir], folders=True) as (partial, ):
         annotations = partial / 'Annotations'
         annotations.mkdir()
         order = np.argsort(elements, kind='stable')
@@ -235,16 +187,6 @@ def write_s3dis_room(room_dir: Path, points: np.ndarray, elements: np.ndarray) -
         for name, chunk in zip(names, np.split(order, starts[1:])):
             _write_points(annotations / f'{name}.txt', points[chunk])
         _write_points(partial / f'{room_dir.name}.txt', points[order])
-        if room_dir.exists():
-            old = Path(tempfile.mkdtemp(prefix=f'.{room_dir.name}.old-', dir=room_dir.parent))
-            os.replace(room_dir, old / room_dir.name)
-            os.replace(partial, room_dir)
-            shutil.rmtree(old)
-        else:
-            os.replace(partial, room_dir)
-    finally:
-        if partial.exists():
-            shutil.rmtree(partial)
 
 
 def labels_document(read: dict, scan: Path) -> dict:
@@ -277,6 +219,7 @@ def make_labels(document: Path,
                 timeout: float = 300.0) -> dict:
     """Read the document, write the labels file and the S3DIS room into ``out``; returns a
     summary (``labels``, ``room_dir``, ``boxes`` per class, ``points``, ``reviewed``)."""
+    check_output(out, '--out', inputs=[document, scan], folder=True)
     document, scan, out = Path(document), Path(scan), Path(out)
     room_name = room_name or f'{re.sub(r"[^A-Za-z0-9]", "", scan.stem) or "room"}_1'
     if not ROOM_NAME.fullmatch(room_name):
@@ -286,6 +229,8 @@ def make_labels(document: Path,
         raise LabelsInputError(f'--area {area}: expected a positive area number')
     if not scan.is_file():
         raise LabelsInputError(f'{scan}: scan file not found')
+    labels_path = check_output(out / f'{scan.stem}.labels.json', '--out', [document, scan])
+    room_dir = check_output(out / f'Area_{area}' / room_name, '--room', folder=True)
     points = read_scan(scan)
     read = read_document(document, freecadcmd, timeout)
     boxes = read['boxes']
@@ -297,10 +242,7 @@ def make_labels(document: Path,
     elements = background_elements(points[:, :3], read['room'])
     for index, name in enumerate(instance_names(boxes, str(document))):
         elements[owners == index] = name
-    out.mkdir(parents=True, exist_ok=True)
-    room_dir = out / f'Area_{area}' / room_name
     write_s3dis_room(room_dir, points, elements)
-    labels_path = out / f'{scan.stem}.labels.json'
     write_labels(labels_path, labels_document(read, scan))
     counts = {
         name: sum(box['class'] == name for box in boxes)

@@ -11,8 +11,9 @@ every reader and writer of the project goes through it. Errors are ``SchemaError
 naming the file and the JSON path of the bad value, e.g.
 ``pred.json: detections[2].score: expected a finite number, got NaN``.
 
-Standard library only (with ``synthdet.classes`` and ``synthdet.geometry``, which need no more
-at import): FreeCAD's own Python loads this module too, to check the files the macro imports.
+Standard library only (with ``synthdet.classes``, ``synthdet.geometry`` and
+``synthdet.outputs``, which need no more at import): FreeCAD's own Python loads this module
+too, to check the files the macro imports.
 """
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ from typing import NoReturn
 
 from synthdet.classes import SEMANTIC_CLASSES
 from synthdet.geometry import first_self_crossing, signed_area
+from synthdet.outputs import write_text
 
 ROOM_FORMAT = 'synthdet.room/1'
 PREDICTIONS_FORMAT = 'synthdet.predictions/1'
@@ -77,19 +79,9 @@ def write_json_atomic(path: str | os.PathLike, data: object, indent: int | None 
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` under a temporary name beside ``path`` and rename it into place; nothing
-    is left behind if encoding or writing fails."""
-    path = os.fspath(path)
-    data = text.encode('utf-8')  # before any file exists: text that is not Unicode fails here
-    temporary = f'{path}.tmp{os.getpid()}'
-    try:
-        with open(temporary, 'wb') as stream:
-            stream.write(data)
-        os.replace(temporary, path)
-    except BaseException:
-        if os.path.lexists(temporary):
-            os.unlink(temporary)
-        raise
+    """Write ``text`` as UTF-8 through a checked temporary file beside ``path``, renamed into
+    place (``synthdet.outputs``); nothing is left behind if encoding or writing fails."""
+    write_text(path, text)
 
 
 # --------------------------------------------------------------------------- value checks

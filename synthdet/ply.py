@@ -6,6 +6,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from synthdet.outputs import replaced_file
+
 
 def write_ply(path: str | os.PathLike,
               vertex: Mapping[str, np.ndarray],
@@ -13,7 +15,8 @@ def write_ply(path: str | os.PathLike,
     """Write a binary little-endian PLY whose ``vertex`` element has one property per entry of
     ``vertex`` (name -> 1D array; the arrays' dtypes become the property types, in order).
 
-    The file is written next to ``path`` and renamed into place.
+    The file is written through a checked temporary file beside ``path``, renamed into place
+    (``synthdet.outputs``).
     """
     from plyfile import PlyData, PlyElement
     columns = {name: np.asarray(values) for name, values in vertex.items()}
@@ -25,11 +28,9 @@ def write_ply(path: str | os.PathLike,
         dtype=[(name, values.dtype.newbyteorder('<')) for name, values in columns.items()])
     for name, values in columns.items():
         table[name] = values
-    path = os.fspath(path)
-    temporary = f'{path}.tmp{os.getpid()}'
-    PlyData([PlyElement.describe(table, 'vertex')], byte_order='<',
-            comments=list(comments)).write(temporary)
-    os.replace(temporary, path)
+    with replaced_file(path) as stream:
+        PlyData([PlyElement.describe(table, 'vertex')], byte_order='<',
+                comments=list(comments)).write(stream)
 
 
 def read_ply_vertices(path: str | os.PathLike) -> np.ndarray:

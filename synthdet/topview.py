@@ -7,12 +7,14 @@ with :func:`draw_top_view`, in the class colors of :data:`synthdet.classes.CLASS
 """
 from __future__ import annotations
 
+import io
 import os
 from pathlib import Path
 
 import numpy as np
 
 from synthdet.classes import CLASS_COLORS, class_color
+from synthdet.outputs import write_bytes
 from synthdet.room_data import Box, Scan
 
 
@@ -58,7 +60,8 @@ def draw_top_view(out: str | os.PathLike,
                   corners_label: str = 'corners') -> None:
     """Save a PNG of the scan seen from above: points (ceiling removed), ground-truth boxes as
     solid outlines, predicted boxes dashed with their scores, the corner polygon in black
-    (``corners_label`` names it in the legend)."""
+    (``corners_label`` names it in the legend). The picture is drawn in memory and written
+    through a checked temporary file (``synthdet.outputs``)."""
     import matplotlib
     matplotlib.use('Agg')
     from matplotlib import pyplot as plt
@@ -171,5 +174,7 @@ def draw_top_view(out: str | os.PathLike,
     axes.set_ylabel('y (m)')
     axes.set_title(title or Path(scan.source).name, fontsize=10)
     figure.tight_layout()
-    figure.savefig(os.fspath(out))
+    picture = io.BytesIO()
+    figure.savefig(picture, format='png')
     plt.close(figure)
+    write_bytes(out, picture.getvalue())

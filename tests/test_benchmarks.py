@@ -100,6 +100,11 @@ SMOKE: dict[str, Smoke | str] = {
               r'2 processes x 1 thread vs 1 process x 2 threads: x' + figure('ratio') +
               r' faster per iteration of 4 rooms \(' + figure('two') + ' s vs ' +
               figure('one') + r' s\)'),
+    'bench_train_recipe.py':
+        Smoke(['--rooms-per-area', '1', '--points', '5000', '--iters', '1', '--warmup', '0',
+               '--profile-iters', '1', '--workers', '1', '--fork-tools'],
+              r'make exp2-cpu training: previous ' + figure('previous') + r' min, today ' +
+              figure('today') + r' min: x' + figure('ratio') + ' faster'),
     'bench_scan_io.py':
         Smoke(['--points', '20000', '--room-points', '5000', '--chunk', '5000'],
               r'scan_io \d+M-point LAZ: streamed load_scan peak ' + figure('streamed') +

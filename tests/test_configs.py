@@ -86,9 +86,16 @@ def test_resolved_datasets_and_pipelines(name):
     assert _num_points(cfg.test_pipeline) == [num_points]
 
 
-PRE_SAMPLING = {
-    'exp2_cpu': [dict(type='ThinRoomStructure', keep=0.1)],
-    'tiny': []
+THIN_STRUCTURE = dict(type='ThinRoomStructure', keep=0.1)
+PRE_SAMPLING = {  # per config: the steps before PointSample in its train and test pipelines
+    'exp2_cpu': {
+        'train_pipeline': [dict(THIN_STRUCTURE, cached_rooms=1000)],
+        'test_pipeline': [THIN_STRUCTURE]
+    },
+    'tiny': {
+        'train_pipeline': [],
+        'test_pipeline': []
+    }
 }
 
 
@@ -99,7 +106,7 @@ def test_cpu_configs_change_only_points_thinning_voxels_levels_and_robustness_of
     assert robust == ([] if name == 'tiny' else list(exp2.robust_augmentations))
     for key in ('train_pipeline', 'test_pipeline'):
         pre_sampling = [step for step in cfg[key] if step.type in PRE_SAMPLING_STEPS]
-        assert pre_sampling == PRE_SAMPLING[name]
+        assert pre_sampling == PRE_SAMPLING[name][key]
         derived = [
             step for step in cfg[key]
             if step.type not in ('PointSample', *PRE_SAMPLING_STEPS, *ROBUSTNESS)
@@ -110,8 +117,8 @@ def test_cpu_configs_change_only_points_thinning_voxels_levels_and_robustness_of
         ]
         assert derived == original
     changed = dict(exp2.model, voxel_size=0.02)
-    if name == 'exp2_cpu':  # and the 16 cm head level, with the printers on it
-        changed['neck'] = dict(exp2.model.neck, backbone_fine_level=True)
+    if name == 'exp2_cpu':  # the 16 cm head level with the printers, the pruned generated voxels
+        changed['neck'] = dict(exp2.model.neck, backbone_fine_level=True, generated_reach=1)
         changed['bbox_head'] = dict(exp2.model.bbox_head, label2level=(2, 1, 1, 1, 0))
     assert exp2.model.voxel_size == 0.01 and cfg.model == changed
 

@@ -13,6 +13,7 @@ from mmdet3d.utils import register_all_modules
 from mmengine.structures import InstanceData
 
 from projects.synthdet.models import TR3DDetector, tr3d_assign
+from projects.synthdet.models.tr3d_neck import voxel_keys
 from tests.s3dis_fixtures import write_synthetic_area
 
 REPO = Path(__file__).resolve().parents[1]
@@ -264,6 +265,56 @@ def test_backbone_fine_level_sits_on_the_first_stage_voxels(scenes):
     for parameter in (model.neck.fine_up.kernel, model.neck.fine_out_block[0].kernel,
                       model.neck.up_block_1[0].kernel):
         assert parameter.grad is not None and parameter.grad.abs().sum() > 0
+
+
+def test_voxel_keys_match_exactly_the_voxels_within_reach_of_an_anchor_of_their_scene():
+    """``voxel_keys``: a query's key is among the anchors' keys exactly when a voxel of its
+    scene lies within ``reach`` voxels of ``stride`` in every axis (checked by brute force)."""
+    generator = torch.Generator().manual_seed(3)
+    stride = 4
+    anchors = torch.cat((torch.randint(0, 2, (30, 1), generator=generator),
+                         torch.randint(-6, 6, (30, 3), generator=generator) * stride), dim=1)
+    queries = torch.cat((torch.randint(0, 2, (400, 1), generator=generator),
+                         torch.randint(-9, 9, (400, 3), generator=generator) * stride), dim=1)
+    for reach in (0, 1, 2):
+        query_keys, anchor_keys = voxel_keys(queries, anchors, reach, stride)
+        found = torch.isin(query_keys, anchor_keys)
+        gap = (queries[:, None, 1:] - anchors[None, :, 1:]).abs().amax(dim=2) // stride
+        same_scene = queries[:, None, 0] == anchors[None, :, 0]
+        expected = ((gap <= reach) & same_scene).any(dim=1)
+        assert torch.equal(found, expected)
+        assert 0 < int(expected.sum()) < len(queries)
+
+
+def test_generated_reach_keeps_generated_voxels_near_the_backbone_stage(scenes):
+    """``TR3DNeck(generated_reach=r)``: the level built on a generative upsampling keeps only
+    voxels within ``r`` voxels of its backbone stage's own (0: exactly its own), fewer than
+    TR3D's neck keeps, and the model still trains through every block."""
+    counts = {}
+    for reach in (None, 0, 1):
+        torch.manual_seed(0)
+        config = tr3d_config(voxel_size=VOXEL)
+        config['neck']['generated_reach'] = reach
+        model = MODELS.build(config)
+        model.init_weights()
+        model.eval()
+        batch = make_batch(model, scenes)
+        with torch.no_grad():
+            stages = model.backbone(model.voxelize(batch['inputs']['points']))
+            levels = model.neck(stages)
+        own = {tuple(c) for c in stages[1].coordinates.tolist()}
+        kept = {tuple(c) for c in levels[0].coordinates.tolist()}
+        assert own <= kept
+        if reach == 0:
+            assert kept == own
+        counts[reach] = len(kept)
+    assert counts[0] < counts[1] < counts[None]
+    model.train()
+    losses = model(**make_batch(model, scenes), mode='loss')
+    sum(losses.values()).backward()
+    assert model.neck.up_block_1[0].kernel.grad.abs().sum() > 0
+    with pytest.raises(ValueError, match='generated_reach'):
+        MODELS.build(dict(tr3d_config()['neck'], generated_reach=-1))
 
 
 # --- assigner -----------------------------------------------------------------------------

@@ -138,12 +138,13 @@ def test_registry_builds_the_model_of_every_config(path: Path) -> None:
         assert cfg.model.voxel_size == model.bbox_head.voxel_size == 0.01
         assert cfg.train_dataloader.batch_size == 16 and cfg.train_dataloader.dataset.times == 13
         assert cfg.train_cfg.max_epochs == 5 and cfg.train_cfg.val_interval == 1
-    if path.stem.startswith('exp2_cpu'):  # the documented CPU-scale differences, 1x schedule
+    if path.stem.startswith('exp2_cpu'):  # the CPU-scale differences, 1x schedule, one validation
         assert cfg.model.voxel_size == model.bbox_head.voxel_size == 0.02
         assert cfg.train_dataloader.batch_size == 4 and cfg.train_dataloader.dataset.times == 5
         assert cfg.param_scheduler.milestones == [8, 11] and cfg.param_scheduler.end == 12
-        assert cfg.train_cfg.max_epochs == 12 and cfg.train_cfg.val_interval == 1
-        assert model.neck.backbone_fine_level and model.bbox_head.label2level == (2, 1, 1, 1, 0)
+        assert cfg.train_cfg.max_epochs == 12 and cfg.train_cfg.val_interval == 12
+        assert model.neck.backbone_fine_level and model.neck.generated_reach == 1
+        assert model.bbox_head.label2level == (2, 1, 1, 1, 0)
     points = {
         t.num_points
         for d in [*train_sets, cfg.test_dataloader.dataset]

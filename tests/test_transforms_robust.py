@@ -475,6 +475,37 @@ def test_thin_room_structure_keeps_a_share_of_the_structure_and_every_object_poi
         ThinRoomStructure(cell=0.0)
 
 
+def test_thin_room_structure_cache_gives_the_same_rooms_as_finding_the_structure_anew():
+    """``cached_rooms``: a room's structure is found once per file and point count; the thinned
+    rooms are the same as without the cache, epoch after epoch, and a room file that now holds
+    other points is not given the cached mask."""
+    xyz, labels = _room_with_objects(20000)
+    cached, fresh = ThinRoomStructure(keep=0.1, cached_rooms=2), ThinRoomStructure(keep=0.1)
+    calls = []
+    found = cached.structure
+    cached.structure = lambda points: calls.append(len(points)) or found(points)
+
+    def room(path, points):
+        scene = make_scene(points, np.zeros_like(points))
+        scene['lidar_points'] = dict(lidar_path=path)
+        return scene
+
+    for epoch in range(3):
+        for path in ('a.bin', 'b.bin'):
+            np.random.seed(epoch)
+            with_cache = cached(room(path, xyz))['points'].tensor
+            np.random.seed(epoch)
+            assert torch.equal(with_cache, fresh(room(path, xyz))['points'].tensor)
+    assert calls == [len(xyz)] * 2  # each room's structure found once
+    cached(room('c.bin', xyz))  # beyond cached_rooms: found, not kept
+    cached(room('c.bin', xyz))
+    assert calls == [len(xyz)] * 4
+    cached(room('a.bin', xyz[:-5]))  # the same file with other points
+    assert calls[-1] == len(xyz) - 5
+    with pytest.raises(ValueError, match='cached_rooms'):
+        ThinRoomStructure(cached_rooms=-1)
+
+
 def test_voxel_grid_sample_keeps_one_random_point_per_cube_with_its_masks():
     rng = np.random.default_rng(3)
     # a dense patch near a sensor (500 points in one 2 cm cube) and 300 points far apart

@@ -26,6 +26,7 @@ from tqdm import tqdm
 from synthdet.annotation_check import (
     MAX_OUTSIDE, TOLERANCE, check_room, describe, format_summary, offenders, summarize)
 from synthdet.contracts import SchemaError
+from synthdet.outputs import OutputFailed, OutputRefused, check_output, write_text
 from synthdet.point_text import PointFileError
 
 
@@ -61,12 +62,14 @@ def main(argv: list[str] | None = None) -> int:
     """Check, print the table; returns the exit code."""
     args = parse_args(argv)
     try:
+        if args.out:
+            check_output(args.out, '--out', [args.raw_dir])
         rooms = room_dirs(args.raw_dir, args.areas)
         if not rooms:
             raise FileNotFoundError(f'{args.raw_dir}: no generated room (Area_N/<room>/meta.json)')
         fits = [fit for room in tqdm(rooms, desc='rooms', unit='room', disable=None)
                 for fit in check_room(room, args.tolerance)]
-    except (FileNotFoundError, SchemaError, PointFileError) as error:
+    except (FileNotFoundError, SchemaError, PointFileError, OutputRefused) as error:
         print(f'check_annotations: error: {error}', file=sys.stderr)
         return 2
     rows = summarize(fits)
@@ -78,13 +81,16 @@ def main(argv: list[str] | None = None) -> int:
     for fit in bad[:10]:
         print(f'  {describe(fit)}')
     if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps({
-            'format': 'synthdet.annotation_check/1',
-            'tolerance': args.tolerance,
-            'rows': rows,
-            'offenders': [vars(f) for f in bad]
-        }, indent=1) + '\n')
+        try:
+            write_text(args.out, json.dumps({
+                'format': 'synthdet.annotation_check/1',
+                'tolerance': args.tolerance,
+                'rows': rows,
+                'offenders': [vars(f) for f in bad]
+            }, indent=1) + '\n')
+        except OutputFailed as error:
+            print(f'check_annotations: error: {error}', file=sys.stderr)
+            return 1
     if bad:
         print(f'check_annotations: {len(bad)} objects have more than '
               f'{args.max_outside:.1%} of their points outside their box', file=sys.stderr)

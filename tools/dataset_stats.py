@@ -12,11 +12,13 @@ Counts come from the info pickles ``<data_root>/s3dis_infos_Area_N.pkl`` written
 """
 import argparse
 import sys
+from pathlib import Path
 
 from projects.synthdet.evaluation.table1 import (
     count_instances, find_info_areas, format_table1, info_path, table1)
 from synthdet.contracts import SENSOR_MODELS
 from synthdet.info_files import InfoFileError, room_sensors
+from synthdet.outputs import OutputFailed, OutputRefused, check_output
 from projects.synthdet.evaluation.table_files import write_table
 
 
@@ -48,11 +50,14 @@ def main(argv: list[str] | None = None) -> int:
         help='print the sensor models that scanned the rooms instead (one per line)')
     args = parser.parse_args(argv)
     try:
+        if args.out:
+            check_output(args.out, '--out', [args.data_root])
+            check_output(Path(args.out).with_suffix('.txt'), '--out', [args.data_root])
         if args.sensors:
             print('\n'.join(sensors_of_areas(args.data_root, args.areas, args.extra_tag)))
             return 0
         counts = count_instances(args.data_root, args.areas, args.extra_tag)
-    except (FileNotFoundError, InfoFileError) as error:
+    except (FileNotFoundError, InfoFileError, OutputRefused) as error:
         print(f'dataset_stats: error: {error}', file=sys.stderr)
         return 2
     document = table1(counts)
@@ -60,7 +65,11 @@ def main(argv: list[str] | None = None) -> int:
             f'{args.data_root}\n{format_table1(document)}')
     print(text)
     if args.out:
-        print(f'written to {args.out} and {write_table(args.out, document, text)}')
+        try:
+            print(f'written to {args.out} and {write_table(args.out, document, text)}')
+        except OutputFailed as error:
+            print(f'dataset_stats: error: {error}', file=sys.stderr)
+            return 1
     return 0
 
 

@@ -37,6 +37,7 @@ from typing import Callable
 from projects.synthdet.config_helpers import with_num_points
 from synthdet.contracts import read_corners, read_predictions, read_room
 from synthdet.info_files import RAW_DIR
+from synthdet.outputs import write_text
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -113,7 +114,7 @@ def claim_work_dir(stamp: Path, wanted: dict) -> None:
                             'choose another --work-dir')
     else:
         stamp.parent.mkdir(parents=True, exist_ok=True)
-        stamp.write_text(json.dumps(wanted) + '\n')
+        write_text(stamp, json.dumps(wanted) + '\n')
 
 
 class Demo:
@@ -260,7 +261,7 @@ class Demo:
                   f'with the data in {self.data},\n# {size.num_points} sampled points, '
                   f'{size.epochs} epochs, training areas repeated {size.repeats}x, batch '
                   f'{size.batch_size}. Written by tools/demo.py.\n')
-        self.config.write_text(header + cfg.pretty_text)
+        write_text(self.config, header + cfg.pretty_text)
 
     def trained(self) -> bool:
         return (self.train_dir / f'epoch_{self.size.epochs}.pth').is_file()
@@ -334,7 +335,7 @@ class Demo:
                 f'{self.size.score_thr} (dashed), room corners (black)')
 
     def report(self) -> None:
-        (self.work / 'REPORT.md').write_text(self.report_text())
+        write_text(self.work / 'REPORT.md', self.report_text())
 
     # ------------------------------------------------------------------ the report
     def report_text(self) -> str:
@@ -430,7 +431,7 @@ class Demo:
             began = time.monotonic()
             action()
             self.durations[name] = time.monotonic() - began
-            self.durations_file.write_text(json.dumps(self.durations, indent=1) + '\n')
+            write_text(self.durations_file, json.dumps(self.durations, indent=1) + '\n')
             print(f'{prefix}: done in {self.durations[name]:.0f} s', flush=True)
         print(
             f'[demo] finished in {time.monotonic() - start:.0f} s: {self.work / "REPORT.md"}',

@@ -34,6 +34,7 @@ from projects.synthdet.bootstrap import (
 from projects.synthdet.inference.detector import ModelDetector, load_model
 from projects.synthdet.inference.windows import inference_settings
 from synthdet.contracts import write_predictions
+from synthdet.outputs import readable
 from synthdet.prepare import prepare_scan
 from synthdet.scan_io import load_scan
 
@@ -57,12 +58,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 def output_path(scan: Path, out_dir: Path) -> Path:
     """``<out_dir>/<scan stem>.pred.json``."""
     return out_dir / f'{scan.stem}.pred.json'
-
-
-def readable(text: str) -> str:
-    """``text`` as valid Unicode: bytes of a file name that are not UTF-8 (which Python keeps as
-    lone surrogates) become U+FFFD."""
-    return text.encode('utf-8', 'surrogateescape').decode('utf-8', 'replace')
 
 
 def check_scans(scans: list[Path], out_dir: Path, voxel: float | None,

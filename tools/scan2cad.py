@@ -19,16 +19,13 @@ The stages are the ones a user runs one by one, on the same prepared scan:
 4. the FreeCAD document (``configurator.freecad_cli.build_document``, as
    ``python -m configurator freecad``).
 Every output is in the scan's own coordinates (a georeferenced scan gives georeferenced boxes).
-The outputs of one run are written under unique temporary names beside them and renamed at the
-end together: a failed run leaves the previous set as it was.
+The outputs of one run are made in a work folder of the run, then copied to temporary names of
+the run beside their targets and renamed together at the end (``synthdet.outputs``): a failed
+run leaves the previous set as it was, and the next run removes what a killed one left.
 """
 import argparse
-import contextlib
-import os
-import secrets
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 from configurator.corners import SCAN_VOXEL, CornerDetectionError, room_outline
@@ -39,7 +36,9 @@ from projects.synthdet.bootstrap import (
 from projects.synthdet.inference.detector import ModelDetector, load_model
 from projects.synthdet.inference.windows import inference_settings
 from synthdet.contracts import write_corners, write_predictions
+from synthdet.outputs import check_output, copy_into_place, names_as_given, readable
 from synthdet.prepare import align_scan, resample_to_density
+from synthdet.processes import work_folder
 from synthdet.scan_io import load_scan
 
 
@@ -62,26 +61,6 @@ def output_paths(out: Path) -> tuple[Path, Path]:
     return out.with_suffix('.pred.json'), out.with_suffix('.corners.json')
 
 
-@contextlib.contextmanager
-def staged_outputs(paths: list[Path]) -> Iterator[list[Path]]:
-    """Unique temporary paths beside ``paths`` (same suffix); when the block succeeds they
-    replace ``paths``, one rename each, all after the last output is complete; whatever
-    happens the temporaries are gone afterwards."""
-    token = f'{os.getpid()}.{secrets.token_hex(4)}'
-    staged = [path.with_name(f'.{path.stem}.{token}.partial{path.suffix}') for path in paths]
-    try:
-        yield staged
-        for temporary in staged:
-            if not temporary.is_file():
-                raise OSError(f'{temporary}: the output was not written')
-        for temporary, path in zip(staged, paths):
-            os.replace(temporary, path)
-    finally:
-        for temporary in staged:
-            with contextlib.suppress(OSError):
-                temporary.unlink()
-
-
 def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
     """Run the four stages on ``args.scan``; returns FreeCAD's result (objects, warnings, the
     corner finder's notes first: an approximate floor, an open-top scan)."""
@@ -89,7 +68,9 @@ def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
     if out.suffix.lower() != '.fcstd':
         raise ValueError(f'{out}: the output must end with .FCStd')
     predictions_path, corners_path = output_paths(out)
+    inputs = [scan, args.config, args.checkpoint, args.library]
     for path in (out, predictions_path, corners_path):  # the arguments before any work
+        check_output(path, '--out', inputs)
         check_output_file(path)
     cfg = load_config(args.config, args.cfg_options)
     spec, density = inference_settings(cfg, args.config)
@@ -102,25 +83,27 @@ def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
         report(f'prepare: {line}')
     detector = ModelDetector(
         load_model(cfg, args.checkpoint, args.device, args.tta), args.score_thr, args.seed)
-    with staged_outputs([predictions_path, corners_path, out]) as (predictions_tmp, corners_tmp,
-                                                                   out_tmp):
+    with work_folder('synthdet-scan2cad') as work:
+        # the document's label is its file's stem, as when FreeCAD saves it where it belongs
+        staged = [work / 'room.pred.json', work / 'room.corners.json', work / readable(out.name)]
         predictions = detector.predictions(prepared, spec, Path(args.config).stem)
-        write_predictions(predictions_tmp, predictions)
+        write_predictions(staged[0], predictions)
         report(f'detect: {len(predictions["detections"])} objects -> {predictions_path}')
         outline = outline_in_scan(room_outline(outlined.points), outlined)
         corners = outline_to_dict(outline, str(scan))
-        write_corners(corners_tmp, corners)
+        write_corners(staged[1], corners)
         kind = 'approximate corners' if outline.approximate else 'corners'
         report(f'corners: {len(corners["corners"])} {kind} -> {corners_path}')
         result = build_document(
             scan,
-            predictions_tmp,
-            out_tmp,
-            corners=corners_tmp,
+            staged[0],
+            staged[2],
+            corners=staged[1],
             library=args.library,
             min_score=args.score_thr,
             wall_thickness=args.wall_thickness,
             freecadcmd=args.freecadcmd)
+        copy_into_place(list(zip(staged, (predictions_path, corners_path, out))))
     result = dict(result, document=str(out.resolve()), warnings=[
         *(f'{scan}: {note}' for note in outline.notes), *result['warnings']])
     report(f'freecad: {len(result["objects"])} objects -> {result["document"]} '
@@ -132,6 +115,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run scan2cad; returns 0, 2 for bad input (scan, checkpoint, no room found), 1 for a
     failure at run time (FreeCAD, an unwritable output), each with a one-line message."""
     args = parse_args(argv)
+    names_as_given()
     try:
         result = scan_to_cad(args)
     except ValueError as error:  # ScanFormatError, CheckpointError, SchemaError too

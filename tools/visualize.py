@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from synthdet.outputs import check_output, names_as_given
 from synthdet.room_data import (boxes_from_predictions, corner_polygon,
                                  load_ground_truth, load_scan, write_labelled_ply)
 from synthdet.topview import draw_top_view
@@ -43,9 +44,16 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Draw (and export) one scan; returns the exit code (1 with a message for bad inputs)."""
+    """Draw (and export) one scan; returns the exit code: 2 with a message for bad inputs (an
+    output that is an input, a folder, a device or a FIFO too, before any work), 1 when an
+    output cannot be written."""
     args = parse_args(argv)
+    names_as_given()
     try:
+        inputs = (args.scan, args.gt, args.pred, args.corners)
+        for option, output in (('--out', args.out), ('--ply', args.ply)):
+            if output is not None:
+                check_output(output, option, inputs)
         scan = load_scan(args.scan)
         gt = load_ground_truth(args.gt, args.scan) if args.gt else []
         pred = boxes_from_predictions(args.pred, args.min_score) if args.pred else []

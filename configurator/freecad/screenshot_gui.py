@@ -1,19 +1,22 @@
 # Runs inside the FreeCAD GUI (started by `python -m configurator screenshot`): open the
-# document as a user would, save what the 3D view shows as a PNG, report and quit.
-# Options come from SYNTHDET_SCREENSHOT (a JSON: document, out, width, height, result).
+# document as a user would (checked first: synthdet_freecad.opening), save what the 3D view
+# shows as a PNG, report and quit. Options come from SYNTHDET_SCREENSHOT (a JSON: document,
+# out, width, height, result, and paths: the folders holding synthdet_freecad and synthdet).
 import json
 import os
+import sys
 import traceback
 
-import FreeCAD as App
 import FreeCADGui as Gui
 
 options = json.load(open(os.environ['SYNTHDET_SCREENSHOT'], encoding='utf-8'))
 result = {'status': 'error', 'error': None}
+sys.path.extend(path for path in options['paths'] if path not in sys.path)  # FreeCAD's first
 try:
+    from synthdet_freecad.opening import open_document
     try:
-        doc = App.openDocument(options['document'])
-    except OSError as error:  # not a FreeCAD document: an expected failure, one line
+        doc = open_document(options['document'])
+    except (OSError, ValueError) as error:  # not an FCStd, or refused: one line
         raise RuntimeError(f'FreeCAD cannot open it: {str(error).strip()}') from None
     Gui.updateGui()
     view = Gui.getDocument(doc.Name).activeView()

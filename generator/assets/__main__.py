@@ -6,10 +6,12 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
 from generator.assets.library import ASSET_CLASSES, build_library, load_library
+from synthdet.outputs import OutputFailed, OutputRefused, check_output
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -41,8 +43,26 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> int:
+    """Build (and draw) the library; returns 0, 2 with one line for an output that is not a
+    folder (checked first), 1 with one line when a file cannot be written."""
     args = parse_args(argv)
+    try:
+        check_output(args.out, '--out', folder=True)
+        if args.preview is not None:
+            check_output(args.preview, '--preview', folder=True)
+    except OutputRefused as error:
+        print(f'generator.assets: error: {error}', file=sys.stderr)
+        return 2
+    try:
+        _build(args)
+    except OutputFailed as error:
+        print(f'generator.assets: error: {error}', file=sys.stderr)
+        return 1
+    return 0
+
+
+def _build(args: argparse.Namespace) -> None:
     start = time.perf_counter()
     paths = build_library(args.out, args.instances, args.seed, args.classes)
     print(f'built {len(paths)} library files in {time.perf_counter() - start:.1f} s:')
@@ -56,4 +76,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

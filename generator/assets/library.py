@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from generator.assets import chair, printer3d, sofa, table, yumi
 from generator.assets.builder import material_color
+from synthdet.outputs import replaced_paths
 
 ASSET_CLASSES = ('table', 'chair', 'sofa', 'yumi', '3dprinter')
 GENERATORS: dict[str, ModuleType] = {
@@ -134,9 +135,8 @@ def build_library(out_dir: Path,
                     x += hi[0] - lo[0] + 0.3
                     bar.update()
                 path = out_dir / f'{cls}.blend'
-                partial = out_dir / f'.{cls}.partial.blend'
-                bpy.data.libraries.write(str(partial), {collection}, fake_user=True)
-                os.replace(partial, path)
+                with replaced_paths([path]) as (partial, ):
+                    bpy.data.libraries.write(str(partial), {collection}, fake_user=True)
                 paths.append(path)
             finally:
                 _remove_collection(collection)

@@ -2,6 +2,7 @@
 colored triangles in an orthographic 3D view (matplotlib, headless)."""
 from __future__ import annotations
 
+import io
 import math
 from pathlib import Path
 
@@ -13,6 +14,7 @@ import numpy as np  # noqa: E402
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: E402
 
 from generator.assets.library import AssetInstance, AssetLibrary  # noqa: E402
+from synthdet.outputs import write_bytes  # noqa: E402
 
 LIGHT = np.array([-0.4, -0.7, 0.6]) / np.linalg.norm([-0.4, -0.7, 0.6])
 
@@ -58,7 +60,9 @@ def render_previews(library: AssetLibrary, out_dir: Path, columns: int = 4) -> l
         fig.suptitle(f'{cls}: {len(instances)} instances', fontsize=11)
         fig.tight_layout()
         path = out_dir / f'{cls}.png'
-        fig.savefig(path)
+        picture = io.BytesIO()
+        fig.savefig(picture, format='png')
         plt.close(fig)
+        write_bytes(path, picture.getvalue())
         paths.append(path)
     return paths

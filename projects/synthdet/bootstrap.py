@@ -1,10 +1,11 @@
 """The shared start of ``tools/train.py``, ``test.py`` and ``predict.py``.
 
 Command-line options common to the tools (numbers checked against their ranges with short
-messages), config loading with ``--cfg-options`` (loading a config imports its
-``custom_imports``, which registers the plugin's modules with mmdet3d; a file that is not a
-config is one line naming it), the checks of output paths before any work, the work directory
-and the launcher. Checkpoints are loaded weights-only
+messages), config loading with ``--cfg-options`` (a ``.py`` config is code: loading it runs it
+and imports its ``custom_imports``, which registers the plugin's modules with mmdet3d; a JSON
+or YAML config is data, refused if it would import or run anything: ``data_config``; a file
+that is not a config is one line naming it), the checks of output paths before any work, the
+work directory and the launcher. Checkpoints are loaded weights-only
 (``projects/synthdet/checkpoint.py``); nothing here changes how ``torch.load`` unpickles.
 """
 import argparse
@@ -17,7 +18,9 @@ from typing import Callable, NoReturn
 
 from mmengine.config import Config, DictAction
 
+from projects.synthdet.data_config import ConfigFileError, check_data_config, is_data_config
 from projects.synthdet.distributed import prepare_distributed
+from synthdet.outputs import OutputRefused, check_output
 
 
 def run_tool(main: Callable[[], object],
@@ -35,10 +38,6 @@ def run_tool(main: Callable[[], object],
         print(f'{prog}: error: {error}', file=sys.stderr)
         sys.exit(1)
     sys.exit(0)
-
-
-class ConfigFileError(ValueError):
-    """A CONFIG that cannot be loaded as an mmengine config; the message names the file."""
 
 
 def shown(text: object, limit: int = 24) -> str:
@@ -82,8 +81,7 @@ def float_in(low: float, high: float, include_low: bool = True) -> Callable[[str
     return parse
 
 
-class OutputPathError(ValueError):
-    """An output path that cannot be written; the message names it."""
+OutputPathError = OutputRefused  # an output path that cannot be written; the message names it
 
 
 def _nearest_existing(path: Path) -> Path:
@@ -105,25 +103,23 @@ def _check_can_create_in(folder: Path, output: Path) -> None:
     os.unlink(name)
 
 
-def check_output_dir(path: str | Path) -> None:
+def check_output_dir(path: str | Path, option: str = '--out') -> None:
     """:class:`OutputPathError` unless ``path`` is a writable folder or can be created as one
-    (the folder is not created; a probe file is created and removed)."""
-    path = Path(path)
+    (the folder is not created; a probe file is created and removed); a file, device or FIFO
+    is refused by ``synthdet.outputs.check_output``."""
+    path = check_output(path, option, folder=True)
     existing = _nearest_existing(path)
-    if existing == Path(os.path.abspath(path)) and not existing.is_dir():
-        raise OutputPathError(f'{path}: is a file, expected a folder')
     if not existing.is_dir():
         raise OutputPathError(f'{path}: cannot be created ({existing} is a file)')
     _check_can_create_in(existing, path)
 
 
-def check_output_file(path: str | Path, make_parents: bool = False) -> None:
-    """:class:`OutputPathError` unless the file ``path`` can be written: not a folder, in a
-    writable folder that exists (or, with ``make_parents``, can be created). The file is not
-    created; a probe file beside it is created and removed."""
-    path = Path(path)
-    if path.is_dir():
-        raise OutputPathError(f'{path}: is a folder, expected a file name')
+def check_output_file(path: str | Path, make_parents: bool = False, option: str = '--out') -> None:
+    """:class:`OutputPathError` unless the file ``path`` can be written: not a folder, device
+    or FIFO (``synthdet.outputs.check_output``), in a writable folder that exists (or, with
+    ``make_parents``, can be created). The file is not created; a probe file beside it is
+    created and removed."""
+    path = check_output(path, option)
     if make_parents:
         check_output_dir(path.parent)
         return
@@ -220,11 +216,18 @@ def check_config_path(path: str | Path) -> None:
 
 
 def load_config(path: str | Path, cfg_options: dict | None = None) -> Config:
-    """Load a config (registering its ``custom_imports``) and apply ``--cfg-options``;
-    :class:`ConfigFileError` naming the file (and line) if it cannot be loaded."""
+    """Load a config and apply ``--cfg-options``; :class:`ConfigFileError` naming the file
+    (and line) if it cannot be loaded. A ``.py`` config is Python code, run with its
+    ``custom_imports``; a JSON or YAML config is data, refused if it would import or run code
+    (``data_config.check_data_config``, which registers the plugin's classes) and read without
+    mmengine's text substitutions (what was checked is what is read)."""
     check_config_path(path)
+    data_only = is_data_config(path)
+    if data_only:
+        check_data_config(path)
     try:
-        cfg = Config.fromfile(path)
+        cfg = Config.fromfile(path, use_predefined_variables=not data_only,
+                              use_environment_variables=not data_only)
         if cfg_options:
             cfg.merge_from_dict(cfg_options)
     except SyntaxError as error:

@@ -17,6 +17,7 @@ for a checkpoint inside the run's own work directory, through the ``trusted://``
 """
 from __future__ import annotations
 import hashlib
+import io
 import os
 import pickle
 import re
@@ -24,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
+
+from synthdet.outputs import write_bytes
 
 TRUSTED_PREFIX = 'trusted://'
 _HISTORY_BUFFER_STATISTICS = ('min', 'max', 'current', 'mean')
@@ -201,31 +204,19 @@ def save_inference_checkpoint(checkpoint: dict,
     """Write :func:`inference_checkpoint` of ``checkpoint`` to ``out`` atomically; returns it.
 
     With ``digest_suffix`` the file is named ``<out stem>-<first 8 hex digits of its
-    SHA-256>.pth`` (mmdet's published-model name) and ``out`` itself is never written. The file
-    is written under a temporary name of this process, reloaded with plain
-    ``weights_only=True`` and then renamed into place; on any failure the temporary is removed.
+    SHA-256>.pth`` (mmdet's published-model name) and ``out`` itself is never written. The
+    checkpoint is serialised in memory, reloaded with plain ``weights_only=True`` and written
+    through a checked temporary file of this run, renamed into place (``synthdet.outputs``).
     """
     out = Path(out)
-    partial = out.with_name(f'.{out.name}.{os.getpid()}.partial')
-    try:
-        torch.save(inference_checkpoint(checkpoint), partial)
-        torch.load(partial, map_location='cpu', weights_only=True)
-        if digest_suffix:
-            out = out.with_name(f'{out.stem}-{sha256_prefix(partial)}.pth')
-        os.replace(partial, out)
-    except BaseException:
-        partial.unlink(missing_ok=True)
-        raise
+    buffer = io.BytesIO()
+    torch.save(inference_checkpoint(checkpoint), buffer)
+    data = buffer.getvalue()
+    torch.load(io.BytesIO(data), map_location='cpu', weights_only=True)
+    if digest_suffix:
+        out = out.with_name(f'{out.stem}-{hashlib.sha256(data).hexdigest()[:8]}.pth')
+    write_bytes(out, data)
     return out
-
-
-def sha256_prefix(path: str | os.PathLike, length: int = 8) -> str:
-    """The first ``length`` hex digits of the file's SHA-256 (mmdet's published-model suffix)."""
-    digest = hashlib.sha256()
-    with open(path, 'rb') as stream:
-        for block in iter(lambda: stream.read(1 << 20), b''):
-            digest.update(block)
-    return digest.hexdigest()[:length]
 
 
 def trusted_resume_path(checkpoint: str | os.PathLike, work_dir: str | os.PathLike) -> str:

@@ -36,6 +36,7 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
+from synthdet.outputs import replaced_paths
 from synthdet.scan_io import e57, las, pcd, ply, points_bin, s3dis_txt, text_columns
 from synthdet.scan_io.common import (CHUNK_POINTS, MAX_LINE_BYTES, TEXT_BYTES_PER_POINT,
                                      ChunkReader, ScanFormatError)
@@ -226,6 +227,5 @@ def write_scan(path: str | os.PathLike, points: np.ndarray) -> None:
     if writer is None:
         raise ValueError(f'{path}: unknown scan type {path.suffix.lower()!r}, expected one of '
                          f'{", ".join(WRITERS)}')
-    temporary = path.with_name(f'{path.name}.tmp{os.getpid()}{path.suffix}')
-    writer(temporary, points)
-    os.replace(temporary, path)
+    with replaced_paths([path]) as (temporary, ):
+        writer(temporary, points)

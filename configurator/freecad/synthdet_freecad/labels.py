@@ -24,10 +24,13 @@ import math
 import os
 
 import FreeCAD as App
+# standard library only, importable wherever schema's synthdet.contracts is
+from synthdet.fcstd_guard import RefusedDocument
 
 # the parts' proxy class: FreeCAD restores a proxy only from a module loaded before the
 # document opens (or an installed add-on), and the recompute below needs it
 from . import library
+from .opening import open_document
 from .schema import LABELS_READ_FORMAT as READ_FORMAT
 
 SIZE_PROPERTIES = ('Length', 'Width', 'Height')
@@ -174,11 +177,13 @@ def room_outline(doc) -> dict | None:
 
 
 def read_document(path: str) -> dict:
-    """Open the document at ``path`` (read only: never saved) and return its labels and room.
+    """Open the document at ``path`` (checked first, read only: never saved) and return its
+    labels and room.
 
-    Raises ``NotSynthdet`` when it holds no synthdet part or room, or a part that is no box.
+    Raises ``RefusedDocument`` for a document FreeCAD would run code or open other files for,
+    ``NotSynthdet`` when it holds no synthdet part or room, or a part that is no box.
     """
-    doc = App.openDocument(path)
+    doc = open_document(path)
     try:
         library.restore_proxies(doc)
         doc.recompute()  # a cell edited without a recompute gives the sizes the user sees
@@ -209,11 +214,11 @@ def source_scan(parts: list) -> str:
 
 def run_headless() -> None:
     """Read the document named by ``SYNTHDET_READ`` and write the result JSON (status ``ok``,
-    or ``error`` with ``kind`` ``input`` for a document that is not synthdet's)."""
+    or ``error`` with ``kind`` ``input`` for a document that is refused or not synthdet's)."""
     result_path = os.environ['SYNTHDET_RESULT']
     try:
         result = dict(read_document(os.environ[ENV_READ]), status='ok', error=None)
-    except NotSynthdet as error:
+    except (NotSynthdet, RefusedDocument) as error:
         result = {'format': READ_FORMAT, 'status': 'error', 'kind': 'input', 'error': str(error)}
     except Exception as error:  # the process boundary: every failure goes to the result file
         result = {

@@ -36,6 +36,7 @@ from tqdm import tqdm
 
 from synthdet.classes import DETECTION_CLASSES, FALLBACK_CLASS, SEMANTIC_CLASSES
 from synthdet.info_files import RAW_DIR as S3DIS_DIR
+from synthdet.outputs import write_bytes
 from synthdet.point_text import PointFileError, compile_parser, max_rows, read_point_file
 from synthdet.processes import die_with_parent
 from synthdet.room_data import annotation_class, annotation_files, natural_key
@@ -380,10 +381,7 @@ def info_metainfo() -> dict:
 
 
 def _write_pickle_atomic(obj: object, path: Path) -> None:
-    partial = path.with_name(path.name + PARTIAL_SUFFIX)
-    with open(partial, 'wb') as f:
-        pickle.dump(obj, f, protocol=pickle.HIGHEST_PROTOCOL)
-    os.replace(partial, path)
+    write_bytes(path, pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL))
 
 
 def _run(tasks: list, pool: ProcessPoolExecutor | None) -> Iterator[RoomResult]:
@@ -425,12 +423,11 @@ def _convert_area(area: int,
     return results
 
 
-def _remove_partials_of_areas(out_dir: Path, areas: Iterable[int], info_prefix: str) -> None:
+def _remove_partials_of_areas(out_dir: Path, areas: Iterable[int]) -> None:
     for area in areas:
         for sub in OUTPUT_DIRS:
             for partial in (out_dir / sub).glob(f'Area_{area}_*.bin{PARTIAL_SUFFIX}'):
                 partial.unlink(missing_ok=True)
-        (out_dir / f'{info_prefix}_infos_Area_{area}.pkl{PARTIAL_SUFFIX}').unlink(missing_ok=True)
 
 
 def _remove_partials(out_dir: Path, names: Iterable[str]) -> None:
@@ -478,7 +475,7 @@ def convert_s3dis(root_path: str | Path,
         (out_dir / sub).mkdir(parents=True, exist_ok=True)
     summary = ConversionSummary()
     _compile_kernels()  # once here rather than in every worker
-    _remove_partials_of_areas(out_dir, areas, info_prefix)  # leftovers of a killed run
+    _remove_partials_of_areas(out_dir, areas)  # leftovers of a killed run
     pool = ProcessPoolExecutor(
         workers, initializer=die_with_parent, initargs=(os.getpid(), )) if workers > 1 else None
     try:

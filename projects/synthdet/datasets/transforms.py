@@ -327,6 +327,10 @@ class ThinRoomStructure(BaseTransform):
         min_level_share: least share of the points in a level's slice.
         cell: side (m) of the wall columns.
         wall_span: least z extent of a wall column, as a share of the room height.
+        cached_rooms: keep the structure masks of up to this many rooms in memory (packed
+            bits), keyed by the room's file and point count, so that a training loader finds
+            a room's structure once, not every epoch; only right after ``LoadPointsFromFile``,
+            whose points are a room's file unchanged. 0 finds it every time.
     """
 
     def __init__(self,
@@ -336,7 +340,8 @@ class ThinRoomStructure(BaseTransform):
                  search: float = 0.5,
                  min_level_share: float = 0.01,
                  cell: float = 0.1,
-                 wall_span: float = 0.8) -> None:
+                 wall_span: float = 0.8,
+                 cached_rooms: int = 0) -> None:
         _check_probability('keep', keep)
         _check_probability('min_level_share', min_level_share)
         _check_probability('wall_span', wall_span)
@@ -350,6 +355,9 @@ class ThinRoomStructure(BaseTransform):
         self.min_level_share = min_level_share
         self.cell = cell
         self.wall_span = wall_span
+        _check_at_least('cached_rooms', cached_rooms, 0)
+        self.cached_rooms = cached_rooms
+        self._masks: dict[tuple[str, int], np.ndarray] = {}
 
     def level(self, z: np.ndarray, start: float, stop: float, from_top: bool) -> float | None:
         """The floor (``from_top`` False) or the ceiling: the lowest (highest) ``bin``-high z
@@ -394,15 +402,31 @@ class ThinRoomStructure(BaseTransform):
         mask[rest[wall[column]]] = True
         return mask
 
+    def room_structure(self, results: dict, xyz: np.ndarray) -> np.ndarray:
+        """``structure(xyz)``, from the cache when ``cached_rooms`` is set and the room's file
+        (``lidar_path``) with as many points was seen before."""
+        path = results.get('lidar_path') or results.get('lidar_points', {}).get('lidar_path')
+        if not self.cached_rooms or path is None:
+            return self.structure(xyz)
+        key = (str(path), len(xyz))
+        packed = self._masks.get(key)
+        if packed is None:
+            mask = self.structure(xyz)
+            if len(self._masks) < self.cached_rooms:
+                self._masks[key] = np.packbits(mask)
+            return mask
+        return np.unpackbits(packed, count=len(xyz)).astype(bool)
+
     def transform(self, results: dict) -> dict:
         """Thin the structure points of ``points`` (and the same rows of the point masks)."""
         xyz = results['points'].coord.numpy()
         if len(xyz) == 0:
             return results
-        dropped = self.structure(xyz) & (np.random.rand(len(xyz)) >= self.keep)
+        dropped = self.room_structure(results, xyz) & (np.random.rand(len(xyz)) >= self.keep)
         return _keep_rows(results, np.flatnonzero(~dropped))
 
     def __repr__(self) -> str:
         return (f'{type(self).__name__}(keep={self.keep}, band={self.band}, bin={self.bin}, '
                 f'search={self.search}, min_level_share={self.min_level_share}, '
-                f'cell={self.cell}, wall_span={self.wall_span})')
+                f'cell={self.cell}, wall_span={self.wall_span}, '
+                f'cached_rooms={self.cached_rooms})')

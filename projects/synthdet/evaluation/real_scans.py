@@ -351,9 +351,7 @@ def draw_scan(out: Path, prepared: PreparedScan, labels: dict, detections: Seque
              for b in labels['boxes']]
     shown = [Box(d['class'], tuple(d['center']), tuple(d['size']), d['yaw'], d['score'])
              for d in detections if d['score'] >= score_thr]
-    temporary = out.with_name(f'.{out.stem}.tmp{os.getpid()}{out.suffix}')
-    draw_top_view(temporary, Scan(points, None, prepared.source), truth, shown, title=title)
-    os.replace(temporary, out)
+    draw_top_view(out, Scan(points, None, prepared.source), truth, shown, title=title)
 
 
 def evaluate_scans(cfg: Config,

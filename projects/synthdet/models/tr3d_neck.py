@@ -2,6 +2,7 @@
 from typing import Sequence
 
 import MinkowskiEngine as ME
+import torch
 from mmdet3d.registry import MODELS
 from mmengine.model import BaseModule
 from torch import nn
@@ -26,19 +27,31 @@ class TR3DNeck(BaseModule):
     locations half as far apart when the voxels are coarser than TR3D's 1 cm, at a fraction of
     the cost of finer voxels (``benchmarks/bench_model.py``).
 
+    With ``generated_reach`` (not in TR3D) the voxels that a generative upsampling creates are
+    kept only within that many voxels of the finer stage's own voxels (a Chebyshev distance in
+    the finer stage's voxels; 0 keeps only the stage's own): TR3D's upsampling fills most of a
+    room's volume, air included, and the blocks on that level cost the most of the model.
+
     Args:
         in_channels: channels of every backbone stage, the first one is used only for
             ``backbone_fine_level``.
         out_channels: channels of every output level.
         backbone_fine_level: add the finest level on the first stage's voxels.
+        generated_reach: keep generated voxels within this many voxels of the finer stage's
+            own; None keeps them all (TR3D).
     """
 
     def __init__(self,
                  in_channels: Sequence[int],
                  out_channels: int,
                  backbone_fine_level: bool = False,
+                 generated_reach: int | None = None,
                  init_cfg=None):
         super().__init__(init_cfg)
+        if generated_reach is not None and generated_reach < 0:
+            raise ValueError(f'generated_reach must be >= 0 or None, got {generated_reach}')
+        self.generated_reach = generated_reach
+        self.pruning = ME.MinkowskiPruning()
         channels = tuple(in_channels)[1:]
         if len(channels) < 2:
             raise ValueError(f'TR3DNeck needs at least 3 backbone stages, got {in_channels}')
@@ -76,16 +89,46 @@ class TR3DNeck(BaseModule):
         """Kaiming-normal convolution kernels, unit BatchNorm scale and zero shift."""
         init_minkowski_weights(self)
 
+    def _near(self, generated: ME.SparseTensor, own: ME.SparseTensor) -> ME.SparseTensor:
+        """``generated`` without the voxels farther than ``generated_reach`` voxels from every
+        voxel of ``own`` (same scene, same tensor stride)."""
+        if self.generated_reach is None:
+            return generated
+        keep = torch.isin(*voxel_keys(generated.C, own.C, self.generated_reach,
+                                      own.tensor_stride[0]))
+        return self.pruning(generated, keep) if not bool(keep.all()) else generated
+
     def forward(self, feats: Sequence[ME.SparseTensor]) -> list[ME.SparseTensor]:
         """Map backbone stage outputs to the output levels, finest first."""
         first, *inputs = feats
         x = inputs[-1]
         outs = []
         for i in range(self.num_levels - 1, -1, -1):
-            x = inputs[i] + getattr(self, f'up_block_{i + 1}')(x)
+            x = inputs[i] + self._near(getattr(self, f'up_block_{i + 1}')(x), inputs[i])
             x = getattr(self, f'lateral_block_{i}')(x)
             outs.append(getattr(self, f'out_block_{i}')(x))
         if self.backbone_fine_level:
             x = first + self.fine_up_norm(self.fine_up(x, first.coordinate_map_key))
             outs.append(self.fine_out_block(self.fine_lateral_block(x)))
         return outs[::-1]
+
+
+def voxel_keys(queries: torch.Tensor, anchors: torch.Tensor, reach: int,
+               stride: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Integer keys of ``queries`` (Q, 4: scene, x, y, z) and of every voxel within ``reach``
+    voxels of ``stride`` of the ``anchors`` (A, 4), such that a query's key is among the
+    anchors' keys exactly when it is within reach of an anchor of its scene."""
+    span = torch.arange(-reach, reach + 1, device=anchors.device) * stride
+    offsets = torch.cartesian_prod(span, span, span).to(anchors.dtype)
+    near = (anchors[:, None, 1:] + offsets[None]).reshape(-1, 3)
+    scenes = anchors[:, :1].repeat_interleave(len(offsets), dim=0)
+    near = torch.cat((scenes, near), dim=1)
+    low = torch.minimum(near.min(dim=0).values, queries.min(dim=0).values)
+    size = torch.maximum(near.max(dim=0).values, queries.max(dim=0).values) - low + 1
+
+    def key(coordinates: torch.Tensor) -> torch.Tensor:
+        shifted = (coordinates - low).long()
+        return ((shifted[:, 0] * size[1] + shifted[:, 1]) * size[2] + shifted[:, 2]) * size[3] \
+            + shifted[:, 3]
+
+    return key(queries), key(near)
