@@ -380,7 +380,7 @@ def walls_first_outline(xyz: np.ndarray, levels: Levels, to_frame: np.ndarray,
     if len(evidence) >= 100:
         walled = walled_outline(xyz[:, :2] @ to_frame.T, evidence @ to_frame.T, params, tuning)
     if walled is None:
-        problem = 'the scan shows no wall plane'
+        problem = 'no outline could be built on its wall planes'
     elif walled.seen_area < tuning.min_seen_area or walled.held < tuning.min_held:
         problem = (f'the outline built on the wall planes is a view of less than half the room '
                    f'(the points span {walled.seen_area:.0%} of it, it holds {walled.held:.0%} '

@@ -2,6 +2,11 @@
 here with the faults of real ones: a reconstruction with walls missing, walls that stop low,
 one depth view of a room, an L-shaped room seen from one side with occlusions."""
 import math
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,9 +15,11 @@ from configurator.corners import CornerParams, detect_corners, room_outline
 from configurator.wall_evidence import WallEvidenceParams, wall_planes, walled_outline
 from synthdet.geometry import (distance_to_polygon, first_self_crossing, points_in_polygon,
                                rotation2d)
+from synthdet.scan_io import write_scan
 from tests.room_scans import _sample_box, _sample_flat, _sample_walls
 from tests.test_real_scan_geometry import DEPTH, RECTANGLE, WIDTH, depth_view, room_scan
 
+REPO = Path(__file__).resolve().parents[1]
 L_ROOM = np.array([[0.0, 0.0], [0.0, 6.0], [4.0, 6.0], [4.0, 3.0], [7.0, 3.0], [7.0, 0.0]])
 
 
@@ -68,15 +75,20 @@ def l_room_scan(seed: int = 0) -> np.ndarray:
     return np.concatenate([floor, walls, table, cabinet])
 
 
+def walls_missing_scan() -> np.ndarray:
+    """A 6 m x 5 m reconstruction that kept one wall whole and 1.5 m of another (and the
+    lowest 0.8 m of every wall, the floor and the furniture)."""
+    points = room_scan(ceiling=False, height=2.5, furniture=3, seed=11)
+    high = points[:, 2] > 0.05
+    kept = on_wall(points, 1, DEPTH, -1.0, WIDTH + 1) | on_wall(points, 0, 0.0, 3.5, 5.0)
+    return points[~high | kept | (points[:, 2] < 0.8)]
+
+
 def test_reconstruction_with_walls_missing_is_traced_on_the_walls_it_has():
     """A reconstruction that kept one wall whole and 1.5 m of another: wall points back 34 %
     of the footprint's outline (before: no walls found, an approximate floor). The outline
     lies on both walls, closes along the floor's extent elsewhere and is marked partial."""
-    points = room_scan(ceiling=False, height=2.5, furniture=3, seed=11)
-    high = points[:, 2] > 0.05
-    kept = on_wall(points, 1, DEPTH, -1.0, WIDTH + 1) | on_wall(points, 0, 0.0, 3.5, 5.0)
-    points = points[~high | kept | (points[:, 2] < 0.8)]  # the furniture and the floor stay
-    outline = detect_corners(points)
+    outline = detect_corners(walls_missing_scan())
     assert not outline.approximate and len(outline.corners) == 4
     assert corner_errors(outline.corners, RECTANGLE).max() < 0.05, outline.corners
     assert 0.2 < outline.quality['walls_seen'] < 0.75
@@ -185,3 +197,29 @@ def test_walled_outline_fills_a_notch_no_wall_backs_but_not_a_walled_corner():
     assert notched is not None and len(notched.corners) == 4
     assert corner_errors(notched.corners, np.array([[6.0, 0.0]])).max() < 0.1
     assert math.isclose(notched.held, 1.0, abs_tol=0.01)
+
+
+def test_real_scans_benchmark_outlines_every_scan_of_a_folder_and_draws_it(tmp_path):
+    """``benchmarks/bench_corners.py --real DIR --views DIR`` on a folder holding the
+    reconstruction with walls missing (PLY), a one-sided depth view (PCD) and files that are
+    no scans: one line per scan, both outlined on their walls as partial outlines, a top
+    view of each."""
+    scans, views = tmp_path / 'scans', tmp_path / 'views'
+    scans.mkdir()
+    write_scan(scans / 'room.ply', walls_missing_scan())
+    room = room_scan(width=7.0, depth=6.0, furniture=5, seed=4)
+    write_scan(scans / 'view.pcd', depth_view(room, np.array([3.5, 0.3, 1.4])))
+    (scans / 'view.labels.json').write_text('{}')
+    (scans / 'README.md').write_text('scans\n')
+    result = subprocess.run(
+        [sys.executable, 'benchmarks/bench_corners.py', '--real', str(scans), '--views',
+         str(views)], cwd=REPO, capture_output=True, text=True, check=False,
+        env={**os.environ, 'PYTHONPATH': str(REPO)})
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.strip().splitlines()
+    assert re.fullmatch(r'room\.ply +4 partial +\d+%', lines[-3]), lines
+    assert re.fullmatch(r'view\.pcd +\d+ partial +\d+%', lines[-2]), lines
+    assert re.fullmatch(r'corners, real scans: 2 of 2 outlined on their walls \(2 partial\), '
+                        r'0 approximate floors; corners per outline 4-\d+', lines[-1]), lines
+    assert sorted(path.name for path in views.iterdir()) == ['room.ply.png', 'view.pcd.png']
+    assert all(path.read_bytes()[:4] == b'\x89PNG' for path in views.iterdir())
