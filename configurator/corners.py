@@ -18,7 +18,9 @@ Method (``docs/corners.md`` explains it in full):
 
 Wall points are points of vertical columns that reach up (``wall_reach``): furniture against
 a wall does not, so its faces never become walls. A scan without a ceiling (an open-top mesh)
-gets walls of ``default_wall_height``. :func:`room_outline` never gives up on a real room:
+gets walls of ``default_wall_height``. An outline that walls back too little of is built on
+the scan's wall planes instead (:mod:`configurator.wall_evidence`, a partial outline).
+:func:`room_outline` never gives up on a real room:
 when the outline cannot be traced it returns an approximate floor (the footprint's outline or
 its oriented bounding rectangle) marked ``approximate_floor`` in the quality figures.
 """
