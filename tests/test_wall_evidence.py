@@ -13,11 +13,11 @@ import pytest
 
 from configurator.corners import CornerParams, detect_corners, room_outline
 from configurator.wall_evidence import WallEvidenceParams, wall_planes, walled_outline
-from synthdet.geometry import (distance_to_polygon, first_self_crossing, points_in_polygon,
-                               rotation2d)
+from synthdet.geometry import distance_to_polygon, first_self_crossing, points_in_polygon
 from synthdet.scan_io import write_scan
 from tests.room_scans import _sample_box, _sample_flat, _sample_walls
-from tests.test_real_scan_geometry import DEPTH, RECTANGLE, WIDTH, depth_view, room_scan
+from tests.test_real_scan_geometry import (DEPTH, RECTANGLE, WIDTH, depth_view, in_view,
+                                          occluded_view, room_scan)
 
 REPO = Path(__file__).resolve().parents[1]
 L_ROOM = np.array([[0.0, 0.0], [0.0, 6.0], [4.0, 6.0], [4.0, 3.0], [7.0, 3.0], [7.0, 0.0]])
@@ -33,33 +33,6 @@ def on_wall(points: np.ndarray, axis: int, offset: float, low: float, high: floa
     along the other axis."""
     return (np.abs(points[:, axis] - offset) < 0.02) & (points[:, 1 - axis] > low) & \
         (points[:, 1 - axis] < high)
-
-
-def occluded_view(points: np.ndarray, camera: np.ndarray, look: np.ndarray,
-                  half_width: float = 35.0, half_height: float = 30.0) -> np.ndarray:
-    """What a depth camera at ``camera`` looking towards the plan point ``look`` sees, in its
-    upright frame (z up, camera at the origin, looking along +y; :func:`depth_view`), and
-    only the nearest surface of every 0.4 degree ray bin (points within 5 cm of it)."""
-    turn = rotation2d(math.pi / 2 - math.atan2(*(look - camera[:2])[::-1]))
-    turned = points.copy()
-    turned[:, :2] = (points[:, :2] - camera[:2]) @ turn.T + camera[:2]
-    view = depth_view(turned, camera, half_width, half_height)
-    xyz = view[:, :3]
-    distance = np.linalg.norm(xyz, axis=1)
-    azimuth = np.degrees(np.arctan2(xyz[:, 0], xyz[:, 1]))
-    elevation = np.degrees(np.arcsin(xyz[:, 2] / distance))
-    rays = np.floor(azimuth / 0.4).astype(np.int64) * 100_000 + \
-        np.floor(elevation / 0.4).astype(np.int64)
-    _, inverse = np.unique(rays, return_inverse=True)
-    nearest = np.full(inverse.max() + 1, np.inf)
-    np.minimum.at(nearest, inverse, distance)
-    return view[distance < nearest[inverse] + 0.05]
-
-
-def in_view(plan: np.ndarray, camera: np.ndarray, look: np.ndarray) -> np.ndarray:
-    """Plan points of the room in the frame of :func:`occluded_view`."""
-    turn = rotation2d(math.pi / 2 - math.atan2(*(look - camera[:2])[::-1]))
-    return (plan - camera[:2]) @ turn.T
 
 
 def l_room_scan(seed: int = 0) -> np.ndarray:
