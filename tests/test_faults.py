@@ -431,13 +431,13 @@ def test_far_outliers_cost_no_memory(l_room, tmp_path):
     assert result['quality']['far_points'] > 0  # left out by the corner search itself
 
 
-def test_corners_output_that_cannot_be_written_is_a_run_time_failure(l_room, tmp_path):
+def test_corners_output_under_a_file_is_refused_before_any_work(l_room, tmp_path):
     scan = tmp_path / 'room.txt'
     write_scan(scan, l_room.points)
     blocked = tmp_path / 'file'
     blocked.write_text('')
     proc = _corners(scan, blocked / 'room.json')
-    assert_clean_error(proc, 1, 'cannot write', str(blocked / 'room.json'))
+    assert_clean_error(proc, 2, 'cannot be used', str(blocked / 'room.json'))
 
 
 def test_scan_without_floor_is_an_error(l_room, tmp_path):

@@ -17,8 +17,9 @@ import numpy as np
 import pytest
 
 from configurator import freecad_cli
-from configurator.freecad_cli import MACRO, FreecadFailed, build_document
+from configurator.freecad_cli import MACRO, build_document
 from synthdet.contracts import SchemaError, load_json, validate_corners, validate_predictions
+from synthdet.outputs import OutputRefused
 from synthdet.scan_io import write_scan
 from tests.freecad_gui import RUN_MACRO_ANSWERING, WRITE_REPORT, run_gui_driver
 from tests.room_scans import make_room
@@ -570,11 +571,10 @@ def test_corners_from_the_scan_when_not_given(scanned_build, inspection):
     assert len(detections_in(objects)) == 1
 
 
-def test_freecad_failure_is_reported_not_hidden(workspace, tmp_path):
+def test_an_output_under_a_file_is_refused_before_freecad_starts(workspace, tmp_path):
     out_dir = tmp_path / 'not-a-folder'
     out_dir.write_text('a file where the output folder should be')
-    with pytest.raises(
-            FreecadFailed, match='FreeCAD import failed: cannot create the output folder'):
+    with pytest.raises(OutputRefused, match='cannot be used .Not a directory.'):
         build_document(workspace['scan'], workspace['predictions'], out_dir / 'room.FCStd',
                        workspace['corners'])
 
