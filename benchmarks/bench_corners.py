@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/bench_corners.py [--rooms 10] [--points 300000]
         [--generate 30] [--generated DIR ...]
+    .venv/bin/python benchmarks/bench_corners.py --real SCANS_DIR [--views DIR]
 
 For every room shape (rect, L, U, T, chamfer) and noise setting (clean; LiDAR noise: 1 cm range
 noise, 0.03 degree angular jitter, 10 % dropout, dropout patches, 0.05 % outliers) it generates
@@ -21,12 +22,19 @@ clustered with DBSCAN at a normalised threshold, corners ordered by angle around
 see :func:`paper_corners`), ``hull`` the convex hull of the wall points with the traced
 method's simplification.
 
+``--real SCANS_DIR`` measures only real scans instead (no truth): ``python -m configurator
+corners SCAN --approximate`` on every scan of the folder, one line per scan (corners, how the
+outline was found, the share of it that wall points back), ending with ``corners, real
+scans: ...``; ``--views DIR`` writes each scan's top view with its outline there.
+
 Ends with one line: the traced method on the generator rooms (clean, noisy; mean and worst
 corner error), then every method on all rooms (mean error, worst corner, right count, right
 order) and the time per 1M points. Errors are given side by side, not as ratios: the traced
 error is a fraction of a millimetre to a few millimetres, too small to divide by.
 """
 import argparse
+import contextlib
+import io
 import json
 import subprocess
 import sys
@@ -47,7 +55,8 @@ from configurator.corners import (
     detect_corners,  # noqa
     find_levels,
     simplify_outline)
-from synthdet.contracts import read_room
+from configurator.__main__ import main as configurator_main
+from synthdet.contracts import read_corners, read_room
 from synthdet.info_files import room_sensor
 from synthdet.scan_io import read_scan
 from tests.room_scans import SHAPES, NoiseModel, make_room
@@ -235,6 +244,49 @@ def time_methods(rooms: int) -> dict[str, float]:
     return seconds
 
 
+def real_scan_outlines(folder: Path, views: Path | None) -> list[tuple[str, int, str, float]]:
+    """Scan name, corner count, how the outline was found (traced, partial or approximate)
+    and the share of it that wall points back, for every scan file of ``folder`` (not its
+    ``.labels.json`` or ``.md`` files), as ``python -m configurator corners SCAN
+    --approximate`` finds them; with ``views``, each scan's top view is written there."""
+    rows = []
+    with tempfile.TemporaryDirectory(prefix='synthdet-bench-corners-') as work:
+        for scan in sorted(folder.iterdir()):
+            if scan.name.endswith('.labels.json') or scan.suffix == '.md' or scan.is_dir():
+                continue
+            out = Path(work) / f'{scan.name}.corners.json'
+            arguments = ['corners', str(scan), '--out', str(out), '--approximate']
+            if views is not None:
+                arguments += ['--preview', str(views / f'{scan.name}.png')]
+            with contextlib.redirect_stdout(io.StringIO()), \
+                    contextlib.redirect_stderr(io.StringIO()) as messages:
+                code = configurator_main(arguments)
+            if code != 0:
+                raise SystemExit(f'{scan}: corners failed: {messages.getvalue().strip()}')
+            corners = read_corners(out)
+            seen = corners['quality']['walls_seen']
+            found = 'approximate' if corners['quality'].get('approximate_floor') else \
+                'partial' if seen < CornerParams.min_seen_walls else 'traced'
+            rows.append((scan.name, len(corners['corners']), found, seen))
+    return rows
+
+
+def report_real_scans(folder: Path, views: Path | None) -> None:
+    """Print :func:`real_scan_outlines` and its headline."""
+    if views is not None:
+        views.mkdir(parents=True, exist_ok=True)
+    rows = real_scan_outlines(folder, views)
+    print(f'{"scan":<36} {"corners":>7} {"outline":<12} {"walls back":>10}')
+    for name, count, found, seen in rows:
+        print(f'{name:<36} {count:>7} {found:<12} {seen:>10.0%}')
+    outlined = [count for _, count, found, _ in rows if found != 'approximate']
+    partial = sum(found == 'partial' for _, _, found, _ in rows)
+    counts = f'{min(outlined)}-{max(outlined)}' if outlined else 'none'
+    print(f'corners, real scans: {len(outlined)} of {len(rows)} outlined on their walls '
+          f'({partial} partial), {len(rows) - len(outlined)} approximate floors; '
+          f'corners per outline {counts}')
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rooms', type=int, default=10, help='rooms per shape and noise')
@@ -252,7 +304,12 @@ def main() -> None:
         type=int,
         default=30,
         help='generator rooms to make, clean and again noisy (0: none)')
+    parser.add_argument('--real', type=Path, help='measure the real scans of this folder only')
+    parser.add_argument('--views', type=Path, help='with --real: write the top views here')
     args = parser.parse_args()
+    if args.real is not None:
+        report_real_scans(args.real, args.views)
+        return
     workspace = tempfile.TemporaryDirectory(prefix='synthdet-bench-corners-')
     if args.generate:
         args.generated += generate_rooms(Path(workspace.name), args.generate, args.points)

@@ -18,7 +18,9 @@ Method (``docs/corners.md`` explains it in full):
 
 Wall points are points of vertical columns that reach up (``wall_reach``): furniture against
 a wall does not, so its faces never become walls. A scan without a ceiling (an open-top mesh)
-gets walls of ``default_wall_height``. :func:`room_outline` never gives up on a real room:
+gets walls of ``default_wall_height``. An outline that walls back too little of is built on
+the scan's wall planes instead (:mod:`configurator.wall_evidence`, a partial outline).
+:func:`room_outline` never gives up on a real room:
 when the outline cannot be traced it returns an approximate floor (the footprint's outline or
 its oriented bounding rectangle) marked ``approximate_floor`` in the quality figures.
 """
@@ -30,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage
 
+from configurator.lattice_outline import trace_boundary
 from synthdet.contracts import CORNERS_FORMAT
 from synthdet.geometry import (distance_to_polygon, first_self_crossing, points_in_polygon,
                                rotation2d, signed_area)
@@ -136,24 +139,30 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
     supported = sum(line.support * _edge_length(outline, i) for i, line in enumerate(lines))
     perimeter = sum(_edge_length(outline, i) for i in range(len(outline)))
     seen = supported / perimeter
-    if supported < params.min_wall_support * perimeter:
-        raise CornerDetectionError(
-            f'no walls found: wall points back only {supported / perimeter:.0%} of the room '
-            f'outline (need {params.min_wall_support:.0%})')
-    lines = _drop_wall_less_bumps(lines, params)
-    lines = _snap_directions(lines, params.snap_angle)
-    corners = _intersect_lines(lines, params.min_edge, params.min_turn)
-    if len(corners) < 3:
-        raise CornerDetectionError('no walls found: fewer than 3 wall lines were fitted')
-    crossing = first_self_crossing(corners)
-    if crossing is not None:
-        raise CornerDetectionError(f'the fitted outline crosses itself (walls {crossing[0]} and '
-                                   f'{crossing[1]}); the scan is too sparse or not one room')
+    failure = None
+    if seen < params.min_wall_support:
+        failure = (f'no walls found: wall points back only {seen:.0%} of the room outline '
+                   f'(need {params.min_wall_support:.0%})')
+    else:
+        lines = _drop_wall_less_bumps(lines, params)
+        lines = _snap_directions(lines, params.snap_angle)
+        corners = _intersect_lines(lines, params.min_edge, params.min_turn)
+        failure = _outline_failure(corners)
+    walled = None
+    if failure or seen < params.min_seen_walls:  # the footprint follows occlusions: walls first
+        from configurator.wall_evidence import walls_first_outline  # it imports this module
+        walled = walls_first_outline(xyz, levels, to_frame, failure, params)
+    if walled is not None and (failure or walled.seen > seen):  # else the traced one is better
+        corners, seen, lines = walled.corners, walled.seen, []
+    else:
+        walled = None
 
     corners = corners @ rotation2d(angle).T
     corners = _canonical_order(corners)
     quality = _quality(corners, xyz, floor_z, ceiling_z, lines, params)
     quality['walls_seen'] = seen
+    if walled is not None:
+        quality['min_wall_support'] = float(walled.supports.min())
     _check_floor(xyz, levels, quality, far_points, params)
     notes = list(levels.notes)
     if seen < params.min_seen_walls:
@@ -166,6 +175,17 @@ def detect_corners(points: np.ndarray, params: CornerParams | None = None) -> Ro
         wall_angle=float(angle % (math.pi / 2)),
         quality=quality,
         notes=notes)
+
+
+def _outline_failure(corners: np.ndarray) -> str | None:
+    """Why fitted corners are no room outline (too few, crossing), or None."""
+    if len(corners) < 3:
+        return 'no walls found: fewer than 3 wall lines were fitted'
+    crossing = first_self_crossing(corners)
+    if crossing is not None:
+        return (f'the fitted outline crosses itself (walls {crossing[0]} and {crossing[1]}); '
+                'the scan is too sparse or not one room')
+    return None
 
 
 def _checked_xyz(points: np.ndarray) -> np.ndarray:
@@ -612,76 +632,6 @@ def _solid_footprint(occupied: np.ndarray, min_island: int, iterations: int) -> 
     occupied = ndimage.binary_closing(occupied, square, iterations=iterations)
     occupied = ndimage.binary_fill_holes(occupied)
     return ndimage.binary_opening(occupied, square, iterations=iterations)
-
-
-def trace_boundary(mask: np.ndarray) -> np.ndarray:
-    """Outer boundary of a 2D boolean mask (``mask[ix, iy]``) as a clockwise lattice polygon.
-
-    Crack following: every side between an inside and an outside cell becomes a directed
-    edge with the inside on its right; edges are chained (turning right at the rare
-    diagonal contacts) and the loop enclosing the largest area is returned as ``(K, 2)``
-    lattice coordinates (cell corners) with collinear vertices removed.
-    """
-    padded = np.pad(mask.astype(bool), 1)
-    inside = padded[1:-1, 1:-1]
-    ix, iy = np.nonzero(inside & ~padded[1:-1, :-2])  # bottom side open
-    starts = [np.stack([ix + 1, iy], 1)]
-    ends = [np.stack([ix, iy], 1)]
-    ix, iy = np.nonzero(inside & ~padded[1:-1, 2:])  # top side open
-    starts.append(np.stack([ix, iy + 1], 1))
-    ends.append(np.stack([ix + 1, iy + 1], 1))
-    ix, iy = np.nonzero(inside & ~padded[:-2, 1:-1])  # left side open
-    starts.append(np.stack([ix, iy], 1))
-    ends.append(np.stack([ix, iy + 1], 1))
-    ix, iy = np.nonzero(inside & ~padded[2:, 1:-1])  # right side open
-    starts.append(np.stack([ix + 1, iy + 1], 1))
-    ends.append(np.stack([ix + 1, iy], 1))
-    starts = np.concatenate(starts)
-    ends = np.concatenate(ends)
-    if len(starts) == 0:
-        return np.zeros((0, 2))
-
-    outgoing: dict[tuple[int, int], list[int]] = {}
-    for index, start in enumerate(map(tuple, starts.tolist())):
-        outgoing.setdefault(start, []).append(index)
-    used = np.zeros(len(starts), dtype=bool)
-    best_loop, best_area = None, 0.0
-    for first in range(len(starts)):
-        if used[first]:
-            continue
-        loop = []
-        edge = first
-        while not used[edge]:
-            used[edge] = True
-            loop.append(starts[edge])
-            here = tuple(ends[edge].tolist())
-            heading = ends[edge] - starts[edge]
-            options = [e for e in outgoing[here] if not used[e]]
-            if not options:
-                break
-            # prefer the right turn, then straight on, then left (keeps diagonal contacts apart)
-            edge = min(options, key=lambda e: _turn_rank(heading, ends[e] - starts[e]))
-        polygon = np.array(loop, dtype=np.float64)
-        area = -signed_area(polygon)  # clockwise loops have negative signed area
-        if area > best_area:
-            best_loop, best_area = polygon, area
-    if best_loop is None:
-        return np.zeros((0, 2))
-    return _drop_collinear(best_loop)
-
-
-def _turn_rank(heading: np.ndarray, new: np.ndarray) -> int:
-    cross = heading[0] * new[1] - heading[1] * new[0]
-    return 0 if cross < 0 else (1 if cross == 0 else 2)
-
-
-def _drop_collinear(polygon: np.ndarray) -> np.ndarray:
-    previous = np.roll(polygon, 1, axis=0)
-    following = np.roll(polygon, -1, axis=0)
-    a = polygon - previous
-    b = following - polygon
-    cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-    return polygon[np.abs(cross) > 1e-9]
 
 
 # --------------------------------------------------------------------------- simplification
