@@ -20,8 +20,8 @@ import pytest
 from configurator import labels as labels_module
 from configurator.__main__ import main as configurator_main
 from configurator.freecad_cli import build_document
-from configurator.labels import (BOX_MARGIN, LabelsInputError, background_elements, check_overlaps,
-                                 instance_names, point_owners)
+from configurator.labels import (BOX_MARGIN, LabelsInputError, background_elements,
+                                 instance_names, point_owners, shadowed_boxes, write_s3dis_room)
 from generator.__main__ import main as generator_main
 from synthdet.classes import GENERATED_CLASSES, class_color
 from synthdet.contracts import read_labels, write_corners, write_predictions
@@ -540,27 +540,55 @@ def test_a_document_with_python_objects_or_external_links_is_never_opened(
     assert "a link to another file ('other.FCStd')" in capsys.readouterr().err
 
 
-def test_overlapping_parts_are_refused_and_nothing_is_written(round_trip, tmp_path, capsys):
+def inside_box(xyz: np.ndarray, item: dict) -> np.ndarray:
+    """Points inside the box (its footprint, and above its bottom up to its top)."""
+    bottom = item['center'][2] - item['size'][2] / 2.0
+    footprint = box_corners_xy(item['center'], item['size'], item['yaw'])
+    return inside_outline(footprint, xyz) & (xyz[:, 2] > bottom + 0.001) & (
+        xyz[:, 2] < bottom + item['size'][2] - 0.001)
+
+
+def test_a_chair_pushed_under_a_table_is_labelled_with_both_boxes(round_trip, tmp_path, capsys):
+    """A user moves a chair half under a table: both boxes are labelled exactly, the points in
+    both go to the chair (the smaller box), the table keeps the rest, every point once."""
     labels = read_labels(round_trip['out'] / 'factory_1.labels.json')
-    chair = next(box for box in labels['boxes'] if box['class'] == 'chair')
-    script = EDIT_SCRIPT  # move chair 2 onto chair 1's place
-    moved = tmp_path / 'overlap.FCStd'
+    table = next(item for item in labels['boxes'] if item['class'] == 'table')
+    along = np.array([math.cos(table['yaw']), math.sin(table['yaw'])])
+    under = np.asarray(table['center'][:2]) + (table['size'][0] / 2.0 - 0.15) * along
+    pushed = tmp_path / 'pushed.FCStd'
     run_freecad_script(
-        tmp_path, script, {
+        tmp_path, EDIT_SCRIPT, {
             'freecad_dir': str(FREECAD_DIR),
             'repo': str(REPO),
             'document': str(round_trip['corrected']),
-            'out': str(moved),
+            'out': str(pushed),
             'edits': {
-                'chair 2': [chair['center'][0] + 0.1, chair['center'][1]]
+                'chair 2': under.tolist()
             },
             'added': []
         })
     out = tmp_path / 'out'
-    assert labels_cli(moved, '--scan', round_trip['scan'], '--out', out) == 2
-    error = capsys.readouterr().err
-    assert 'overlap.FCStd' in error and 'overlap: move or resize one of them' in error
-    assert not out.exists()
+    assert labels_cli(pushed, '--scan', round_trip['scan'], '--out', out, '--area', 1, '--room',
+                      'factory_1') == 0
+    assert capsys.readouterr().err == ''
+    written = read_labels(out / 'factory_1.labels.json')['boxes']
+    assert len(written) == len(labels['boxes'])
+    chair = next(item for item in written if np.allclose(item['center'][:2], under, atol=1e-3))
+    assert chair['class'] == 'chair'
+    assert any(item['class'] == 'table' and item == table for item in written)
+    annotations = out / 'Area_1' / 'factory_1' / 'Annotations'
+    files = {path.stem: read_scan(path)[:, :3] for path in annotations.glob('*.txt')}
+    chair_name = max((name for name in files if name.startswith('chair_')),
+                     key=lambda name: inside_box(files[name], chair).sum())
+    scan = read_scan(round_trip['scan'])[:, :3]
+    shared = scan[inside_box(scan, chair) & inside_box(scan, table)]
+    assert len(shared) > 50  # the table's points where the chair went under it
+    assert {tuple(row) for row in shared.round(3)} <= {
+        tuple(row) for row in files[chair_name].round(3)}
+    table_names = [name for name in files if name.startswith('table_')]
+    assert not any(inside_box(files[name], chair).any() for name in table_names)
+    assert max(inside_box(files[name], table).sum() for name in table_names) > 500
+    assert sum(len(xyz) for xyz in files.values()) == len(scan)
 
 
 def box(label: str, center, size, yaw: float = 0.0) -> dict:
@@ -573,7 +601,7 @@ def box(label: str, center, size, yaw: float = 0.0) -> dict:
     }
 
 
-def test_points_are_given_to_the_nearest_box_and_ambiguities_refused():
+def test_points_are_given_to_the_nearest_box_and_a_box_off_the_scan_refused():
     table = box('table 1', [0.0, 0.0, 0.4], [1.0, 1.0, 0.8])
     robot = box('yumi 1', [0.0, 0.0, 1.1], [0.4, 0.4, 0.6])
     points = np.array([
@@ -585,15 +613,48 @@ def test_points_are_given_to_the_nearest_box_and_ambiguities_refused():
         [0.5 + 2 * BOX_MARGIN, 0.0, 0.5],  # farther out: nobody's
     ])
     assert point_owners(points, [table, robot], 'doc').tolist() == [-1, 0, 0, 1, 0, -1]
-    check_overlaps([table, robot], 'doc')  # standing on it is no overlap
-    with pytest.raises(LabelsInputError, match=r"^doc: 'table 1' and 'yumi 2' overlap"):
-        check_overlaps([table, box('yumi 2', [0.4, 0.0, 0.7], [0.4, 0.4, 0.6])], 'doc')
-    twin = box('chair 2', [0.0, 0.0, 0.4], [1.0, 1.0, 0.8], math.pi / 2)
-    with pytest.raises(LabelsInputError, match=r"in both 'table 1' and 'chair 2'"):
-        point_owners(points, [table, twin], 'doc')
     empty = box('chair 3', [5.0, 5.0, 0.4], [0.5, 0.5, 0.8])
     with pytest.raises(LabelsInputError, match=r"^doc: 'chair 3' holds no scan point"):
         point_owners(points, [table, empty], 'doc')
+
+
+def test_a_point_inside_overlapping_boxes_belongs_to_the_smallest():
+    """A chair pushed half under a table: its seat and the table top above it lie in both
+    boxes and are the chair's; the table keeps its other half."""
+    table = box('table 1', [0.0, 0.0, 0.375], [1.4, 0.8, 0.75])
+    chair = box('chair 1', [0.0, 0.4, 0.45], [0.5, 0.5, 0.9], math.pi / 2)
+    points = np.array([
+        [0.0, 0.3, 0.45],  # the seat, under the table top: in both, the chair's
+        [0.1, 0.35, 0.75],  # the table top over the seat: in both, the chair's
+        [0.0, -0.3, 0.75],  # the table top away from the chair: the table's
+        [0.0, 0.6, 0.85],  # the backrest out from under the table: the chair's
+        [0.6, 0.0, 0.2],  # a table leg: the table's
+    ])
+    for boxes, table_index, chair_index in (([table, chair], 0, 1), ([chair, table], 1, 0)):
+        owners = point_owners(points, boxes, 'doc')
+        assert owners.tolist() == [chair_index, chair_index, table_index, chair_index,
+                                   table_index]
+        assert shadowed_boxes(points, boxes, owners, 'doc') == ({}, [])
+
+
+def test_a_box_whose_points_all_went_to_smaller_boxes_repeats_them_with_a_warning(
+        tmp_path):
+    table = box('table 1', [0.0, 0.0, 0.4], [1.0, 1.0, 0.8])
+    twin = box('table 2', [0.0, 0.0, 0.4], [1.0, 1.0, 0.8], math.pi / 2)  # duplicated in place
+    points = np.array([[0.0, 0.0, 0.8], [0.3, 0.2, 0.4], [3.0, 0.0, 0.4]])
+    owners = point_owners(points, [table, twin], 'doc')
+    assert owners.tolist() == [0, 0, -1]  # equal boxes: the first in document order
+    repeated, warnings = shadowed_boxes(points, [table, twin], owners, 'doc')
+    assert list(repeated) == [1] and repeated[1].tolist() == [0, 1]
+    assert warnings == ["doc: every scan point of 'table 2' belongs to 'table 1': its "
+                        'annotation file repeats those 2 points']
+    elements = np.array(['table_1', 'table_1', 'clutter_1'], dtype=object)
+    room = tmp_path / 'Area_1' / 'twin_1'
+    write_s3dis_room(room, np.column_stack([points, np.zeros((3, 3))]), elements,
+                     {'table_2': repeated[1]})
+    assert read_scan(room / 'Annotations' / 'table_2.txt')[:, :3].tolist() == points[:2].tolist()
+    assert read_scan(room / 'Annotations' / 'table_1.txt')[:, :3].tolist() == points[:2].tolist()
+    assert len(read_scan(room / 'twin_1.txt')) == 3  # the room holds every point once
 
 
 def test_annotation_names_are_numbered_per_class_and_safe_as_file_names():
