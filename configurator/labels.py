@@ -87,6 +87,11 @@ def _outside(xyz: np.ndarray, box: dict) -> np.ndarray:
     return np.where(xyz[:, 2] > bottom + BOTTOM_CLEARANCE, excess, np.inf)
 
 
+def holds_points(xyz: np.ndarray, box: dict) -> bool:
+    """Whether a point lies in the box or within ``BOX_MARGIN`` of it (above its bottom)."""
+    return bool((_outside(xyz, box) <= BOX_MARGIN).any())
+
+
 def box_volume(box: dict) -> float:
     """The box's volume (cubic metres)."""
     return float(np.prod(box['size']))
