@@ -33,6 +33,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+from mmengine.config import Config
 from tqdm import tqdm
 
 from projects.synthdet.bootstrap import add_cfg_options, float_in, int_in, load_config, run_tool
@@ -59,7 +60,7 @@ class BadInput(ValueError):
 class Setup:
     """The checked inputs of a run."""
 
-    cfg: object
+    cfg: Config
     scans: list[Path]
     spec: WindowSpec
     density: float
@@ -113,16 +114,15 @@ def check_inputs(args: argparse.Namespace) -> tuple[Setup, object]:
     """Check every input before any work; the run's setup and the first round's teacher.
     Raises ``BadInput`` naming the file or option."""
     try:
-        check_output(args.out, '--out', inputs=[args.checkpoint])
-        check_output(args.work, '--work', folder=True)
         scans = find_scans(args.scans)
+        check_output(args.out, '--out', inputs=[args.checkpoint, args.config, *scans])
+        check_output(args.work, '--work', folder=True)
         cfg = load_config(args.config, args.cfg_options)
         check_share(cfg)
         spec, density = inference_settings(cfg, str(args.config))
         for scan in scans:
             load_scan(scan, voxel=args.voxel, columns=args.columns)
         repeat = adapt_repeat(cfg, len(scans))
-        load_checkpoint_file(args.checkpoint)
         teacher = load_model(cfg, str(args.checkpoint), args.device, tta=True)
     except (ValueError, OSError) as error:  # each names its file, option or config key
         raise BadInput(readable(str(error))) from None
