@@ -19,9 +19,8 @@ file, into DATA_ROOT, which also receives the user rooms' area 10.
    IoU, the real-scan evaluation's rule), the unmatched ones and the alternatives not switched
    in deleted, each matched part moved, turned and resized (placement, parameter sheet) onto
    its box, each missed object added with ``editing.add_part`` (the macro's "Add synthdet
-   object"), the document marked reviewed and saved. True boxes that overlap (``labels``
-   refuses them) are first cut apart at the middle of their smallest overlap, as a user
-   answering its message would;
+   object"), the document marked reviewed and saved. True boxes that overlap (a chair under a
+   table) stay as they are: ``labels`` accepts them;
 3. ``python -m configurator labels`` on each corrected document (labels and an S3DIS room of
    area 10, checked against the boxes the correction aimed at), ``tools/create_data.py``;
 4. ``tools/train.py`` with the fine-tune config from the checkpoint, its wall time measured
@@ -52,7 +51,7 @@ import numpy as np
 
 from benchmarks.tool_runs import add_fork_tools_option, start_tool
 from configurator.freecad_cli import run_freecad_process
-from configurator.labels import OVERLAP_TOLERANCE, read_document
+from configurator.labels import read_document
 from projects.synthdet.config_helpers import area_info_file
 from projects.synthdet.evaluation.real_scans import (
     IOU_THR, LabelledScan, assign_greedy, box_array, find_labelled_scans, format_result)
@@ -67,90 +66,10 @@ USER_AREA = 10  # the area teach_finetune.py trains the user's rooms as
 TEST_AREA = 9
 LINKED_FOLDERS = ('points', 'instance_mask', 'semantic_mask')
 FREECAD_DIR = REPO / 'configurator' / 'freecad'
-SEPARATION = 0.002  # metres left between two true boxes cut apart
+CORRECTION_SCRIPT = REPO / 'benchmarks' / 'teach_correction.py'  # runs in freecadcmd
 LABELS_TOLERANCE = 0.002  # metres: the labels round to the millimetre
 GOAL_RECALL_GAIN = 0.2
 GOAL_MAP_DROP = 0.02
-
-# Runs in freecadcmd: applies a correction plan to a synthdet document like a user, saves it.
-CORRECT_IN_FREECAD = '''\
-import json, math, os, sys
-plan = json.load(open(os.environ['SYNTHDET_CORRECTION'], encoding='utf-8'))
-sys.path.insert(0, plan['freecad_dir'])
-sys.path.append(plan['repo'])
-import FreeCAD as App
-from synthdet_freecad import editing, labels  # editing loads the parts' classes
-
-
-SIZE_PROPERTIES = ('Length', 'Width', 'Height')
-
-
-def set_size(doc, part, size):
-    # the part's own size properties, or the cells of its parameter sheet (older documents)
-    if all(name in part.PropertiesList for name in SIZE_PROPERTIES):
-        for name, metres in zip(SIZE_PROPERTIES, size):
-            setattr(part, name, 1000.0 * metres)
-        return
-    sheet = labels._parameter_sheet(doc, part)
-    for alias, metres in zip(labels.SIZE_ALIASES, size):
-        sheet.set(sheet.getCellFromAlias(alias), '=%.3f mm' % (1000.0 * metres))
-
-
-def place(part, box):
-    part.setExpression('.Placement.Base.z', None)
-    bottom = box['center'][2] - box['size'][2] / 2.0
-    part.Placement = App.Placement(
-        App.Vector(1000.0 * box['center'][0], 1000.0 * box['center'][1], 1000.0 * bottom),
-        App.Rotation(App.Vector(0, 0, 1), math.degrees(box['yaw'])))
-
-
-def delete(doc, parts):
-    names = []  # all names first: a sheet may also be a child, a child go with its part
-    for part in parts:
-        sheet = doc.getObject(part.Name + '_Parameters')
-        names += [obj.Name for obj in labels.part_children(part) + [sheet]
-                  if obj is not None] + [part.Name]
-    for name in dict.fromkeys(names):
-        if doc.getObject(name) is not None:
-            doc.removeObject(name)
-
-
-def correct():
-    doc = App.openDocument(plan['document'])
-    parts = labels.synthdet_parts(doc)
-    edits = {item['name']: item['box'] for item in plan['edit']}
-    for part in parts:  # free the heights bound to other parts before any is deleted
-        if part.Name in edits:
-            part.setExpression('.Placement.Base.z', None)
-    unmatched = [part for part in parts if part.Name not in edits]
-    delete(doc, unmatched)
-    for name, box in edits.items():
-        part = doc.getObject(name)
-        set_size(doc, part, box['size'])
-        place(part, box)
-    floor_z = editing.floor_height(doc)
-    for box in plan['add']:
-        part = editing.add_part(doc, box['class'], box['center'][0], box['center'][1],
-                                box['yaw'], tuple(box['size']))
-        if abs(box['center'][2] - box['size'][2] / 2.0 - floor_z) > 0.001:
-            place(part, box)  # not on the floor: lifted like a user setting its z
-    editing.set_reviewed(doc)
-    doc.recompute()
-    doc.saveAs(plan['out'])
-    return {'status': 'ok', 'deleted': len(unmatched), 'edited': len(edits),
-            'added': len(plan['add']),
-            'invalid': [obj.Name for obj in doc.Objects if not obj.isValid()]}
-
-
-try:
-    result = correct()
-except Exception as error:  # the process boundary: every failure goes to the result file
-    result = {'status': 'error', 'error': '%s: %s' % (type(error).__name__, error)}
-temporary = os.environ['SYNTHDET_RESULT'] + '.tmp'
-with open(temporary, 'w', encoding='utf-8') as stream:
-    json.dump(result, stream)
-os.replace(temporary, os.environ['SYNTHDET_RESULT'])
-'''
 
 
 class StepFailed(RuntimeError):
@@ -158,62 +77,6 @@ class StepFailed(RuntimeError):
 
 
 # --------------------------------------------------------------------------- the correction
-
-
-def _axes(yaw: float) -> np.ndarray:
-    """The box's three unit axes (its length, width and height directions) as rows."""
-    return np.array([[math.cos(yaw), math.sin(yaw), 0.0], [-math.sin(yaw),
-                                                           math.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
-
-
-def _extent(box: dict, direction: np.ndarray) -> tuple[int, float, float]:
-    """The box's axis along ``direction`` (one of its axes up to sign) and its interval there."""
-    axes = _axes(box['yaw'])
-    axis = int(np.argmax(np.abs(axes @ direction)))
-    middle = float(np.dot(box['center'], direction))
-    half = box['size'][axis] / 2.0
-    return axis, middle - half, middle + half
-
-
-def _set_extent(box: dict, direction: np.ndarray, low: float, high: float) -> dict:
-    axis, old_low, old_high = _extent(box, direction)
-    size = list(box['size'])
-    size[axis] = high - low
-    shift = (low + high) / 2.0 - (old_low + old_high) / 2.0
-    center = (np.asarray(box['center']) + shift * direction).tolist()
-    return dict(box, center=center, size=size)
-
-
-def separate_boxes(boxes: list[dict]) -> tuple[list[dict], list[str]]:
-    """The boxes with every pair sharing more than ``OVERLAP_TOLERANCE`` along each axis cut
-    apart (``SEPARATION`` between them) at the middle of their smallest overlap, and what was
-    cut. Raises ``ValueError`` for an overlapping pair whose axes are not parallel."""
-    boxes = [dict(box) for box in boxes]
-    cuts = []
-    for first in range(len(boxes)):
-        for second in range(first + 1, len(boxes)):
-            a, b = boxes[first], boxes[second]
-            axes = _axes(a['yaw'])
-            intervals = [(_extent(a, d)[1:], _extent(b, d)[1:]) for d in axes]
-            overlaps = [min(ha, hb) - max(la, lb) for (la, ha), (lb, hb) in intervals]
-            if min(overlaps) <= OVERLAP_TOLERANCE:
-                continue
-            if np.abs(_axes(b['yaw']) @ axes.T).max(axis=1).min() < 1.0 - 1e-6:
-                raise ValueError(f'the true boxes {first} ({a["class"]}) and {second} '
-                                 f'({b["class"]}) overlap and are not parallel')
-            axis = int(np.argmin(overlaps))
-            (la, ha), (lb, hb) = intervals[axis]
-            middle = (max(la, lb) + min(ha, hb)) / 2.0
-            low_box, high_box = (first, second) if la + ha <= lb + hb else (second, first)
-            direction = axes[axis]
-            _, low, _ = _extent(boxes[low_box], direction)
-            _, _, high = _extent(boxes[high_box], direction)
-            boxes[low_box] = _set_extent(boxes[low_box], direction, low, middle - SEPARATION / 2.0)
-            boxes[high_box] = _set_extent(boxes[high_box], direction, middle + SEPARATION / 2.0,
-                                          high)
-            cuts.append(f'{a["class"]} {first} and {b["class"]} {second} cut apart along '
-                        f'{"xyz"[axis]} (they shared {overlaps[axis]:.3f} m)')
-    return boxes, cuts
 
 
 def assign_parts(parts: list[dict], truth: list[dict]) -> dict[int, int]:
@@ -250,8 +113,7 @@ def correct_document(document: Path,
                      timeout: float = 600.0) -> dict:
     """Apply ``plan`` to ``document`` in ``freecadcmd`` and save the result as ``out``."""
     with work_folder('synthdet-teach') as work:
-        script, plan_path, result = work / 'correct.py', work / 'plan.json', work / 'result.json'
-        script.write_text(CORRECT_IN_FREECAD, encoding='utf-8')
+        plan_path, result = work / 'plan.json', work / 'result.json'
         plan_path.write_text(
             json.dumps(
                 dict(
@@ -262,7 +124,8 @@ def correct_document(document: Path,
                     repo=str(REPO))),
             encoding='utf-8')
         env = dict(os.environ, SYNTHDET_CORRECTION=str(plan_path), SYNTHDET_RESULT=str(result))
-        report = run_freecad_process([freecadcmd, str(script)], env, work, timeout, result)
+        report = run_freecad_process([freecadcmd, str(CORRECTION_SCRIPT)], env, work, timeout,
+                                     result)
     if report.get('status') != 'ok' or report['invalid']:
         raise StepFailed(f'{document}: the correction failed in FreeCAD: '
                          f'{report.get("error") or report["invalid"]}')
@@ -597,7 +460,7 @@ def make_user_area(args: argparse.Namespace, train: list[LabelledScan]) -> list[
             str(args.score_thr), '--freecadcmd', args.freecadcmd
         ], args.work / 'logs' / f'scan2cad_{stem}.log', args.fork_tools)
         parts = read_document(document, args.freecadcmd)['boxes']
-        truth, cuts = separate_boxes(item.labels['boxes'])
+        truth = item.labels['boxes']
         plan = correction_plan(parts, truth)
         edited = correct_document(document, plan, corrected, args.freecadcmd)
         run_step(f'labels of {corrected.name}', [
@@ -618,14 +481,12 @@ def make_user_area(args: argparse.Namespace, train: list[LabelledScan]) -> list[
             f'{edited["deleted"] + edited["edited"] - len(parts)} alternatives not switched in), '
             f'{edited["deleted"]} deleted, '
             f'{edited["edited"]} moved/resized, {edited["added"]} added -> {len(written)} '
-            f'labels (within {1000.0 * deviation:.1f} mm of the aimed boxes); '
-            f'{len(cuts)} overlapping true pairs cut apart',
+            f'labels (within {1000.0 * deviation:.1f} mm of the aimed boxes)',
             flush=True)
         done.append({
             'room': stem,
             'parts': len(parts),
             'labels': len(written),
-            'cuts': cuts,
             **{
                 key: edited[key]
                 for key in ('deleted', 'edited', 'added')

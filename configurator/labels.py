@@ -6,10 +6,12 @@ own coordinates:
 
 - writes ``<scan stem>.labels.json`` (``synthdet.labels/1``, what ``tools/eval_scans.py``
   reads beside a scan);
-- gives every scan point to the box it lies in, or lies within ``BOX_MARGIN`` of (the nearest
-  such box; ``point_owners``), counting only points above the box's bottom by more than
+- gives every scan point to one box (``point_owners``): the smallest box it lies in (boxes
+  may overlap, as a chair pushed under a table), else the nearest box it lies within
+  ``BOX_MARGIN`` of, counting only points above the box's bottom by more than
   ``BOTTOM_CLEARANCE``: the floor under a part and the table top under a part standing on it
-  stay outside;
+  stay outside. A box left without a point of its own (a part duplicated in place) gets an
+  annotation file repeating the points in its reach, and a warning (``shadowed_boxes``);
 - names the other points by the room's outline, as the generator's structure elements:
   ``floor_1`` within ``SURFACE_BAND`` of the floor, ``ceiling_1`` of the ceiling, ``wall_<i>``
   within ``SURFACE_BAND`` of the wall from corner i to corner i + 1 (1-based, the outline in
@@ -17,10 +19,9 @@ own coordinates:
 - writes them as ``Area_<N>/<room>/<room>.txt`` and ``Annotations/<class>_<k>.txt``
   (``x y z r g b``, millimetres, colors 0-255) for ``tools/create_data.py``.
 
-Boxes overlapping each other, a point inside two boxes, a box without points and a document
-that is not synthdet's are ``LabelsInputError`` with one line naming the document; a document
-FreeCAD would run code or open other files for is refused before FreeCAD starts
-(``synthdet.fcstd_guard``).
+A box without a scan point in its reach and a document that is not synthdet's are
+``LabelsInputError`` with one line naming the document; a document FreeCAD would run code or
+open other files for is refused before FreeCAD starts (``synthdet.fcstd_guard``).
 """
 import os
 import re
@@ -34,14 +35,12 @@ from synthdet.cli import check_input_file
 from synthdet.classes import GENERATED_CLASSES
 from synthdet.contracts import LABELS_FORMAT, write_labels
 from synthdet.fcstd_guard import check_document
-from synthdet.geometry import box_corners_xy
 from synthdet.outputs import check_output, replaced_paths
 from synthdet.processes import work_folder
 from synthdet.scan_io import read_scan
 
 BOX_MARGIN = 0.005  # metres a point may lie outside its box (sizes rounded to mm, rounding)
 BOTTOM_CLEARANCE = 0.0005  # metres above a box's bottom before a point is the box's
-OVERLAP_TOLERANCE = 0.001  # metres two boxes may share before they count as overlapping
 SURFACE_BAND = 0.05  # metres from the floor, ceiling or a wall a point is that surface's
 ROOM_NAME = re.compile(r'[A-Za-z0-9]+_[0-9]+')
 CLASS_NAME = re.compile(r'[A-Za-z0-9]{1,100}')
@@ -73,27 +72,6 @@ def read_document(document: Path, freecadcmd: str = 'freecadcmd', timeout: float
     return result
 
 
-def _footprint(box: dict, grow: float = 0.0) -> np.ndarray:
-    """The box footprint's four corners (x, y), grown by ``grow`` on every side."""
-    size = [box['size'][0] + 2.0 * grow, box['size'][1] + 2.0 * grow]
-    return box_corners_xy(box['center'], size, box['yaw'])
-
-
-def check_overlaps(boxes: list[dict], source: str) -> None:
-    """Raise ``LabelsInputError`` for two boxes sharing more than ``OVERLAP_TOLERANCE`` along
-    every axis (boxes standing on each other only touch)."""
-    from shapely.geometry import Polygon
-    shapes = [Polygon(_footprint(box, -OVERLAP_TOLERANCE / 2.0)) for box in boxes]
-    for first in range(len(boxes)):
-        for second in range(first + 1, len(boxes)):
-            a, b = boxes[first], boxes[second]
-            low = max(a['center'][2] - a['size'][2] / 2, b['center'][2] - b['size'][2] / 2)
-            high = min(a['center'][2] + a['size'][2] / 2, b['center'][2] + b['size'][2] / 2)
-            if high - low > OVERLAP_TOLERANCE and shapes[first].intersects(shapes[second]):
-                raise LabelsInputError(f'{source}: {a["label"]!r} and {b["label"]!r} overlap: '
-                                       'move or resize one of them')
-
-
 def _outside(xyz: np.ndarray, box: dict) -> np.ndarray:
     """How far each point lies outside the box (0 inside; metres, the largest excess along
     the box's axes), infinite for points not above its bottom by ``BOTTOM_CLEARANCE``."""
@@ -110,27 +88,49 @@ def _outside(xyz: np.ndarray, box: dict) -> np.ndarray:
     return np.where(xyz[:, 2] > bottom + BOTTOM_CLEARANCE, excess, np.inf)
 
 
+def holds_points(xyz: np.ndarray, box: dict) -> bool:
+    """Whether a point lies in the box or within ``BOX_MARGIN`` of it (above its bottom)."""
+    return bool((_outside(xyz, box) <= BOX_MARGIN).any())
+
+
+def box_volume(box: dict) -> float:
+    """The box's volume (cubic metres)."""
+    return float(np.prod(box['size']))
+
+
 def point_owners(xyz: np.ndarray, boxes: list[dict], source: str) -> np.ndarray:
-    """Index of the box each point belongs to, -1 for none: the box it lies in, or within
-    ``BOX_MARGIN`` of (the nearest one). Raises ``LabelsInputError`` for a point inside two
-    boxes or a box that gets no point."""
+    """Index of the box each point belongs to, -1 for none. A point inside boxes belongs to the
+    smallest of them (by volume; the first in document order among equal ones); a point inside
+    none belongs to the nearest box within ``BOX_MARGIN`` of it. Raises ``LabelsInputError`` for
+    a box with no scan point inside it or within ``BOX_MARGIN``."""
     owners = np.full(len(xyz), -1, dtype=np.int64)
     nearest = np.full(len(xyz), np.inf)
-    for index, box in enumerate(boxes):
-        outside = _outside(xyz, box)
-        shared = (outside == 0.0) & (nearest == 0.0)
-        if shared.any():
-            other = boxes[owners[np.argmax(shared)]]
-            raise LabelsInputError(f'{source}: {int(shared.sum())} scan points lie in both '
-                                   f'{other["label"]!r} and {box["label"]!r}: separate them')
+    order = sorted(range(len(boxes)), key=lambda index: box_volume(boxes[index]))
+    for index in order:  # smallest first: an equal distance (0 inside) keeps the smaller box
+        outside = _outside(xyz, boxes[index])
+        if not (outside <= BOX_MARGIN).any():
+            raise LabelsInputError(f'{source}: {boxes[index]["label"]!r} holds no scan point: '
+                                   'move it onto its object or delete it')
         closer = (outside <= BOX_MARGIN) & (outside < nearest)
         owners[closer] = index
         nearest[closer] = outside[closer]
-    counts = np.bincount(owners[owners >= 0], minlength=len(boxes))
-    for index in np.flatnonzero(counts == 0):
-        raise LabelsInputError(f'{source}: {boxes[index]["label"]!r} holds no scan point: '
-                               'move it onto its object or delete it')
     return owners
+
+
+def shadowed_boxes(xyz: np.ndarray, boxes: list[dict], owners: np.ndarray,
+                   source: str) -> tuple[dict[int, np.ndarray], list[str]]:
+    """The boxes left without a point of their own (every point in their reach went to a
+    smaller or nearer box, e.g. a part duplicated in place): for each, the indices of the
+    points in its reach, which its annotation file repeats, and one warning line each."""
+    repeated: dict[int, np.ndarray] = {}
+    warnings = []
+    for index in np.flatnonzero(np.bincount(owners[owners >= 0], minlength=len(boxes)) == 0):
+        reach = np.flatnonzero(_outside(xyz, boxes[index]) <= BOX_MARGIN)
+        takers = ', '.join(repr(boxes[owner]['label']) for owner in np.unique(owners[reach]))
+        repeated[int(index)] = reach
+        warnings.append(f'{source}: every scan point of {boxes[index]["label"]!r} belongs to '
+                        f'{takers}: its annotation file repeats those {len(reach)} points')
+    return repeated, warnings
 
 
 def instance_names(boxes: list[dict], source: str) -> list[str]:
@@ -176,16 +176,22 @@ def _write_points(path: Path, points: np.ndarray) -> None:
     np.savetxt(path, rows, fmt='%.3f %.3f %.3f %d %d %d')
 
 
-def write_s3dis_room(room_dir: Path, points: np.ndarray, elements: np.ndarray) -> None:
+def write_s3dis_room(room_dir: Path,
+                     points: np.ndarray,
+                     elements: np.ndarray,
+                     repeated: dict[str, np.ndarray] | None = None) -> None:
     """Write one S3DIS room (``<room>.txt`` and ``Annotations/<element>.txt``) atomically: in
     a temporary folder of this run beside ``room_dir``, renamed into place (a previous room
-    replaced; ``synthdet.outputs``, which also removes the folders of killed runs)."""
+    replaced; ``synthdet.outputs``, which also removes the folders of killed runs).
+    ``repeated`` maps further annotation names to the indices of points they repeat."""
     with replaced_paths([room_dir], folders=True) as (partial, ):
         annotations = partial / 'Annotations'
         annotations.mkdir()
         order = np.argsort(elements, kind='stable')
         names, starts = np.unique(elements[order], return_index=True)
         for name, chunk in zip(names, np.split(order, starts[1:])):
+            _write_points(annotations / f'{name}.txt', points[chunk])
+        for name, chunk in (repeated or {}).items():
             _write_points(annotations / f'{name}.txt', points[chunk])
         _write_points(partial / f'{room_dir.name}.txt', points[order])
 
@@ -219,7 +225,8 @@ def make_labels(document: Path,
                 freecadcmd: str = 'freecadcmd',
                 timeout: float = 300.0) -> dict:
     """Read the document, write the labels file and the S3DIS room into ``out``; returns a
-    summary (``labels``, ``room_dir``, ``boxes`` per class, ``points``, ``reviewed``)."""
+    summary (``labels``, ``room_dir``, ``boxes`` per class, ``points``, ``object_points``,
+    ``reviewed``, ``warnings``: one line per box whose annotation repeats other boxes' points)."""
     check_output(out, '--out', inputs=[document, scan], folder=True)
     document, scan, out = Path(document), Path(scan), Path(out)
     room_name = room_name or f'{re.sub(r"[^A-Za-z0-9]", "", scan.stem) or "room"}_1'
@@ -237,12 +244,14 @@ def make_labels(document: Path,
     if not boxes and not read['reviewed']:  # reviewed and empty: a room without the classes
         raise LabelsInputError(f'{document}: the document holds no synthdet part to label '
                                '(mark it reviewed if the room holds none of the classes)')
-    check_overlaps(boxes, str(document))
+    names = instance_names(boxes, str(document))
     owners = point_owners(points[:, :3], boxes, str(document))
+    repeated, warnings = shadowed_boxes(points[:, :3], boxes, owners, str(document))
     elements = background_elements(points[:, :3], read['room'])
-    for index, name in enumerate(instance_names(boxes, str(document))):
+    for index, name in enumerate(names):
         elements[owners == index] = name
-    write_s3dis_room(room_dir, points, elements)
+    write_s3dis_room(room_dir, points, elements,
+                     {names[index]: chunk for index, chunk in repeated.items()})
     write_labels(labels_path, labels_document(read, scan))
     counts = {
         name: sum(box['class'] == name for box in boxes)
@@ -254,7 +263,8 @@ def make_labels(document: Path,
         'boxes': counts,
         'points': int(len(points)),
         'object_points': int((owners >= 0).sum()),
-        'reviewed': read['reviewed']
+        'reviewed': read['reviewed'],
+        'warnings': warnings
     }
 
 

@@ -7,6 +7,7 @@ Writes ``DIR/<scan stem>.labels.json`` (``synthdet.labels/1``, for ``tools/eval_
 ``configurator/labels.py`` for the rules and docs/teach.md for the workflow.
 """
 import argparse
+import sys
 
 from configurator.freecad_cli import add_program_options, run_reporting_errors
 from synthdet.cli import MAX_AREA, int_in
@@ -33,5 +34,7 @@ def run(args: argparse.Namespace) -> int:
                             args.freecadcmd, args.timeout))
     if code:
         return code
+    for warning in summary['warnings']:
+        print(f'warning: {warning}', file=sys.stderr)
     print(summary_line(summary))
     return 0

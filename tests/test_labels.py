@@ -20,8 +20,7 @@ import pytest
 from configurator import labels as labels_module
 from configurator.__main__ import main as configurator_main
 from configurator.freecad_cli import build_document
-from configurator.labels import (BOX_MARGIN, LabelsInputError, background_elements, check_overlaps,
-                                 instance_names, point_owners)
+from configurator.labels import BOX_MARGIN
 from generator.__main__ import main as generator_main
 from synthdet.classes import GENERATED_CLASSES, class_color
 from synthdet.contracts import read_labels, write_corners, write_predictions
@@ -473,6 +472,57 @@ def test_a_document_of_the_former_layout_is_read_from_its_parameter_sheets(tmp_p
     assert box['yaw'] == pytest.approx(math.radians(30))
 
 
+def inside_box(xyz: np.ndarray, item: dict) -> np.ndarray:
+    """Points inside the box (its footprint, and above its bottom up to its top)."""
+    bottom = item['center'][2] - item['size'][2] / 2.0
+    footprint = box_corners_xy(item['center'], item['size'], item['yaw'])
+    return inside_outline(footprint, xyz) & (xyz[:, 2] > bottom + 0.001) & (
+        xyz[:, 2] < bottom + item['size'][2] - 0.001)
+
+
+def test_a_chair_pushed_under_a_table_is_labelled_with_both_boxes(round_trip, tmp_path, capsys):
+    """A user moves a chair half under a table: both boxes are labelled exactly, the points in
+    both go to the chair (the smaller box), the table keeps the rest, every point once."""
+    labels = read_labels(round_trip['out'] / 'factory_1.labels.json')
+    table = next(item for item in labels['boxes'] if item['class'] == 'table')
+    along = np.array([math.cos(table['yaw']), math.sin(table['yaw'])])
+    under = np.asarray(table['center'][:2]) + (table['size'][0] / 2.0 - 0.15) * along
+    pushed = tmp_path / 'pushed.FCStd'
+    run_freecad_script(
+        tmp_path, EDIT_SCRIPT, {
+            'freecad_dir': str(FREECAD_DIR),
+            'repo': str(REPO),
+            'document': str(round_trip['corrected']),
+            'out': str(pushed),
+            'edits': {
+                'chair 2': under.tolist()
+            },
+            'added': []
+        })
+    out = tmp_path / 'out'
+    assert labels_cli(pushed, '--scan', round_trip['scan'], '--out', out, '--area', 1, '--room',
+                      'factory_1') == 0
+    assert capsys.readouterr().err == ''
+    written = read_labels(out / 'factory_1.labels.json')['boxes']
+    assert len(written) == len(labels['boxes'])
+    chair = next(item for item in written if np.allclose(item['center'][:2], under, atol=1e-3))
+    assert chair['class'] == 'chair'
+    assert any(item['class'] == 'table' and item == table for item in written)
+    annotations = out / 'Area_1' / 'factory_1' / 'Annotations'
+    files = {path.stem: read_scan(path)[:, :3] for path in annotations.glob('*.txt')}
+    chair_name = max((name for name in files if name.startswith('chair_')),
+                     key=lambda name: inside_box(files[name], chair).sum())
+    scan = read_scan(round_trip['scan'])[:, :3]
+    shared = scan[inside_box(scan, chair) & inside_box(scan, table)]
+    assert len(shared) > 50  # the table's points where the chair went under it
+    assert {tuple(row) for row in shared.round(3)} <= {
+        tuple(row) for row in files[chair_name].round(3)}
+    table_names = [name for name in files if name.startswith('table_')]
+    assert not any(inside_box(files[name], chair).any() for name in table_names)
+    assert max(inside_box(files[name], table).sum() for name in table_names) > 500
+    assert sum(len(xyz) for xyz in files.values()) == len(scan)
+
+
 # --------------------------------------------------------------------------- input errors
 
 
@@ -538,87 +588,6 @@ def test_a_document_with_python_objects_or_external_links_is_never_opened(
             target.writestr(item, data)
     assert labels_cli(linked, '--scan', round_trip['scan'], '--out', out) == 2
     assert "a link to another file ('other.FCStd')" in capsys.readouterr().err
-
-
-def test_overlapping_parts_are_refused_and_nothing_is_written(round_trip, tmp_path, capsys):
-    labels = read_labels(round_trip['out'] / 'factory_1.labels.json')
-    chair = next(box for box in labels['boxes'] if box['class'] == 'chair')
-    script = EDIT_SCRIPT  # move chair 2 onto chair 1's place
-    moved = tmp_path / 'overlap.FCStd'
-    run_freecad_script(
-        tmp_path, script, {
-            'freecad_dir': str(FREECAD_DIR),
-            'repo': str(REPO),
-            'document': str(round_trip['corrected']),
-            'out': str(moved),
-            'edits': {
-                'chair 2': [chair['center'][0] + 0.1, chair['center'][1]]
-            },
-            'added': []
-        })
-    out = tmp_path / 'out'
-    assert labels_cli(moved, '--scan', round_trip['scan'], '--out', out) == 2
-    error = capsys.readouterr().err
-    assert 'overlap.FCStd' in error and 'overlap: move or resize one of them' in error
-    assert not out.exists()
-
-
-def box(label: str, center, size, yaw: float = 0.0) -> dict:
-    return {
-        'class': 'chair',
-        'label': label,
-        'center': list(center),
-        'size': list(size),
-        'yaw': yaw
-    }
-
-
-def test_points_are_given_to_the_nearest_box_and_ambiguities_refused():
-    table = box('table 1', [0.0, 0.0, 0.4], [1.0, 1.0, 0.8])
-    robot = box('yumi 1', [0.0, 0.0, 1.1], [0.4, 0.4, 0.6])
-    points = np.array([
-        [0.0, 0.0, 0.0],  # the floor under the table: nobody's
-        [0.3, 0.3, 0.8],  # on the table top: the table's
-        [0.0, 0.0, 0.8 + 0.0004],  # a robot foot point within the clearance: the table's
-        [0.1, 0.1, 0.802],  # the robot's: inside it, 2 mm above the table
-        [0.5 + BOX_MARGIN / 2, 0.0, 0.5],  # just outside the table's side: the table's
-        [0.5 + 2 * BOX_MARGIN, 0.0, 0.5],  # farther out: nobody's
-    ])
-    assert point_owners(points, [table, robot], 'doc').tolist() == [-1, 0, 0, 1, 0, -1]
-    check_overlaps([table, robot], 'doc')  # standing on it is no overlap
-    with pytest.raises(LabelsInputError, match=r"^doc: 'table 1' and 'yumi 2' overlap"):
-        check_overlaps([table, box('yumi 2', [0.4, 0.0, 0.7], [0.4, 0.4, 0.6])], 'doc')
-    twin = box('chair 2', [0.0, 0.0, 0.4], [1.0, 1.0, 0.8], math.pi / 2)
-    with pytest.raises(LabelsInputError, match=r"in both 'table 1' and 'chair 2'"):
-        point_owners(points, [table, twin], 'doc')
-    empty = box('chair 3', [5.0, 5.0, 0.4], [0.5, 0.5, 0.8])
-    with pytest.raises(LabelsInputError, match=r"^doc: 'chair 3' holds no scan point"):
-        point_owners(points, [table, empty], 'doc')
-
-
-def test_annotation_names_are_numbered_per_class_and_safe_as_file_names():
-    boxes = [box('table 1', [0, 0, 0], [1, 1, 1]), box('chair 1', [2, 0, 0], [1, 1, 1])]
-    boxes[0]['class'] = 'table'
-    boxes.append(dict(boxes[1], label='chair 2'))
-    assert instance_names(boxes, 'doc') == ['table_1', 'chair_1', 'chair_2']
-    for bad in ('../../escape', 'fork lift', 'pallet_rack', ''):
-        boxes[1]['class'] = bad
-        with pytest.raises(LabelsInputError, match=r"^doc: part 'chair 1' has class"):
-            instance_names(boxes, 'doc')
-
-
-def test_background_points_follow_the_room_outline():
-    room = {
-        'corners': [[0.0, 0.0], [0.0, 4.0], [5.0, 4.0], [5.0, 0.0]],
-        'floor_z': 0.0,
-        'ceiling_z': 3.0
-    }
-    points = np.array([[2.0, 2.0, 0.01], [2.0, 2.0, 2.98], [0.02, 2.0, 1.5], [2.0, 3.99, 1.5],
-                       [5.0, 1.0, 1.0], [2.0, 2.0, 1.5]])
-    assert background_elements(points, room).tolist() == [
-        'floor_1', 'ceiling_1', 'wall_1', 'wall_2', 'wall_3', 'clutter_1'
-    ]
-    assert set(background_elements(points, None)) == {'clutter_1'}
 
 
 GUI_DRIVER = textwrap.dedent('''\

@@ -112,10 +112,13 @@ def test_registry_builds_the_model_of_every_config(path: Path) -> None:
     assert model.bbox_head.num_classes == len(cfg.model.bbox_head.label2level)
     # The paper reports its best epoch; the CPU-scale configs test their final one (exp2_cpu's
     # area 9 validates and tests; the domain-shift models do not validate).
-    final = ('exp2_cpu', 'domain_shift_cpu', 'domain_shift_mixed_cpu', 'teach_finetune')
+    final = ('exp2_cpu', 'domain_shift_cpu', 'domain_shift_mixed_cpu', 'teach_finetune',
+             'adapt_selftrain')
     best_metric = None if path.stem in final else 'mAP_0.25'
     assert cfg.default_hooks.checkpoint.save_best == best_metric
-    assert cfg.optim_wrapper.optimizer == dict(type='AdamW', lr=0.001, weight_decay=0.0001)
+    learning_rate = 0.0001 if path.stem == 'adapt_selftrain' else 0.001  # self-training: 1/10
+    assert cfg.optim_wrapper.optimizer == dict(
+        type='AdamW', lr=learning_rate, weight_decay=0.0001)
     assert cfg.optim_wrapper.clip_grad.max_norm == 10
     if 'test_dataloader' not in cfg:  # tr3d.py: the model base without data
         return
@@ -155,6 +158,7 @@ def test_registry_builds_the_model_of_every_config(path: Path) -> None:
         'domain_shift_cpu': 40000,
         'domain_shift_mixed_cpu': 40000,
         'teach_finetune': 40000,
+        'adapt_selftrain': 40000,
         'tiny': 10000
     }.get(path.stem, 100000)
     assert points == {expected_points}  # training and testing sample alike

@@ -15,7 +15,7 @@
 #   (72 minutes wall on a 2-core machine shared with other jobs).
 # Another synthetic checkpoint: --cfg-options load_from=work_dirs/exp2_cpu/epoch_12.pth
 _base_ = ['./exp2_cpu.py']
-from projects.synthdet.config_helpers import area_datasets  # noqa: E402
+from projects.synthdet.config_helpers import areas_once  # noqa: E402
 
 load_from = 'work_dirs/exp2_cpu/epoch_12.pth'
 user_area = 10
@@ -23,13 +23,8 @@ user_repeat = 33
 epochs = 6
 
 # the user's area listed `user_repeat` times: every entry is a plain area dataset
-train_dataloader = dict(
-    dataset=dict(
-        times=1,
-        dataset=dict(
-            datasets=area_datasets(
-                dict(_base_.train_area_dataset, pipeline=_base_.train_pipeline),
-                [*_base_.train_area, *[user_area] * user_repeat], _base_.metainfo))))
+train_dataloader = areas_once(_base_.train_area_dataset, _base_.train_pipeline,
+                              [*_base_.train_area, *[user_area] * user_repeat], _base_.metainfo)
 train_cfg = dict(max_epochs=epochs, val_interval=epochs)
 param_scheduler = dict(
     type='MultiStepLR', begin=0, end=epochs, by_epoch=True, milestones=[4], gamma=0.1)

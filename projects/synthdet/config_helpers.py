@@ -22,6 +22,15 @@ def area_datasets(area_dataset: Mapping[str, Any], areas: Iterable[int],
     return [dict(area_dataset, ann_file=area_info_file(area), metainfo=metainfo) for area in areas]
 
 
+def areas_once(area_dataset: Mapping[str, Any], pipeline: Sequence[Mapping[str, Any]],
+               areas: Iterable[int], metainfo: Mapping[str, Any]) -> dict:
+    """Override of the ``train_dataloader`` of ``_base_/s3dis-synthdet.py``: one epoch lists
+    each of ``areas`` once (``times=1``; an area listed twice is read twice), every dataset
+    with ``pipeline`` and ``metainfo``."""
+    datasets = area_datasets(dict(area_dataset, pipeline=pipeline), areas, metainfo)
+    return dict(dataset=dict(times=1, dataset=dict(datasets=datasets)))
+
+
 def area_loaders(area_dataset: Mapping[str, Any], train_area: Iterable[int], test_area: int,
                  metainfo: Mapping[str, Any]) -> tuple[dict, dict]:
     """Overrides of the ``train_dataloader`` and ``val_dataloader`` (also the test loader) of

@@ -10,6 +10,17 @@ from torch import nn
 from .mink_resnet import init_minkowski_weights
 
 
+class CopyablePruning(ME.MinkowskiPruning):
+    """MinkowskiEngine's pruning made copyable with ``copy.deepcopy`` (its function object
+    cannot be pickled; it holds no state, so a copy is a new instance). mmengine's EMA hooks
+    copy the whole model."""
+
+    def __deepcopy__(self, memo: dict) -> 'CopyablePruning':
+        copied = type(self)()
+        copied.train(self.training)
+        return copied
+
+
 @MODELS.register_module()
 class TR3DNeck(BaseModule):
     """Top-down sparse FPN over all backbone stages but the first; outputs all but the last level.
@@ -51,7 +62,7 @@ class TR3DNeck(BaseModule):
         if generated_reach is not None and generated_reach < 0:
             raise ValueError(f'generated_reach must be >= 0 or None, got {generated_reach}')
         self.generated_reach = generated_reach
-        self.pruning = ME.MinkowskiPruning()
+        self.pruning = CopyablePruning()
         channels = tuple(in_channels)[1:]
         if len(channels) < 2:
             raise ValueError(f'TR3DNeck needs at least 3 backbone stages, got {in_channels}')
