@@ -36,7 +36,7 @@ from pathlib import Path
 from mmengine.config import Config
 from tqdm import tqdm
 
-from projects.synthdet.bootstrap import add_cfg_options, float_in, int_in, load_config, run_tool
+from projects.synthdet.bootstrap import add_cfg_options, check_device, load_config, run_tool
 from projects.synthdet.checkpoint import load_checkpoint_file, save_inference_checkpoint
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.inference.detector import load_model
@@ -44,6 +44,7 @@ from projects.synthdet.inference.windows import WindowSpec, inference_settings
 from projects.synthdet.self_training import (
     PseudoLabelRule, adapt_repeat, check_share, pseudo_boxes, raw_area_dir, round_config,
     teacher_pseudo_labels, train_round, write_pseudo_room)
+from synthdet.cli import OneLineParser, float_in, int_in
 from synthdet.contracts import write_json_atomic
 from synthdet.outputs import check_output, readable
 from synthdet.prepare import prepare_scan
@@ -71,8 +72,7 @@ class Setup:
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Parse the command line."""
-    import torch
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument('scans', type=Path, help='folder of unlabelled scans')
     parser.add_argument('--config', type=Path, required=True,
                         help='self-training config, e.g. configs/tr3d/adapt_selftrain.py')
@@ -91,7 +91,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help='test-time augmented runs, each seeded, that must agree (default 2)')
     parser.add_argument('--seed', type=int_in(0, 2**31 - 1), default=0,
                         help='seed of the point sampling and of training (default 0)')
-    parser.add_argument('--device', default='cuda:0' if torch.cuda.is_available() else 'cpu')
+    parser.add_argument('--device', default=None, help='cpu, cuda or cuda:N (default: cuda:0 if present)')
     parser.add_argument('--voxel', type=float_in(0.0, 10.0, include_low=False),
                         help='keep one point per voxel of this size (m) while reading')
     parser.add_argument('--columns', help='text scans: the columns, e.g. x,y,z,r,g,b')
@@ -123,6 +123,7 @@ def check_inputs(args: argparse.Namespace) -> tuple[Setup, object]:
         for scan in scans:
             load_scan(scan, voxel=args.voxel, columns=args.columns)
         repeat = adapt_repeat(cfg, len(scans))
+        args.device = check_device(args.device)  # DeviceError, a ValueError
         teacher = load_model(cfg, str(args.checkpoint), args.device, tta=True)
     except (ValueError, OSError) as error:  # each names its file, option or config key
         raise BadInput(readable(str(error))) from None
