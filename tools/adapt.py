@@ -33,6 +33,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 from mmengine.config import Config
 from tqdm import tqdm
 
@@ -162,28 +163,32 @@ def check_settings(args: argparse.Namespace, setup: Setup) -> None:
     write_json_atomic(path, settings)
 
 
-def pseudo_label_round(args: argparse.Namespace, setup: Setup, teacher, round_dir: Path) -> dict:
-    """Pseudo-label every scan with ``teacher``, write and convert the rooms (skipped when the
-    round's ``pseudo_labels.json`` exists); returns that document."""
-    record = round_dir / 'pseudo_labels.json'
-    if record.is_file():
-        return json.loads(record.read_text(encoding='utf-8'))
+def prepared_scans(args: argparse.Namespace, setup: Setup) -> list[np.ndarray]:
+    """Every scan read and prepared (levelled, turned, resampled to the training density) with
+    ``--seed``: the same points in every round."""
+    return [
+        prepare_scan(load_scan(scan, voxel=args.voxel, columns=args.columns),
+                     target_density=setup.density,
+                     seed=args.seed).points
+        for scan in tqdm(setup.scans, desc='prepare', unit='scan')
+    ]
+
+
+def pseudo_label_round(setup: Setup, teacher, points: list[np.ndarray], round_dir: Path) -> dict:
+    """Pseudo-label every scan's prepared ``points`` with ``teacher``, write and convert the
+    rooms; returns the round's ``pseudo_labels.json`` document, written last."""
     area = setup.cfg.adapt_area
-    raw = round_dir / 'raw'
-    raw_area_dir(raw, area).mkdir(parents=True, exist_ok=True)
+    area_dir = raw_area_dir(round_dir / 'raw', area)
+    area_dir.mkdir(parents=True, exist_ok=True)
     scans = []
-    for index, scan in enumerate(tqdm(setup.scans, desc=f'{round_dir.name}: pseudo-labels',
-                                      unit='scan')):
-        prepared = prepare_scan(
-            load_scan(scan, voxel=args.voxel, columns=args.columns),
-            target_density=setup.density,
-            seed=args.seed)
-        found = teacher_pseudo_labels(teacher, prepared.points, setup.spec, setup.rule)
+    for index, (scan, scan_points) in enumerate(
+            tqdm(list(zip(setup.scans, points)), desc=f'{round_dir.name}: pseudo-labels',
+                 unit='scan')):
+        found = teacher_pseudo_labels(teacher, scan_points, setup.spec, setup.rule)
         room = f'scan_{index + 1}'
-        boxes = write_pseudo_room(raw_area_dir(raw, area) / room, prepared.points,
-                                  pseudo_boxes(found, setup.classes))
+        boxes = write_pseudo_room(area_dir / room, scan_points, pseudo_boxes(found, setup.classes))
         scans.append({'scan': scan.name, 'room': room, 'boxes': boxes})
-    convert_s3dis(raw, round_dir / 'data', areas=[area])
+    convert_s3dis(round_dir / 'raw', round_dir / 'data', areas=[area])
     document = {
         'format': PSEUDO_LABELS_FORMAT,
         'frame': 'prepared (floor at z = 0, walls along the axes)',
@@ -194,7 +199,7 @@ def pseudo_label_round(args: argparse.Namespace, setup: Setup, teacher, round_di
         },
         'scans': scans
     }
-    write_json_atomic(record, document)
+    write_json_atomic(round_dir / 'pseudo_labels.json', document)
     return document
 
 
@@ -204,13 +209,19 @@ def adapt(args: argparse.Namespace) -> Path:
     check_settings(args, setup)
     refresh = args.refresh or setup.cfg.refresh_iters
     previous = args.checkpoint
+    points = None  # prepared once, when a round first needs pseudo-labels
     for index in tqdm(range(1, args.rounds + 1), desc='adapt', unit='round'):
         round_dir = args.work / f'round_{index}'
         checkpoint = round_dir / 'train' / f'iter_{refresh}.pth'
         if not checkpoint.is_file():
             if teacher is None:  # the previous round's average, loaded weights-only
                 teacher = load_model(setup.cfg, str(previous), args.device, tta=True)
-            document = pseudo_label_round(args, setup, teacher, round_dir)
+            record = round_dir / 'pseudo_labels.json'
+            if record.is_file():  # labelled before a stop during the round's training
+                document = json.loads(record.read_text(encoding='utf-8'))
+            else:
+                points = points if points is not None else prepared_scans(args, setup)
+                document = pseudo_label_round(setup, teacher, points, round_dir)
             count = sum(len(item['boxes']) for item in document['scans'])
             tqdm.write(f'{round_dir.name}: {count} pseudo-labels in {len(setup.scans)} scans')
             cfg = round_config(setup.cfg, round_dir / 'train', previous, round_dir / 'data',
