@@ -35,6 +35,7 @@ import os
 import subprocess
 import sys
 import time
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -377,9 +378,7 @@ class Demo:
         """The report's first section: the scan the shipped model turned into a document."""
         document = self.shipped_document()
         detections = read_predictions(document.with_suffix('.pred.json'))['detections']
-        counts = {}
-        for detection in detections:
-            counts[detection['class']] = counts.get(detection['class'], 0) + 1
+        counts = Counter(detection['class'] for detection in detections)
         found = ', '.join(f'{count} {name}' for name, count in sorted(counts.items())) or 'none'
         picture = document.with_suffix('.FCStd.png').relative_to(self.work)
         return [
