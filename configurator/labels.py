@@ -88,9 +88,14 @@ def _outside(xyz: np.ndarray, box: dict) -> np.ndarray:
     return np.where(xyz[:, 2] > bottom + BOTTOM_CLEARANCE, excess, np.inf)
 
 
+def in_reach(xyz: np.ndarray, box: dict, margin: float = BOX_MARGIN) -> np.ndarray:
+    """Which points lie in the box or within ``margin`` metres of it (above its bottom)."""
+    return _outside(xyz, box) <= margin
+
+
 def holds_points(xyz: np.ndarray, box: dict) -> bool:
     """Whether a point lies in the box or within ``BOX_MARGIN`` of it (above its bottom)."""
-    return bool((_outside(xyz, box) <= BOX_MARGIN).any())
+    return bool(in_reach(xyz, box).any())
 
 
 def box_volume(box: dict) -> float:

@@ -75,14 +75,37 @@ def test_a_pseudo_labelled_room_has_its_boxes_floor_and_clutter(tmp_path):
              {'class': 'table', 'label': 'table 1', 'center': [2.5, 0.5, 2.0],
               'size': [0.5, 0.5, 0.5], 'yaw': 0.0, 'score': 0.7}]  # holds no point: dropped
     room = tmp_path / 'Area_11' / 'scan_1'
-    kept = write_pseudo_room(room, points, boxes)
-    assert kept == boxes[:1]
+    kept, left_out = write_pseudo_room(room, points, boxes, unsure=[])
+    assert kept == boxes[:1] and left_out == 0
     annotations = room / 'Annotations'
     assert sorted(path.stem for path in annotations.glob('*.txt')) == [
         'chair_1', 'clutter_1', 'floor_1']
     assert len(read_scan(annotations / 'chair_1.txt')) == 200
     assert len(read_scan(annotations / 'floor_1.txt')) == 500
     assert len(read_scan(annotations / 'clutter_1.txt')) == 50
+
+
+def test_an_unsure_box_is_left_out_of_the_room_not_trained_as_background(tmp_path):
+    rng = np.random.default_rng(1)
+    floor = np.column_stack([rng.uniform(0, 4, (400, 2)), rng.uniform(-0.01, 0.0, 400)])
+    chair = rng.uniform([1.0, 1.0, 0.1], [1.5, 1.5, 0.9], (200, 3))
+    sofa = rng.uniform([2.5, 2.5, 0.12], [3.5, 3.2, 0.8], (300, 3))  # the teacher is unsure of it
+    lamp = rng.uniform([0.2, 3.5, 1.5], [0.4, 3.7, 2.0], (40, 3))
+    xyz = np.concatenate([floor, chair, sofa, lamp])
+    points = np.column_stack([xyz, np.full((len(xyz), 3), 128.0)])
+    chair_box = {'class': 'chair', 'label': 'chair 1', 'center': [1.25, 1.25, 0.45],
+                 'size': [0.6, 0.6, 0.9], 'yaw': 0.0, 'score': 0.8}
+    unsure = [dict(chair_box, score=0.8),  # a label is never cut
+              {'class': 'sofa', 'label': 'sofa 1', 'center': [3.0, 2.85, 0.45],
+               'size': [0.9, 0.6, 0.7], 'yaw': 0.0, 'score': 0.3}]  # a bit short of the sofa
+    room = tmp_path / 'Area_11' / 'scan_1'
+    kept, left_out = write_pseudo_room(room, points, [chair_box], unsure)
+    assert kept == [chair_box] and left_out == 300  # its margin reaches the sofa's edges
+    annotations = room / 'Annotations'
+    assert len(read_scan(annotations / 'chair_1.txt')) == 200
+    assert len(read_scan(annotations / 'floor_1.txt')) == 400  # the floor under it stays
+    assert len(read_scan(annotations / 'clutter_1.txt')) == 40
+    assert len(read_scan(room / 'scan_1.txt')) == len(xyz) - 300
 
 
 @pytest.fixture(scope='module')
@@ -141,7 +164,8 @@ def test_pseudo_labels_pass_the_filters_and_become_the_rooms(adapted):
     for round_dir in ('round_1', 'round_2'):
         work = adapted['root'] / 'work' / round_dir
         document = json.loads((work / 'pseudo_labels.json').read_text())
-        rule = {'score_thr': SCORE_THR, 'agree_iou': AGREE_IOU, 'seeds': [0, 1]}
+        rule = {'score_thr': SCORE_THR, 'agree_iou': AGREE_IOU, 'unsure_thr': 0.1,
+                'seeds': [0, 1]}
         assert document['rule'] == rule
         assert [item['scan'] for item in document['scans']] == ['hall_1.ply', 'hall_2.ply']
         boxes = [box for item in document['scans'] for box in item['boxes']]
@@ -151,6 +175,9 @@ def test_pseudo_labels_pass_the_filters_and_become_the_rooms(adapted):
                            item['room'] / 'Annotations')
             names = {path.stem for path in annotations.glob('*.txt')}
             assert {box['label'].replace(' ', '_') for box in item['boxes']} <= names
+            room_points = len(read_scan(annotations.parent / f'{item["room"]}.txt'))
+            assert item['unsure_boxes'] >= len(item['boxes'])  # the labels are among them
+            assert room_points == item['points'] - item['points_left_out']
         assert (work / 'data' / 's3dis_infos_Area_11.pkl').is_file()
 
 
@@ -199,6 +226,8 @@ def test_bad_input_is_refused_with_one_line_before_any_work(adapted, tmp_path):
     text = tmp_path / 'notes.pth'
     text.write_text('not a checkpoint')
     assert 'notes.pth' in refused(scans, '--config', config, '--checkpoint', text, *common)
+    assert 'above --score-thr' in refused(scans, '--config', config, '--checkpoint', checkpoint,
+                                          *common, '--unsure-thr', 0.6)
     assert 'is the input' in refused(scans, '--config', config, '--checkpoint', checkpoint,
                                      '--work', work, '--out', checkpoint, '--device', 'cpu')
     process = run_adapt(tmp_path / 'none', '--config', config, '--checkpoint', checkpoint, *common)

@@ -128,6 +128,8 @@ SMOKE: dict[str, Smoke | str] = {
     'bench_domain_shift.py': 'tests/test_bench_domain_shift.py',
     # its whole run at a tiny scale, headline included, is tests/test_bench_teach.py's
     'bench_teach.py': 'tests/test_bench_teach.py',
+    # its whole run at a tiny scale, summary lines included, is tests/test_bench_protocols.py's
+    'bench_protocols.py': 'tests/test_bench_protocols.py',
 }
 
 

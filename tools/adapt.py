@@ -2,7 +2,8 @@
 
 Usage: python tools/adapt.py SCANS_DIR --config configs/tr3d/adapt_selftrain.py
                              --checkpoint CKPT --work DIR --out ADAPTED.pth [--rounds 4]
-                             [--refresh N] [--score-thr 0.5] [--agree-iou 0.5] [--runs 2]
+                             [--refresh N] [--score-thr 0.5] [--unsure-thr 0.1]
+                             [--agree-iou 0.5] [--runs 2]
                              [--seed 0] [--device cpu] [--voxel M] [--columns x,y,z,r,g,b]
                              [--cfg-options k=v ...]
 
@@ -12,7 +13,8 @@ SCANS_DIR holds the scans (every file of a format ``synthdet.scan_io`` reads, as
 1. the teacher detects every scan with test-time augmentation, once per seed (``--runs``
    seeds from ``--seed``); the pseudo-labels are the boxes scoring at least ``--score-thr``
    that every run finds (same class, axis-aligned 3D IoU >= ``--agree-iou``)
-   (``projects/synthdet/self_training.py``);
+   (``projects/synthdet/self_training.py``); the points of the other boxes scoring at least
+   ``--unsure-thr`` are left out of training;
 2. the scans become S3DIS rooms of the config's ``adapt_area`` labelled by them (the rules of
    ``python -m configurator labels``), converted as ``tools/create_data.py`` does;
 3. mmengine's Runner trains ``--refresh`` iterations (default: the config's
@@ -86,6 +88,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="iterations per round (default: the config's refresh_iters)")
     parser.add_argument('--score-thr', type=float_in(0.0, 1.0), default=0.5,
                         help='lowest fused score of a pseudo-label (default 0.5)')
+    parser.add_argument('--unsure-thr', type=float_in(0.0, 1.0), default=0.1,
+                        help='lowest score of a box whose points are left out of training when '
+                        'it is no pseudo-label (default 0.1; at most --score-thr)')
     parser.add_argument('--agree-iou', type=float_in(0.0, 1.0, include_low=False), default=0.5,
                         help='3D IoU at which the runs agree on a box (default 0.5)')
     parser.add_argument('--runs', type=int_in(1, 16), default=2,
@@ -133,8 +138,10 @@ def check_inputs(args: argparse.Namespace) -> tuple[Setup, object]:
     if classes != trained:
         raise BadInput(f'{args.checkpoint}: its classes {classes} are not the config\'s '
                        f'{trained}')
+    if args.unsure_thr > args.score_thr:
+        raise BadInput(f'--unsure-thr {args.unsure_thr}: above --score-thr {args.score_thr}')
     rule = PseudoLabelRule(args.score_thr, args.agree_iou,
-                           tuple(args.seed + run for run in range(args.runs)))
+                           tuple(args.seed + run for run in range(args.runs)), args.unsure_thr)
     return Setup(cfg, scans, spec, density, repeat, classes, rule), teacher
 
 
@@ -147,6 +154,7 @@ def check_settings(args: argparse.Namespace, setup: Setup) -> None:
         'refresh': args.refresh or setup.cfg.refresh_iters,
         'score_thr': args.score_thr,
         'agree_iou': args.agree_iou,
+        'unsure_thr': args.unsure_thr,
         'seeds': list(setup.rule.seeds),
         'voxel': args.voxel,
         'columns': args.columns,
@@ -184,10 +192,14 @@ def pseudo_label_round(setup: Setup, teacher, points: list[np.ndarray], round_di
     for index, (scan, scan_points) in enumerate(
             tqdm(list(zip(setup.scans, points)), desc=f'{round_dir.name}: pseudo-labels',
                  unit='scan')):
-        found = teacher_pseudo_labels(teacher, scan_points, setup.spec, setup.rule)
+        found, unsure = teacher_pseudo_labels(teacher, scan_points, setup.spec, setup.rule)
         room = f'scan_{index + 1}'
-        boxes = write_pseudo_room(area_dir / room, scan_points, pseudo_boxes(found, setup.classes))
-        scans.append({'scan': scan.name, 'room': room, 'boxes': boxes})
+        boxes, left_out = write_pseudo_room(area_dir / room, scan_points,
+                                            pseudo_boxes(found, setup.classes),
+                                            pseudo_boxes(unsure, setup.classes))
+        scans.append({'scan': scan.name, 'room': room, 'boxes': boxes,
+                      'unsure_boxes': len(unsure.scores), 'points_left_out': left_out,
+                      'points': len(scan_points)})
     convert_s3dis(round_dir / 'raw', round_dir / 'data', areas=[area])
     document = {
         'format': PSEUDO_LABELS_FORMAT,
@@ -195,6 +207,7 @@ def pseudo_label_round(setup: Setup, teacher, points: list[np.ndarray], round_di
         'rule': {
             'score_thr': setup.rule.score_thr,
             'agree_iou': setup.rule.agree_iou,
+            'unsure_thr': setup.rule.unsure_thr,
             'seeds': list(setup.rule.seeds)
         },
         'scans': scans

@@ -12,6 +12,11 @@ agrees on, written as S3DIS rooms, and the training runs between two refreshes o
   to the smallest pseudo-box it lies in, else to the nearest within 5 mm; ``floor_1`` are the
   other points within 5 cm of the floor, the rest ``clutter_1``. A pseudo-box without a point
   is dropped.
+- What the teacher is unsure of is left out of the room: the points within ``UNSURE_MARGIN``
+  of a box that some run found scoring at least ``unsure_thr`` but that is no pseudo-label
+  (too low a score, or the runs disagree). An object the teacher half-sees is then neither a
+  label nor background: without the cut, it would be trained as background and the model
+  would learn to stop finding it.
 - A training run continues from the previous one's checkpoint: the student from its own
   weights, the teacher (``MeanTeacherEMAHook``, an exponential moving average of the
   student's weights) from its average. The pseudo-labelled area is mixed with the config's
@@ -29,13 +34,15 @@ import numpy as np
 import torch
 from mmengine.config import Config
 
-from configurator.labels import (SURFACE_BAND, holds_points, instance_names, point_owners,
-                                 shadowed_boxes, write_s3dis_room)
+from configurator.labels import (SURFACE_BAND, holds_points, in_reach, instance_names,
+                                 point_owners, shadowed_boxes, write_s3dis_room)
 from projects.synthdet.config_helpers import area_info_file
 from projects.synthdet.core.box_ops import pairwise_iou_3d
 from projects.synthdet.inference.detector import ModelDetector
 from projects.synthdet.inference.windows import Detections, WindowSpec
 from synthdet.info_files import RAW_DIR, load_info_pickle
+
+UNSURE_MARGIN = 0.05  # metres around an unsure box whose points are left out of the room
 
 
 @dataclass(frozen=True)
@@ -45,6 +52,7 @@ class PseudoLabelRule:
     score_thr: float
     agree_iou: float
     seeds: tuple[int, ...]
+    unsure_thr: float
 
 
 def agreeing_detections(runs: list[Detections], score_thr: float, agree_iou: float) -> Detections:
@@ -65,15 +73,18 @@ def agreeing_detections(runs: list[Detections], score_thr: float, agree_iou: flo
 
 
 def teacher_pseudo_labels(model: torch.nn.Module, points: np.ndarray, spec: WindowSpec,
-                          rule: PseudoLabelRule) -> Detections:
-    """The pseudo-labels of one prepared scan: the teacher ``model`` (with test-time
-    augmentation) run once per seed of ``rule``, its boxes filtered by
-    :func:`agreeing_detections`."""
+                          rule: PseudoLabelRule) -> tuple[Detections, Detections]:
+    """The pseudo-labels of one prepared scan and the boxes the teacher is unsure of: the
+    teacher ``model`` (with test-time augmentation) runs once per seed of ``rule``; the labels
+    are its boxes that pass :func:`agreeing_detections`, the unsure boxes every box of any run
+    scoring at least ``rule.unsure_thr`` (the labels among them)."""
+    floor = min(rule.unsure_thr, rule.score_thr)
     runs = [
-        ModelDetector(model, rule.score_thr, seed).detect(points, spec, progress=False)
+        ModelDetector(model, floor, seed).detect(points, spec, progress=False)
         for seed in rule.seeds
     ]
-    return agreeing_detections(runs, rule.score_thr, rule.agree_iou)
+    unsure = Detections.concatenate([run.select(run.scores >= rule.unsure_thr) for run in runs])
+    return agreeing_detections(runs, rule.score_thr, rule.agree_iou), unsure
 
 
 def pseudo_boxes(detections: Detections, classes: list[str]) -> list[dict]:
@@ -95,12 +106,22 @@ def pseudo_boxes(detections: Detections, classes: list[str]) -> list[dict]:
     return boxes
 
 
-def write_pseudo_room(room_dir: Path, points: np.ndarray, boxes: list[dict]) -> list[dict]:
+def write_pseudo_room(room_dir: Path, points: np.ndarray, boxes: list[dict],
+                      unsure: list[dict]) -> tuple[list[dict], int]:
     """Write the prepared scan ``points`` as an S3DIS room labelled by ``boxes`` (the rules of
-    ``configurator.labels``; floor at z = 0); returns the boxes that hold points (the others
-    are dropped)."""
+    ``configurator.labels``; floor at z = 0), without the points within ``UNSURE_MARGIN`` of an
+    ``unsure`` box that lie in no labelled box. Returns the boxes that hold points (the others
+    are dropped) and the number of points left out."""
+    held = [box for box in boxes if holds_points(points[:, :3], box)]
+    labelled = np.zeros(len(points), dtype=bool)
+    for box in held:
+        labelled |= in_reach(points[:, :3], box)
+    doubtful = np.zeros(len(points), dtype=bool)
+    for box in unsure:
+        doubtful |= in_reach(points[:, :3], box, UNSURE_MARGIN)
+    kept = labelled | ~doubtful
+    points = points[kept]
     xyz = points[:, :3]
-    held = [box for box in boxes if holds_points(xyz, box)]
     source = f'pseudo-labels of {room_dir.name}'
     names = instance_names(held, source)
     owners = point_owners(xyz, held, source)
@@ -111,7 +132,7 @@ def write_pseudo_room(room_dir: Path, points: np.ndarray, boxes: list[dict]) -> 
         elements[owners == index] = name
     write_s3dis_room(room_dir, points, elements,
                      {names[index]: chunk for index, chunk in repeated.items()})
-    return held
+    return held, int(np.count_nonzero(~kept))
 
 
 def raw_area_dir(root: Path, area: int) -> Path:

@@ -1,0 +1,265 @@
+"""Teaching and adapting measured on real labelled scans: three protocols side by side with the
+model before them (docs/teach.md "Three protocols on real scans").
+
+Usage: python benchmarks/bench_protocols.py SCANS_DIR --config configs/tr3d/exp2_cpu.py
+           --checkpoint CKPT --data GENERATED_ROOT --work WORK
+           [--protocols next new unlabelled] [--new-rooms ROOM ...] [--score-thr 0.3]
+           [--iters N] [--rounds R] [--refresh N] [--fork-tools]
+
+SCANS_DIR holds labelled scans (``X.<suffix>`` with ``X.labels.json`` beside it) and may hold
+unlabelled ones. A scan's room is its stem up to the first ``_`` (``scannet0001_living`` and
+``scannet0001_rescan1`` are room ``scannet0001``); a stem holding ``_rescan`` is a rescan.
+
+- ``next`` (the next scan of the same room): ``benchmarks/bench_teach.py`` corrects the first
+  scan of every room that has rescans, fine-tunes on them and tests on the rescans;
+- ``new`` (a new room): the same on every scan of ``--new-rooms``, tested on every other
+  labelled scan;
+- ``unlabelled``: ``tools/adapt.py`` on every scan of the folder without its labels, tested on
+  the labelled ones.
+
+Each row: recall at IoU 0.25 per class, false positives per scan, phantom YuMis and 3D printers,
+generated area 9 AP@0.25 per class (``tools/test.py``), before and after, and the minutes of
+the fine-tune or the adaptation. A finished fine-tune or adaptation in WORK is reused with its
+recorded minutes. Prints the table and one summary line per protocol; the figures go to
+``WORK/protocols.json``. ``--iters`` (fine-tune iterations), ``--rounds`` and ``--refresh``
+(adaptation) shorten the runs for the smoke test. Exit code 2 for bad input, 1 for a step that
+fails.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import time
+from pathlib import Path
+
+from benchmarks import bench_teach
+from benchmarks.bench_teach import (StepFailed, data_root_options, evaluate_held_out,
+                                    run_step, test_area)
+from benchmarks.tool_runs import add_fork_tools_option
+from projects.synthdet.evaluation.real_scans import LabelledScan, find_labelled_scans, labels_path
+from synthdet.scan_io import SCAN_SUFFIXES
+
+REPO = Path(__file__).resolve().parents[1]
+CONFIGS = REPO / 'configs' / 'tr3d'
+PROTOCOLS = ('next', 'new', 'unlabelled')
+TITLES = {'next': 'teach, next scan', 'new': 'teach, new room', 'unlabelled': 'adapt, unlabelled'}
+REPORTED_CLASSES = ('table', 'chair', 'sofa')
+GOAL_AREA9 = 0.9  # every class's AP@0.25 on generated area 9 after adapting
+GOAL_MINUTES = 30.0
+
+
+def room_of(stem: str) -> str:
+    """The room a scan shows: its stem up to the first ``_``."""
+    return stem.split('_')[0]
+
+
+def is_rescan(stem: str) -> bool:
+    """Whether the scan is a later scan of its room."""
+    return '_rescan' in stem
+
+
+def split(scans: list[LabelledScan], protocol: str,
+          new_rooms: list[str]) -> tuple[list[LabelledScan], list[LabelledScan]]:
+    """The teaching and the test scans of a teach protocol; ``ValueError`` when either is
+    empty."""
+    stems = [item.scan.stem for item in scans]
+    if protocol == 'next':
+        rescanned = {room_of(stem) for stem in stems if is_rescan(stem)}
+        train = [item for item in scans
+                 if room_of(item.scan.stem) in rescanned and not is_rescan(item.scan.stem)]
+        test = [item for item in scans if is_rescan(item.scan.stem)]
+    else:
+        train = [item for item in scans if room_of(item.scan.stem) in new_rooms]
+        test = [item for item in scans if room_of(item.scan.stem) not in new_rooms]
+    if not train or not test:
+        raise ValueError(f'protocol {protocol}: {len(train)} scans to teach on and {len(test)} '
+                         'to test on: each needs one at least')
+    return train, test
+
+
+def linked_scans(folder: Path, scans: list[LabelledScan]) -> Path:
+    """A fresh ``folder`` holding links to the scans and their labels files."""
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir(parents=True)
+    for item in scans:
+        for path in (item.scan, labels_path(item.scan)):
+            (folder / path.name).symlink_to(path.resolve())
+    return folder
+
+
+def teach(args: argparse.Namespace, protocol: str, scans: list[LabelledScan]) -> dict:
+    """One teach protocol through ``benchmarks/bench_teach.py``: its figures before and after
+    and the fine-tune's minutes."""
+    train, test = split(scans, protocol, args.new_rooms)
+    work = args.work / protocol
+    command = [
+        linked_scans(work / 'scans', train + test), '--train',
+        *[item.scan.stem for item in train], '--config', args.config, '--checkpoint',
+        args.checkpoint, '--data', args.data, '--data-root', work / 'data', '--work',
+        work / 'run', '--finetune-config', args.finetune_config, '--score-thr', args.score_thr
+    ]
+    if args.iters:
+        command += ['--iters', args.iters]
+    if args.fork_tools:
+        command.append('--fork-tools')
+    if bench_teach.main([str(item) for item in command]) != 0:
+        raise StepFailed(f'protocol {protocol}: benchmarks/bench_teach.py failed')
+    results = json.loads((work / 'run' / 'teach.json').read_text(encoding='utf-8'))
+    return {
+        'train': results['train'],
+        'test': results['held_out'],
+        'before': results['before'],
+        'after': results['after'],
+        'minutes': results['fine_tune_seconds'] / 60.0
+    }
+
+
+def measure(args: argparse.Namespace, config: Path, checkpoint: Path,
+            scans: list[LabelledScan], work: Path) -> dict:
+    """A model on the labelled scans and on generated area 9."""
+    held = evaluate_held_out(config, checkpoint, scans, work / 'eval', args.score_thr)
+    rows = test_area(config, checkpoint, data_root_options(config, args.data), work / 'area9',
+                     args.fork_tools)
+    return {'held_out': held, 'area9': rows}
+
+
+def adapt(args: argparse.Namespace, scans: list[LabelledScan]) -> dict:
+    """The unlabelled protocol: ``tools/adapt.py`` on the whole folder (or its finished run in
+    WORK), the model before and after on the labelled scans."""
+    work = args.work / 'unlabelled'
+    adapted, record = work / 'adapted.pth', work / 'adapt_time.json'
+    if not (adapted.is_file() and record.is_file()):
+        command = [
+            'tools/adapt.py',
+            str(args.scans), '--config',
+            str(args.adapt_config), '--checkpoint',
+            str(args.checkpoint), '--work',
+            str(work / 'adapt'), '--out',
+            str(adapted)
+        ]
+        command += [f'--{key}={value}' for key, value in (('rounds', args.rounds),
+                                                           ('refresh', args.refresh)) if value]
+        command += ['--cfg-options', *data_root_options(args.adapt_config, args.data)]
+        start = time.perf_counter()
+        run_step('tools/adapt.py', command, work / 'adapt.log', args.fork_tools)
+        record.write_text(json.dumps({'seconds': time.perf_counter() - start}))
+    minutes = json.loads(record.read_text(encoding='utf-8'))['seconds'] / 60.0
+    return {
+        'train': [path.name for path in sorted(args.scans.iterdir())
+                  if path.is_file() and path.suffix.lower() in SCAN_SUFFIXES],
+        'test': [item.scan.stem for item in scans],
+        'before': measure(args, args.config, args.checkpoint, scans, work / 'before'),
+        'after': measure(args, args.adapt_config, adapted, scans, work / 'after'),
+        'minutes': minutes
+    }
+
+
+def goals(protocol: str, row: dict) -> dict[str, bool]:
+    """Each goal of the protocol, met or not."""
+    before, after = row['before']['held_out'], row['after']['held_out']
+    recall, recall_before = after['overall_recall'] or 0.0, before['overall_recall'] or 0.0
+    false, false_before = after['false_positives_per_room'], before['false_positives_per_room']
+    area9 = [value for name, value in row['after']['area9']['mAP@0.25'].items()
+             if name != 'mean' and value is not None]
+    met = {
+        'area 9 >= 0.9 in every class': min(area9, default=0.0) >= GOAL_AREA9,
+        f'<= {GOAL_MINUTES:g} minutes': row['minutes'] <= GOAL_MINUTES
+    }
+    if protocol == 'next':
+        met.update({'recall >= 0.9': recall >= 0.9, '<= 0.5 false positives per scan':
+                    false <= 0.5, 'no phantom': after['phantoms'] == 0})
+    elif protocol == 'new':
+        met.update({'recall +0.15': recall - recall_before >= 0.15 - 1e-9,
+                    'no more false positives': false <= false_before})
+    else:
+        met.update({'recall +0.10': recall - recall_before >= 0.10 - 1e-9,
+                    '30 % fewer false positives': false <= 0.7 * false_before + 1e-9})
+    return met
+
+
+def _recall_cells(held: dict) -> str:
+    cells = []
+    for name in REPORTED_CLASSES:
+        total = held['total'].get(name)
+        if total and total['truth']:
+            cells.append(f'{name} {total["found"]}/{total["truth"]}')
+    return ', '.join(cells)
+
+
+def summary_line(protocol: str, row: dict) -> str:
+    """``teach, next scan: recall A (was B), F false positives per scan (was G), P phantom``."""
+    before, after = row['before']['held_out'], row['after']['held_out']
+    return (f'{TITLES[protocol]}: recall {after["overall_recall"] or 0.0:.2f} (was '
+            f'{before["overall_recall"] or 0.0:.2f}), {after["false_positives_per_room"]:.1f} '
+            f'false positives per scan (was {before["false_positives_per_room"]:.1f}), '
+            f'{after["phantoms"]} phantom')
+
+
+def report(rows: dict[str, dict]) -> str:
+    """The table of every protocol run, then one summary line each."""
+    lines = []
+    for protocol, row in rows.items():
+        lines.append(f'{TITLES[protocol]}: taught on {", ".join(row["train"])}; tested on '
+                     f'{len(row["test"])} scans ({row["minutes"]:.1f} min)')
+        for name in ('before', 'after'):
+            held, area9 = row[name]['held_out'], row[name]['area9']['mAP@0.25']
+            per_class = ' '.join(f'{key} {value:.3f}' for key, value in area9.items()
+                                 if key != 'mean' and value is not None)
+            lines.append(
+                f'  {name:6s} recall {held["overall_recall"] or 0.0:.3f} ({_recall_cells(held)}), '
+                f'{held["false_positives_per_room"]:.2f} false positives per scan, '
+                f'{held["phantoms"]} phantoms; area 9 AP@0.25 {per_class}')
+        lines.append('  goals: ' + ', '.join(f'{goal} {"met" if met else "NOT met"}'
+                                             for goal, met in row['goals'].items()))
+    lines.append('')
+    lines += [summary_line(protocol, row) for protocol, row in rows.items()]
+    return '\n'.join(lines)
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('scans', type=Path, help='folder of (mostly labelled) scans')
+    parser.add_argument('--config', type=Path, required=True, help='the synthetic model config')
+    parser.add_argument('--checkpoint', type=Path, required=True, help='its checkpoint')
+    parser.add_argument('--data', type=Path, required=True,
+                        help='generated data root with areas 7, 8, 9 (read only)')
+    parser.add_argument('--work', type=Path, required=True, help='output folder')
+    parser.add_argument('--protocols', nargs='+', choices=PROTOCOLS, default=list(PROTOCOLS))
+    parser.add_argument('--new-rooms', nargs='+', default=['scannet0000', 'scannet0001'],
+                        help='the rooms a new-room protocol teaches on')
+    parser.add_argument('--finetune-config', type=Path, default=CONFIGS / 'teach_finetune.py')
+    parser.add_argument('--adapt-config', type=Path, default=CONFIGS / 'adapt_selftrain.py')
+    parser.add_argument('--score-thr', type=float, default=0.3)
+    parser.add_argument('--iters', type=int, help='fine-tune iterations instead of the epochs')
+    parser.add_argument('--rounds', type=int, help="adaptation rounds (tools/adapt.py's default)")
+    parser.add_argument('--refresh', type=int, help='adaptation iterations per round')
+    add_fork_tools_option(parser)
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        for path in (args.config, args.checkpoint, args.finetune_config, args.adapt_config):
+            if not path.is_file():
+                raise ValueError(f'{path}: file not found')
+        scans, _ = find_labelled_scans([args.scans])
+        rows = {}
+        for protocol in args.protocols:
+            row = adapt(args, scans) if protocol == 'unlabelled' else teach(args, protocol, scans)
+            rows[protocol] = {**row, 'goals': goals(protocol, row)}
+    except ValueError as error:  # a bad argument or scan folder
+        print(f'bench_protocols: bad input: {error}', file=sys.stderr)
+        return 2
+    except (RuntimeError, OSError) as error:  # StepFailed
+        print(f'bench_protocols: failed: {error}', file=sys.stderr)
+        return 1
+    (args.work / 'protocols.json').write_text(json.dumps(rows, indent=1))
+    print(report(rows))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
