@@ -1,5 +1,7 @@
 """docs/benchmarks.md shows the end of each benchmark's output, without Python's warnings."""
+import datetime
 import json
+import re
 import tempfile
 
 from tools import collect_benchmarks
@@ -35,3 +37,20 @@ def test_random_temporary_folder_names_are_scrubbed():
     text = collect_benchmarks.scrub(f'output in {temporary}/tmpn37p8sz_/data and '
                                     f'{temporary}/synthdet-bench-hall-x/hall.laz')
     assert text == 'output in $TMPDIR/<random>/data and $TMPDIR/synthdet-bench-hall-x/hall.laz'
+
+
+def test_the_page_dates_only_what_the_kept_records_date(tmp_path):
+    """Every date on the page is a kept record's finishing time: the notes under the outputs
+    carry none of their own, so a re-run cannot leave a stale date beside a new output."""
+    finished = datetime.date(2031, 1, 2).isoformat() + ' 03:04 UTC'
+    for name in collect_benchmarks.NOTES:
+        (tmp_path / f'{name}.json').write_text(json.dumps(dict(
+            name=name, command=f'.venv/bin/python benchmarks/bench_{name}.py', returncode=0,
+            seconds=1.0, load_before=[0, 0, 0], load_after=[0, 0, 0], finished=finished,
+            last_line='summary')))
+        (tmp_path / f'{name}.txt').write_text('summary\n')
+    records = [collect_benchmarks.kept_output(name, tmp_path) for name in collect_benchmarks.NOTES]
+    page = collect_benchmarks.render(records, [], tmp_path)
+    assert all(note in page for notes in collect_benchmarks.NOTES.values() for note in notes)
+    dates = re.findall(r'\b\d{4}-\d{2}-\d{2}\b', page)
+    assert dates == [finished.split()[0]] * 2 * len(collect_benchmarks.NOTES)

@@ -87,8 +87,8 @@ WHAT = {
     'process x 2 threads, batch of 4 rooms',
     'train_recipe':
     'exp2_cpu training: where an iteration\'s time goes (loader steps, voxelisation, backbone, '
-    'neck, head, backward, optimiser) and the whole `make exp2-cpu` training, previous recipe '
-    'vs today\'s',
+    'neck, head, backward, optimiser) and the whole `make exp2-cpu` training: TR3D\'s full '
+    'neck, structure found anew every epoch and a validation per epoch vs `exp2_cpu.py`',
     'freecad':
     'FreeCAD document of 500 to 10,000 synthetic detections (one parametric part each): build '
     'and save time per detection, wall and CPU seconds of the FreeCAD process',
@@ -108,39 +108,32 @@ GOALS = {
     'freecad': '10,000 detections in under a minute, time per detection flat (no quadratic step)',
     'domain_shift': 'mixed model: drop <= 0.05 mAP@0.25 on every held-out profile',
 }
-# What a reader needs beside an output that was not measured with today's code.
+# How to read an output, shown under its command; repeated runs and what earlier code gave are
+# in docs/history.md, the page's dates and commits come from the kept records.
 NOTES = {
     'scanner': [
         '',
         'The scans\' ratio stays below the bare casting ratio: the work besides casting (ray '
         'generation, noise, the laser scanner\'s spacing filter, labelling) costs both ray '
         'engines the same time; the `scan/bare` column shows how far each Embree scan is from '
-        'its bare cast.',
-        '',
-        'Three runs of the command above on the idle machine (2026-12-07 00:29-00:35 UTC, '
-        '1-minute load 0.4-0.9) gave 10.9x, 10.8x and 10.7x; with embreex\'s `run` as the '
-        'scanner\'s engine, three runs gave 9.4x, 9.3x and 9.3x (2026-12-06 21:45-21:49). The '
-        'laser scanner is furthest from '
-        'the goal (7.5-8.0x): its spacing filter takes 0.26-0.27 s of its 0.65-0.70 s scan, '
-        '48 ns per beam of the 5.4M. What earlier versions gave is in docs/history.md.'
+        'its bare cast, and the table of where the time goes shows what keeps the laser scanner '
+        'furthest from the goal: its spacing filter. Repeated runs and earlier versions: '
+        '[history.md](history.md).'
     ],
     'convert': [
         '',
-        'Three runs of the command above on the idle machine (2026-12-06, 1-minute load 0.6-1.4) '
-        'gave 6.1x, 4.8x and 6.4x at one process each (4.6x, 4.5x, 4.4x at 2 each); synthdet\'s '
-        'one-worker run took 0.58-0.61 s, 0.10-0.12 s of it system time, mmdet3d\'s 2.9-3.9 s. '
-        'Before, five runs gave 2.1x to 4.6x: synthdet\'s run swung from 0.7 to 1.7 s, all of '
-        'it system time. The VM hands free 2 MiB blocks back to its host (virtio-balloon free '
-        'page reporting); memory taken from them costs a host fault per 4 KiB page when first '
-        'touched, and the converter took such blocks for numpy\'s huge pages and for the 2 MiB '
-        'page-cache folios of one-call `tofile` writes. It now reuses its room arrays in 4 KiB '
-        'pages and writes 64 KiB per call; the `sys s` column shows what is left.'
+        'The `sys s` column is the system time of each run. The VM hands free 2 MiB blocks back '
+        'to its host (free page reporting), and memory taken from them costs a host fault per '
+        '4 KiB page when first touched; the converter therefore reuses its room arrays in 4 KiB '
+        'pages and writes 64 KiB per call, which keeps its system time small and its run-to-run '
+        'spread narrow. Repeated runs and earlier versions: [history.md](history.md).'
     ],
     'domain_shift': [
         '',
-        'Not re-run with the regeneration of this page (about 1.5 h of training): the output '
-        'of the command above on the date shown, before the laser scanner\'s export changed '
-        'the generated data; running it again measures today\'s data.'
+        '`make bench` runs it only when named (`--only domain_shift`, about 1.5 h of training): '
+        'the output is that of the run on the date shown. Its rooms came from the laser '
+        'scanner without its one-return-per-centimetre export ([history.md](history.md)); a new '
+        'run measures the generator as it is.'
     ],
 }
 OUTPUT_DIR = REPO_ROOT / 'docs' / 'benchmarks'

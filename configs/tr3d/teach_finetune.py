@@ -10,9 +10,7 @@
 #   generated rooms' variety) keep their training data.
 # - exp2_cpu.py's optimiser for 6 epochs of 50 iterations (batch 4), the learning rate dropping
 #   10x after epoch 4; validation on generated area 9 at the end only (the final epoch is the
-#   model, as in exp2_cpu.py). Measured (docs/teach.md "Measured"): the training process takes
-#   5.1 s of CPU per iteration, validation included, so about 26 minutes on 2 idle CPU cores
-#   (72 minutes wall on a 2-core machine shared with other jobs).
+#   model, as in exp2_cpu.py). Its training time: docs/teach.md, "5. Fine-tune".
 # Another synthetic checkpoint: --cfg-options load_from=work_dirs/exp2_cpu/epoch_12.pth
 _base_ = ['./exp2_cpu.py']
 from projects.synthdet.config_helpers import areas_once  # noqa: E402
