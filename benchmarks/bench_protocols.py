@@ -19,11 +19,11 @@ unlabelled ones. A scan's room is its stem up to the first ``_`` (``scannet0001_
 
 Each row: recall at IoU 0.25 per class, false positives per scan, phantom YuMis and 3D printers,
 generated area 9 AP@0.25 per class (``tools/test.py``), before and after, and the minutes of
-the fine-tune or the adaptation. A finished fine-tune or adaptation in WORK is reused with its
-recorded minutes. Prints the table and one summary line per protocol; the figures go to
-``WORK/protocols.json``. ``--iters`` (fine-tune iterations), ``--rounds`` and ``--refresh``
-(adaptation) shorten the runs for the smoke test. Exit code 2 for bad input, 1 for a step that
-fails.
+the fine-tune or the adaptation. A finished fine-tune in WORK is reused with its recorded
+minutes, and so is a finished adaptation made by the same command. Prints the table and one
+summary line per protocol; the figures go to ``WORK/protocols.json``. ``--iters`` (fine-tune
+iterations), ``--rounds`` and ``--refresh`` (adaptation) shorten the runs for the smoke test.
+Exit code 2 for bad input, 1 for a step that fails.
 """
 from __future__ import annotations
 
@@ -39,6 +39,7 @@ from benchmarks.bench_teach import (StepFailed, data_root_options, evaluate_held
                                     run_step, test_area)
 from benchmarks.tool_runs import add_fork_tools_option
 from projects.synthdet.evaluation.real_scans import LabelledScan, find_labelled_scans, labels_path
+from projects.synthdet.self_training import UNSURE_THR
 from synthdet.scan_io import SCAN_SUFFIXES
 
 REPO = Path(__file__).resolve().parents[1]
@@ -130,21 +131,25 @@ def adapt(args: argparse.Namespace, scans: list[LabelledScan]) -> dict:
     WORK), the model before and after on the labelled scans."""
     work = args.work / 'unlabelled'
     adapted, record = work / 'adapted.pth', work / 'adapt_time.json'
-    if not (adapted.is_file() and record.is_file()):
-        command = [
-            'tools/adapt.py',
-            str(args.scans), '--config',
-            str(args.adapt_config), '--checkpoint',
-            str(args.checkpoint), '--work',
-            str(work / 'adapt'), '--out',
-            str(adapted)
-        ]
-        command += [f'--{key}={value}' for key, value in (('rounds', args.rounds),
-                                                           ('refresh', args.refresh)) if value]
-        command += ['--cfg-options', *data_root_options(args.adapt_config, args.data)]
+    command = [
+        'tools/adapt.py',
+        str(args.scans), '--config',
+        str(args.adapt_config), '--checkpoint',
+        str(args.checkpoint), '--work',
+        str(work / 'adapt'), '--out',
+        str(adapted)
+    ]
+    command += [f'--{key}={value}' for key, value in (('rounds', args.rounds),
+                                                       ('refresh', args.refresh),
+                                                       ('unsure-thr', args.unsure_thr))
+                if value is not None]  # --unsure-thr always: a default that changes reruns
+    command += ['--cfg-options', *data_root_options(args.adapt_config, args.data)]
+    done = json.loads(record.read_text(encoding='utf-8')) if record.is_file() else {}
+    if not adapted.is_file() or done.get('command') != command:
         start = time.perf_counter()
         run_step('tools/adapt.py', command, work / 'adapt.log', args.fork_tools)
-        record.write_text(json.dumps({'seconds': time.perf_counter() - start}))
+        record.write_text(json.dumps({'command': command,
+                                      'seconds': time.perf_counter() - start}))
     minutes = json.loads(record.read_text(encoding='utf-8'))['seconds'] / 60.0
     return {
         'train': [path.name for path in sorted(args.scans.iterdir())
@@ -235,6 +240,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('--iters', type=int, help='fine-tune iterations instead of the epochs')
     parser.add_argument('--rounds', type=int, help="adaptation rounds (tools/adapt.py's default)")
     parser.add_argument('--refresh', type=int, help='adaptation iterations per round')
+    parser.add_argument('--unsure-thr', type=float, default=UNSURE_THR,
+                        help=f"the adaptation's --unsure-thr (default {UNSURE_THR})")
     add_fork_tools_option(parser)
     return parser.parse_args(argv)
 

@@ -125,3 +125,12 @@ def test_a_whole_run_of_the_three_protocols_prints_their_lines(tmp_path, capsys,
     # the protocols' work stays in WORK; the generated data is only read
     assert (work / 'unlabelled' / 'adapt' / 'round_1' / 'pseudo_labels.json').is_file()
     assert not any(path.name.startswith('s3dis_infos_Area_1') for path in data.iterdir())
+    # the same command again reuses the adaptation; other options are refused by tools/adapt.py
+    record = work / 'unlabelled' / 'adapt_time.json'
+    recorded = record.read_text()
+    again = [str(item) for item in command] + ['--protocols', 'unlabelled']
+    assert main(again) == 0 and record.read_text() == recorded
+    capsys.readouterr()
+    assert main([*again, '--unsure-thr', '0.2']) == 1
+    assert 'holds a run with other unsure_thr' in capsys.readouterr().err
+    assert record.read_text() == recorded
