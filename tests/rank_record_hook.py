@@ -1,5 +1,5 @@
-"""A hook for the distributed-training test (tests/test_experiments.py): every process saves
-the samples it trained on and its parameters before and after training to
+"""A hook for the distributed-training test (tests/test_tools/test_experiments.py): every
+process saves the samples it trained on and its parameters before and after training to
 ``<out_dir>/rank<R>.pth``."""
 from pathlib import Path
 

@@ -280,8 +280,8 @@ def render(records: list[dict], not_run: list[str], output_dir: Path) -> str:
         '(where recorded). Load average = 1/5/15-minute load before and after the run; the '
         'project machine is shared with other jobs, so absolute times vary with it more than '
         f'the ratios do. The 1-minute load around these runs: {load} (on 2 cores, above 2 '
-        'means jobs were waiting for a core). `tests/test_benchmarks.py` runs every benchmark '
-        'at its smallest size in `make test`.',
+        'means jobs were waiting for a core). `tests/test_benchmarks/test_benchmarks.py` runs '
+        'every benchmark at its smallest size in `make test`.',
         '',
         '| benchmark | what | result (last line) | goal | wall s | load before | load after | '
         'machine | finished |',

@@ -1,7 +1,8 @@
-# Tiny TR3D for the tests (tests/test_tr3d_overfit.py, tests/test_tr3d_tools.py): exp2.py's
-# model and classes, made to learn a few rooms of area 1 by heart on one CPU core (set the
-# datasets' data_root with --cfg-options): trained and tested on the same rooms, 2 cm voxels,
-# 10,000 sampled points, no augmentation, batch 1, a constant learning rate for 24 epochs.
+# Tiny TR3D for the tests (tests/test_models/test_tr3d_overfit.py,
+# tests/test_tools/test_tr3d_tools.py): exp2.py's model and classes, made to learn a few rooms of
+# area 1 by heart on one CPU core (set the datasets' data_root with --cfg-options): trained and
+# tested on the same rooms, 2 cm voxels, 10,000 sampled points, no augmentation, batch 1, a
+# constant learning rate for 24 epochs.
 _base_ = ['./exp2.py']
 from projects.synthdet.config_helpers import area_datasets, area_info_file  # noqa: E402
 from projects.synthdet.config_helpers import with_num_points  # noqa: E402
