@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from configurator.__main__ import main as configurator_main
-from configurator.corners import (CornerDetectionError, CornerParams, detect_corners,
-                                  floor_prominence, room_outline)
+from configurator.corners import CornerDetectionError, CornerParams, detect_corners, room_outline
+from configurator.corners.levels import floor_prominence
 from synthdet.contracts import read_corners, read_predictions, write_predictions
 from synthdet.geometry import (distance_to_polygon, first_self_crossing, points_in_polygon,
                                rotation2d, signed_area)
