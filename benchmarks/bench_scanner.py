@@ -288,7 +288,7 @@ class TimedRandom:
 def timed_sensor_parts(seconds: Counter) -> Iterator[None]:
     """Time ``generator.tls``' range errors and mixed pixels (as noise) and its spacing filter
     into ``seconds``."""
-    range_noise, mixed_pixels, spacing_filter = (tls._add_range_noise, tls._mixed_pixels,
+    range_noise, mixed_pixels, spacing_filter = (tls.add_range_noise, tls.mix_at_depth_edges,
                                                  tls.SpacingFilter)
 
     def timed_noise(function: Callable) -> Callable:
@@ -309,13 +309,14 @@ def timed_sensor_parts(seconds: Counter) -> Iterator[None]:
             seconds['spacing filter'] += time.perf_counter() - start
             return answer
 
-    tls._add_range_noise, tls._mixed_pixels = timed_noise(range_noise), timed_noise(mixed_pixels)
+    tls.add_range_noise = timed_noise(range_noise)
+    tls.mix_at_depth_edges = timed_noise(mixed_pixels)
     tls.SpacingFilter = TimedSpacingFilter
     try:
         yield
     finally:
-        tls._add_range_noise, tls._mixed_pixels, tls.SpacingFilter = (range_noise, mixed_pixels,
-                                                                      spacing_filter)
+        tls.add_range_noise, tls.mix_at_depth_edges = range_noise, mixed_pixels
+        tls.SpacingFilter = spacing_filter
 
 
 def scan_once(scanner: Scanner, room: RoomGeometry, model: str, points: int, config: dict,

@@ -164,8 +164,8 @@ _MAX_GLASS_FACES = 16
 
 # no triangle map: the hit triangles are the scene's own
 _NO_MAP = np.zeros(0, dtype=np.int64)
-# no stray returns (see :func:`_labels`)
-_NO_STRAY = np.zeros(0, dtype=bool)
+# no stray returns (see :func:`label_returns`)
+NO_STRAY = np.zeros(0, dtype=bool)
 
 
 @numba.njit(cache=True, nogil=True, inline='always')
@@ -183,9 +183,9 @@ def _write_ray(ray: int, path: np.ndarray, step: int, x: float, y: float, z: flo
 
 
 @numba.njit(cache=True, nogil=True)
-def _path_rays(path: np.ndarray, start: int, seed: np.uint64, origins: np.ndarray,
-               directions: np.ndarray, cast_origins: np.ndarray,
-               cast_directions: np.ndarray) -> None:
+def path_rays(path: np.ndarray, start: int, seed: np.uint64, origins: np.ndarray,
+              directions: np.ndarray, cast_origins: np.ndarray,
+              cast_directions: np.ndarray) -> None:
     """Write a batch of uniform rays: origins (N, 3) going round ``path`` from ``start``, unit
     directions (N, 3) of three standard normal draws each, normalised as
     :func:`random_directions` does, and their float32 copies, which Embree casts. Ray r's
@@ -213,10 +213,10 @@ _COUNTED_TARGETS = 512
 
 
 @numba.njit(cache=True, nogil=True)
-def _aimed_rays(path: np.ndarray, start: int, cumulative: np.ndarray, low: np.ndarray,
-                extent: np.ndarray, seed: np.uint64, origins: np.ndarray,
-                directions: np.ndarray, cast_origins: np.ndarray,
-                cast_directions: np.ndarray) -> None:
+def aimed_rays(path: np.ndarray, start: int, cumulative: np.ndarray, low: np.ndarray,
+               extent: np.ndarray, seed: np.uint64, origins: np.ndarray,
+               directions: np.ndarray, cast_origins: np.ndarray,
+               cast_directions: np.ndarray) -> None:
     """Write a batch of aimed rays: origins (N, 3) going round ``path`` from ``start``, unit
     directions (N, 3) towards a uniform random point ``low + uniform * extent`` of a random
     target's bounds (target k with probability ``cumulative[k] - cumulative[k - 1]``), as
@@ -300,9 +300,9 @@ def _glass_hits(t_hit: np.ndarray, primitive: np.ndarray, glass: np.ndarray) -> 
 
 
 @numba.njit(cache=True, nogil=True)
-def _labels(triangle: np.ndarray, colors: np.ndarray, part_of: np.ndarray,
-            movable_tri: np.ndarray, stray: np.ndarray, rgb: np.ndarray, part: np.ndarray,
-            triangles: np.ndarray) -> int:
+def label_returns(triangle: np.ndarray, colors: np.ndarray, part_of: np.ndarray,
+                  movable_tri: np.ndarray, stray: np.ndarray, rgb: np.ndarray, part: np.ndarray,
+                  triangles: np.ndarray) -> int:
     """Write each return's color, part and triangle (int64) in one pass; returns the number
     of returns on objects, ``stray`` ones (empty: none) left out."""
     object_points = 0
@@ -447,10 +447,10 @@ class Scanner:
                 start = state['step']
                 state['step'] = int((state['step'] + batch) % len(path))
                 if aimed:  # towards a random point of a random object's bounds (area-weighted)
-                    _aimed_rays(path, start, self.target_cumulative, self.target_lo,
-                                self.target_extent, stream_seed(rng), *rays)
+                    aimed_rays(path, start, self.target_cumulative, self.target_lo,
+                               self.target_extent, stream_seed(rng), *rays)
                 else:
-                    _path_rays(path, start, stream_seed(rng), *rays)
+                    path_rays(path, start, stream_seed(rng), *rays)
                 cast_origins, cast_dirs = rays[2:]
                 if config['angular_jitter'] > 0:
                     cast_dirs = nominal + rng.standard_normal(
@@ -498,8 +498,8 @@ class Scanner:
         count = state['points']
         xyz, origin, tri = xyz[:count], origin[:count], tri[:count]
         rgb, part = np.empty((count, 3), dtype=np.uint8), np.empty(count, dtype=np.int32)
-        _labels(tri, self.scene.colors, self.scene.part, self.movable_tri, _NO_STRAY, rgb, part,
-                tri)
+        label_returns(tri, self.scene.colors, self.scene.part, self.movable_tri, NO_STRAY, rgb,
+                      part, tri)
         return ScanResult(
             xyz=xyz,
             rgb=rgb,

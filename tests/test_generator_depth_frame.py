@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from generator.config import DEFAULTS, ConfigError, load_config
-from generator.depth_frame import DepthCamera, _depth_frame_returns, cast_depth_frame
+from generator.depth_frame import DepthCamera, cast_depth_frame, depth_frame_returns
 from generator.scanner import Scanner
 from generator.sensor_common import ROOM_STRUCTURE, RoomGeometry
 from generator.sensors import scan_room
@@ -122,9 +122,9 @@ def test_returns_are_lost_at_depth_edges_only():
     quiet = dict(FRAME, depth_noise=[0.0, 0.0])
     camera = straight_camera()
     columns, rows = 200, 150
-    full, edged = (_depth_frame_returns(scanner, camera, columns, rows,
-                                        np.random.default_rng(1), dict(quiet, edge_dropout=share),
-                                        BATCH, on_object, np.zeros(len(on_object)))[0]
+    full, edged = (depth_frame_returns(scanner, camera, columns, rows,
+                                       np.random.default_rng(1), dict(quiet, edge_dropout=share),
+                                       BATCH, on_object, np.zeros(len(on_object)))[0]
                    for share in (0.0, 1.0))
     kept = {tuple(p) for p in edged}
     lost = np.array([p for p in full if tuple(p) not in kept])

@@ -18,7 +18,8 @@ from generator.scanner import Scanner, TriangleScene
 from generator.sensor_common import RoomGeometry, room_geometry
 from generator.sensors import choose_sensor, scan_room
 from generator.tablet import cast_tablet
-from generator.tls import cast_tls, scan_tls, tls_grid
+from generator.tls import cast_tls, scan_tls
+from generator.tls_grid import tls_grid
 from synthdet.contracts import SENSOR_MODELS
 from synthdet.point_text import read_point_file
 from synthdet.voxels import cube_keys
