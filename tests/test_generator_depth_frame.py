@@ -17,7 +17,7 @@ from generator.sensors import scan_room
 from synthdet.geometry import distance_to_polygon
 from synthdet.point_text import read_point_file
 from tests.generator_runs import generate_rooms
-from tests.test_generator_pipeline import _same_tree
+from tests.test_generator_pipeline import same_tree
 from tests.test_generator_sensors import room_scene
 
 FRAME = DEFAULTS['scanner']['depth_frame']
@@ -209,7 +209,7 @@ def test_generated_rooms_record_the_camera_and_keep_no_sparse_object(frame_rooms
 def test_same_seed_gives_the_same_frame_files(frame_rooms):
     work, options = frame_rooms
     generate_rooms(work / 'again', 7, 2, 20000, 3, *options)
-    _same_tree(work / 'out', work / 'again')
+    same_tree(work / 'out', work / 'again')
 
 
 def test_the_depth_frame_profile_draws_it_and_mixed_rooms_does_not():

@@ -17,7 +17,7 @@ from generator.sensors import scan_room
 from synthdet.point_text import read_point_file
 from synthdet.voxels import cube_keys
 from tests.generator_runs import generate_rooms
-from tests.test_generator_pipeline import _same_tree
+from tests.test_generator_pipeline import same_tree
 from tests.test_generator_sensors import room_scene
 from tools.check_annotations import main as check_annotations
 
@@ -147,7 +147,7 @@ def test_generated_rooms_record_the_reconstruction_and_pass_the_annotation_check
 def test_same_seed_gives_the_same_room_files(reconstruction_rooms):
     work, options = reconstruction_rooms
     generate_rooms(work / 'again', 7, 2, 20000, 3, *options)
-    _same_tree(work / 'out', work / 'again')
+    same_tree(work / 'out', work / 'again')
 
 
 def test_the_profile_draws_a_quarter_of_reconstructions_and_the_defaults_none():
