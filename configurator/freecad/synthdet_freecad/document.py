@@ -245,18 +245,8 @@ def _build(doc, predictions: dict, corners: dict | None, library_dir: str | None
         container, kind = built[placed]
         group = furniture if placed.class_name in FURNITURE_CLASSES else equipment
         members[group].append(container)
-        alternatives = []
-        for other in placed.alternatives:
-            alternative, _ = build(other)
-            alternative.Visibility = False
-            alternatives.append(alternative)
+        alternatives = _linked_alternatives(container, placed, build)
         hidden_alternatives.extend(alternatives)
-        if alternatives:
-            container.addProperty(
-                'App::PropertyLinkList', 'Alternatives', 'Synthdet',
-                'other classes detected on this box (hidden in the '
-                'Alternatives group: show one and hide this part to switch)')
-            container.Alternatives = alternatives
         objects.append({
             'name': container.Name,
             'label': container.Label,
@@ -267,6 +257,30 @@ def _build(doc, predictions: dict, corners: dict | None, library_dir: str | None
             'orientation': placed.orientation,
             'alternatives': [alternative.Label for alternative in alternatives],
         })
+    _fill_groups_and_recompute(doc, members, hidden_alternatives)
+    return {'objects': objects, 'warnings': warnings, 'skipped_low_score': skipped}
+
+
+def _linked_alternatives(container, placed, build) -> list:
+    """The other classes detected on the box of ``placed``, built (``build``) and hidden, and
+    linked from its ``container``'s ``Alternatives`` property."""
+    alternatives = []
+    for other in placed.alternatives:
+        alternative, _ = build(other)
+        alternative.Visibility = False
+        alternatives.append(alternative)
+    if alternatives:
+        container.addProperty(
+            'App::PropertyLinkList', 'Alternatives', 'Synthdet',
+            'other classes detected on this box (hidden in the '
+            'Alternatives group: show one and hide this part to switch)')
+        container.Alternatives = alternatives
+    return alternatives
+
+
+def _fill_groups_and_recompute(doc, members: dict, hidden_alternatives: list) -> None:
+    """Fill every group with its ``members`` at once, the hidden alternatives into a hidden
+    Alternatives group, and recompute; raise if FreeCAD cannot."""
     for group, containers_of_group in members.items():
         _add_members(group, containers_of_group)
     if hidden_alternatives:
@@ -277,4 +291,3 @@ def _build(doc, predictions: dict, corners: dict | None, library_dir: str | None
     broken = [obj.Name for obj in doc.Objects if not obj.isValid()]
     if broken:
         raise RuntimeError(f'FreeCAD could not recompute: {", ".join(broken)}')
-    return {'objects': objects, 'warnings': warnings, 'skipped_low_score': skipped}
