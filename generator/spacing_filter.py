@@ -9,7 +9,7 @@ import numba
 import numpy as np
 
 from generator.counter_random import ITEM_COUNTERS, word
-from generator.tls_grid import grid_points
+from generator.tls_grid import grid_points, next_beam
 from synthdet.voxels import hash_slot, packed_key
 
 
@@ -135,9 +135,7 @@ def _cube_keys(station: np.ndarray, cos_elevation: np.ndarray, sin_elevation: np
             keys[k] = packed_key(point, side, origin_key)
         else:
             keys[k] = -2
-        column += 1
-        if column == columns:
-            row, column = row + 1, 0
+        row, column = next_beam(row, column, columns)
 
 
 @numba.njit(cache=True, nogil=True)

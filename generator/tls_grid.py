@@ -40,9 +40,17 @@ def grid_directions(cos_elevation: np.ndarray, sin_elevation: np.ndarray,
         directions[k, 0] = cos_elevation[row] * cos_azimuth[column]
         directions[k, 1] = cos_elevation[row] * sin_azimuth[column]
         directions[k, 2] = sin_elevation[row]
-        column += 1
-        if column == columns:
-            row, column = row + 1, 0
+        row, column = next_beam(row, column, columns)
+
+
+@numba.njit(cache=True, nogil=True)
+def next_beam(row: int, column: int, columns: int) -> tuple[int, int]:
+    """The row and column of the beam after the one at (``row``, ``column``) in a grid of
+    ``columns`` azimuths (elevation-major: counted on without divisions)."""
+    column += 1
+    if column == columns:
+        return row + 1, 0
+    return row, column
 
 
 @numba.njit(cache=True, nogil=True)
