@@ -23,6 +23,11 @@ the scan's wall planes instead (:mod:`configurator.wall_evidence`, a partial out
 :func:`room_outline` never gives up on a real room:
 when the outline cannot be traced it returns an approximate floor (the footprint's outline or
 its oriented bounding rectangle) marked ``approximate_floor`` in the quality figures.
+
+The modules: ``levels`` (steps 1 and 2), ``footprint`` (3), ``simplify`` (4), ``wall_lines``
+(5), ``detect`` (the whole detection and the approximate floor), ``scan_frame`` (a scan file's
+corners in its own coordinates and their ``synthdet.corners/1`` form) and ``params`` (tuning,
+result and error). This package file exports the public interface.
 """
 from configurator.corners.detect import approximate_outline, detect_corners, room_outline
 from configurator.corners.params import CornerDetectionError, CornerParams, RoomOutline
