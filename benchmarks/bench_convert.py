@@ -201,7 +201,8 @@ def check_identical(root: Path, area: int, out_dir: Path, mm_root: Path, mm_info
     return n_boxes
 
 
-def main() -> None:
+def parse_args() -> argparse.Namespace:
+    """The benchmark's command line."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--rooms', type=int, default=20)
     parser.add_argument(
@@ -220,28 +221,40 @@ def main() -> None:
         default=1,
         help='runs per converter, alternating; the best time of each is kept')
     parser.add_argument('--work-dir', help='keep data here (default: a temporary folder)')
-    args = parser.parse_args()
+    return parser.parse_args()
+
+
+def write_inputs(work: Path, area: int, rooms: int, points_per_object: int) -> tuple[Path, Path]:
+    """The synthetic area (written unless it exists) and the mmdet3d layout linking it as its
+    area 1, both on disk and in the page cache; returns their roots."""
+    root, mm_root = work / 'synthetic', work / 'mmdet3d'
+    if not (root / S3DIS_DIR / f'Area_{area}').is_dir():
+        print(f'writing {rooms} rooms ...', flush=True)
+        write_synthetic_area(
+            root,
+            area,
+            rooms,
+            seed=0,
+            classes=BENCH_CLASSES,
+            points_per_object=points_per_object,
+            room_size=(7.0, 6.0, 3.0))
+    (mm_root / S3DIS_DIR).mkdir(parents=True, exist_ok=True)
+    link = mm_root / S3DIS_DIR / 'Area_1'
+    if not link.exists():
+        link.symlink_to(root / S3DIS_DIR / f'Area_{area}', target_is_directory=True)
+    os.sync()  # the rooms on disk: their write-back falls into no timed run
+    for path in (root / S3DIS_DIR).rglob('*.txt'):  # same warm page cache for both
+        path.read_bytes()
+    return root, mm_root
+
+
+def main() -> None:
+    """Time both converters on one area, check that they agree and print the table."""
+    args = parse_args()
     area = 7
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(args.work_dir or tmp)
-        root, mm_root = work / 'synthetic', work / 'mmdet3d'
-        if not (root / S3DIS_DIR / f'Area_{area}').is_dir():
-            print(f'writing {args.rooms} rooms ...', flush=True)
-            write_synthetic_area(
-                root,
-                area,
-                args.rooms,
-                seed=0,
-                classes=BENCH_CLASSES,
-                points_per_object=args.points_per_object,
-                room_size=(7.0, 6.0, 3.0))
-        (mm_root / S3DIS_DIR).mkdir(parents=True, exist_ok=True)
-        link = mm_root / S3DIS_DIR / 'Area_1'
-        if not link.exists():
-            link.symlink_to(root / S3DIS_DIR / f'Area_{area}', target_is_directory=True)
-        os.sync()  # the rooms on disk: their write-back falls into no timed run
-        for path in (root / S3DIS_DIR).rglob('*.txt'):  # same warm page cache for both
-            path.read_bytes()
+        root, mm_root = write_inputs(work, area, args.rooms, args.points_per_object)
         n = args.workers
         configurations = {  # label -> run
             'mmdet3d collect + S3DISData, 1 process':

@@ -49,12 +49,9 @@ from scipy.spatial import ConvexHull
 from skimage import measure
 from sklearn.cluster import DBSCAN
 
-from configurator.corners import (
-    CornerDetectionError,
-    CornerParams,
-    detect_corners,  # noqa
-    find_levels,
-    simplify_outline)
+from configurator.corners import CornerDetectionError, CornerParams, detect_corners
+from configurator.corners.levels import find_levels
+from configurator.corners.simplify import simplify_outline
 from configurator.__main__ import main as configurator_main
 from synthdet.contracts import read_corners, read_room
 from synthdet.info_files import room_sensor

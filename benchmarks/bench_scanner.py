@@ -288,7 +288,7 @@ class TimedRandom:
 def timed_sensor_parts(seconds: Counter) -> Iterator[None]:
     """Time ``generator.tls``' range errors and mixed pixels (as noise) and its spacing filter
     into ``seconds``."""
-    range_noise, mixed_pixels, spacing_filter = (tls._add_range_noise, tls._mixed_pixels,
+    range_noise, mixed_pixels, spacing_filter = (tls.add_range_noise, tls.mix_at_depth_edges,
                                                  tls.SpacingFilter)
 
     def timed_noise(function: Callable) -> Callable:
@@ -309,13 +309,14 @@ def timed_sensor_parts(seconds: Counter) -> Iterator[None]:
             seconds['spacing filter'] += time.perf_counter() - start
             return answer
 
-    tls._add_range_noise, tls._mixed_pixels = timed_noise(range_noise), timed_noise(mixed_pixels)
+    tls.add_range_noise = timed_noise(range_noise)
+    tls.mix_at_depth_edges = timed_noise(mixed_pixels)
     tls.SpacingFilter = TimedSpacingFilter
     try:
         yield
     finally:
-        tls._add_range_noise, tls._mixed_pixels, tls.SpacingFilter = (range_noise, mixed_pixels,
-                                                                      spacing_filter)
+        tls.add_range_noise, tls.mix_at_depth_edges = range_noise, mixed_pixels
+        tls.SpacingFilter = spacing_filter
 
 
 def scan_once(scanner: Scanner, room: RoomGeometry, model: str, points: int, config: dict,
@@ -444,7 +445,47 @@ def agreement(found: tuple[np.ndarray, np.ndarray], embree: tuple[np.ndarray, np
     return f'hit/miss {same_hit:.2%}, |dt| < 1 mm {same_t:.2%}, triangle {same_face:.2%}'
 
 
-def main() -> None:
+def bare_cast_methods(triangles: TriangleScene, objects: list, offsets: np.ndarray, rays: int,
+                      slow_rays: int) -> dict[str, tuple[Caster, int]]:
+    """The ray casters compared on bare rays (label -> caster, rays to cast): Embree on one
+    thread and on all, the previous engines and bpy's loops (``objects``: the bpy objects in
+    export order, ``offsets``: their first triangles)."""
+    embree = {threads: Scanner(triangles, threads=threads) for threads in (1, 0)}
+    methods = {
+        f'Embree Scanner.cast, {threads or os.cpu_count()} thread(s)':
+        (lambda o, d, s=scanner: s.cast(s.full_scene, o, d), rays)
+        for threads, scanner in embree.items()
+    }
+    methods['embreex run (previous engine)'] = (embreex_caster(triangles.vertices,
+                                                               triangles.triangles), rays)
+    methods['Open3D cast_rays (first engine)'] = (open3d_caster(triangles.vertices,
+                                                                triangles.triangles), rays)
+    methods['bpy BVHTree.ray_cast loop'] = (bvhtree_caster(triangles.vertices,
+                                                           triangles.triangles), rays)
+    methods['bpy Object.ray_cast loop (per object)'] = (object_caster(objects,
+                                                                      offsets), slow_rays)
+    face_offsets = dict(zip((o.name for o in objects), offsets.tolist()))
+    methods['bpy scene.ray_cast loop'] = (scene_caster(face_offsets), slow_rays)
+    return methods
+
+
+def print_bare_casts(results: dict[str, tuple], rays: int) -> tuple[str, float]:
+    """The table of the bare casts (rays per second, agreement with Embree); returns the
+    fastest bpy loop and Embree's (one thread) ratio of rays per second to it."""
+    reference = results['Embree Scanner.cast, 1 thread(s)'][2]
+    print(f'bare ray casting, {rays:,} uniform rays from the paper\'s path:')
+    print(f'{"method":<42}{"rays":>9}{"seconds":>9}{"rays/s":>13}  agreement with Embree')
+    rate = {}
+    for label, (n, seconds, found) in results.items():
+        rate[label] = n / seconds
+        check = '' if label.startswith('Embree') else agreement(found, reference)
+        print(f'{label:<42}{n:>9}{seconds:>9.3f}{rate[label]:>13,.0f}  {check}')
+    fastest = max((label for label in rate if label.startswith('bpy')), key=rate.get)
+    return fastest, rate['Embree Scanner.cast, 1 thread(s)'] / rate[fastest]
+
+
+def parse_args() -> argparse.Namespace:
+    """The benchmark's command line."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rays', type=int, default=1_000_000, help='rays for BVHTree and Embree')
     parser.add_argument(
@@ -455,7 +496,12 @@ def main() -> None:
     parser.add_argument('--seed', type=int, default=11, help='layout seed of the room')
     parser.add_argument(
         '--batch-rays', type=int, default=None, help='rays per cast (default: the generator\'s)')
-    args = parser.parse_args()
+    return parser.parse_args()
+
+
+def main() -> None:
+    """Time the bare casts and every default sensor's scan in one generated room."""
+    args = parse_args()
     print('load average (1, 5, 15 min) before: ' + ', '.join(f'{v:.2f}' for v in os.getloadavg()))
 
     for obj in list(bpy.data.objects):  # bpy's start-up cube, camera and light
@@ -490,34 +536,9 @@ def main() -> None:
     origins = path[np.arange(args.rays) % len(path)]
     directions = random_directions(rng, args.rays)
 
-    embree = {threads: Scanner(triangles, threads=threads) for threads in (1, 0)}
-    methods = {
-        f'Embree Scanner.cast, {threads or os.cpu_count()} thread(s)':
-        (lambda o, d, s=scanner: s.cast(s.full_scene, o, d), args.rays)
-        for threads, scanner in embree.items()
-    }
-    methods['embreex run (previous engine)'] = (embreex_caster(triangles.vertices,
-                                                               triangles.triangles), args.rays)
-    methods['Open3D cast_rays (first engine)'] = (open3d_caster(triangles.vertices,
-                                                                triangles.triangles), args.rays)
-    methods['bpy BVHTree.ray_cast loop'] = (bvhtree_caster(triangles.vertices,
-                                                           triangles.triangles), args.rays)
-    methods['bpy Object.ray_cast loop (per object)'] = (object_caster(objects,
-                                                                      offsets), args.slow_rays)
-    face_offsets = dict(zip((o.name for o in objects), offsets.tolist()))
-    methods['bpy scene.ray_cast loop'] = (scene_caster(face_offsets), args.slow_rays)
+    methods = bare_cast_methods(triangles, objects, offsets, args.rays, args.slow_rays)
     results = timed(methods, origins, directions, args.repeats)
-
-    reference = results['Embree Scanner.cast, 1 thread(s)'][2]
-    print(f'bare ray casting, {args.rays:,} uniform rays from the paper\'s path:')
-    print(f'{"method":<42}{"rays":>9}{"seconds":>9}{"rays/s":>13}  agreement with Embree')
-    rate = {}
-    for label, (n, seconds, found) in results.items():
-        rate[label] = n / seconds
-        check = '' if label.startswith('Embree') else agreement(found, reference)
-        print(f'{label:<42}{n:>9}{seconds:>9.3f}{rate[label]:>13,.0f}  {check}')
-    fastest = max((label for label in rate if label.startswith('bpy')), key=rate.get)
-    bare_ratio = rate['Embree Scanner.cast, 1 thread(s)'] / rate[fastest]
+    fastest, bare_ratio = print_bare_casts(results, args.rays)
 
     geometry = room_geometry(layout.polygon, layout.height, layout.bays, triangles, classes)
     meta = {'format': ROOM_FORMAT, **layout_meta(layout)}

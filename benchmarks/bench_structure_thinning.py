@@ -114,7 +114,8 @@ def time_grid(points: np.ndarray, grid, seed: int) -> dict[str, float]:
     return {'VoxelGridSample': ours, 'np.unique': plain}
 
 
-def main() -> None:
+def parse_args() -> argparse.Namespace:
+    """The benchmark's command line."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rooms', type=int, default=4)
     parser.add_argument('--points', type=int, default=1_000_000)
@@ -122,64 +123,61 @@ def main() -> None:
     parser.add_argument('--keep', type=float, default=0.1)
     parser.add_argument('--voxel', type=float, default=0.02)
     parser.add_argument('--pictures', type=Path, help='draw the first room of each sensor here')
-    args = parser.parse_args()
-    sample = TRANSFORMS.build(dict(type='PointSample', num_points=args.sample))
-    thin = TRANSFORMS.build(dict(type='ThinRoomStructure', keep=args.keep))
-    grid = TRANSFORMS.build(dict(type='VoxelGridSample', voxel_size=args.voxel))
-    pipelines = {
-        'PointSample': [sample],
-        'thinned': [thin, sample],
-        'grid+thinned': [grid, thin, sample]
+    return parser.parse_args()
+
+
+def measure_sensor(sensor: str, work: Path, args: argparse.Namespace, pipelines: dict,
+                   grid_seconds: dict[str, list[float]]) -> tuple[dict, float]:
+    """Generate ``args.rooms`` rooms of the ``sensor`` profile into ``work`` and sample each
+    with every pipeline; returns the per-pipeline figures and the mean share of object points
+    the structure thinning flags. The voxel grid's timings go into ``grid_seconds``."""
+    thin, grid = pipelines['thinned'][0], pipelines['grid+thinned'][0]
+    options = RunOptions(
+        out=str(work / sensor),
+        points=args.points,
+        object_ratio=0.5,
+        seed=0,
+        config=load_config(REPO / 'generator' / 'profiles' / f'{sensor}.json'),
+        asset_cache=str(work / 'assets'),
+        threads=1)
+    generator = RoomGenerator(options)
+    for task in plan_tasks([7], args.rooms, 0):
+        generator.generate(task)
+    stats = {
+        name: {'share': [], 'per_object': [], 'voxels': [], 'seconds': []}
+        for name in pipelines
     }
-    grid_seconds = {'VoxelGridSample': [], 'np.unique': []}
-    if args.pictures:
-        args.pictures.mkdir(parents=True, exist_ok=True)
-    rows = {}
-    with tempfile.TemporaryDirectory(prefix='synthdet-bench-thinning-') as work:
-        for sensor in SENSORS:
-            options = RunOptions(
-                out=str(Path(work) / sensor),
-                points=args.points,
-                object_ratio=0.5,
-                seed=0,
-                config=load_config(REPO / 'generator' / 'profiles' / f'{sensor}.json'),
-                asset_cache=str(Path(work) / 'assets'),
-                threads=1)
-            generator = RoomGenerator(options)
-            for task in plan_tasks([7], args.rooms, 0):
-                generator.generate(task)
-            stats = {
-                name: {'share': [], 'per_object': [], 'voxels': [], 'seconds': []}
-                for name in pipelines
-            }
-            flagged = []
-            for index, folder in enumerate(
-                    sorted(p for p in Path(options.out).glob('Area_7/*') if p.is_dir())):
-                points, ids, names = read_room(folder)
-                objects = ids >= 0
-                structure = thin.structure(points[:, :3].astype(np.float64))
-                flagged.append((structure & objects).sum() / max(objects.sum(), 1))
-                for name, steps in pipelines.items():
-                    kept_rows, seconds = sampled(points, steps, seed=index)
-                    kept = ids[kept_rows]
-                    if args.pictures and index == 0:
-                        draw_top_view(
-                            args.pictures / f'{sensor}_{name}.png',
-                            Scan(points[kept_rows], names[kept_rows]),
-                            boxes_from_meta(folder / 'meta.json'),
-                            title=f'{sensor} room {folder.name}, {len(kept_rows):,} points '
-                            f'after {name}')
-                    counts = np.bincount(kept[kept >= 0], minlength=ids.max() + 1)
-                    stats[name]['share'].append(np.mean(kept >= 0))
-                    stats[name]['per_object'].extend(counts.tolist())
-                    stats[name]['voxels'].extend(
-                        occupied_voxels(points[kept_rows, :3], kept, ids.max() + 1, args.voxel))
-                    stats[name]['seconds'].append(seconds)
-                for name, seconds in time_grid(points, grid, seed=index).items():
-                    grid_seconds[name].append(seconds)
-            rows[sensor] = (stats, float(np.mean(flagged)))
-    print(f'{args.rooms} rooms x {args.points:,} points per sensor, {args.sample:,} sampled, '
-          f'structure kept {args.keep:.0%}')
+    flagged = []
+    for index, folder in enumerate(
+            sorted(p for p in Path(options.out).glob('Area_7/*') if p.is_dir())):
+        points, ids, names = read_room(folder)
+        objects = ids >= 0
+        structure = thin.structure(points[:, :3].astype(np.float64))
+        flagged.append((structure & objects).sum() / max(objects.sum(), 1))
+        for name, steps in pipelines.items():
+            kept_rows, seconds = sampled(points, steps, seed=index)
+            kept = ids[kept_rows]
+            if args.pictures and index == 0:
+                draw_top_view(
+                    args.pictures / f'{sensor}_{name}.png',
+                    Scan(points[kept_rows], names[kept_rows]),
+                    boxes_from_meta(folder / 'meta.json'),
+                    title=f'{sensor} room {folder.name}, {len(kept_rows):,} points '
+                    f'after {name}')
+            counts = np.bincount(kept[kept >= 0], minlength=ids.max() + 1)
+            stats[name]['share'].append(np.mean(kept >= 0))
+            stats[name]['per_object'].extend(counts.tolist())
+            stats[name]['voxels'].extend(
+                occupied_voxels(points[kept_rows, :3], kept, ids.max() + 1, args.voxel))
+            stats[name]['seconds'].append(seconds)
+        for name, seconds in time_grid(points, grid, seed=index).items():
+            grid_seconds[name].append(seconds)
+    return stats, float(np.mean(flagged))
+
+
+def print_rows(rows: dict[str, tuple[dict, float]]) -> tuple[dict, dict]:
+    """The table of every sensor and pipeline; returns per sensor the thinning's gain of median
+    points per object and the voxel grid's gain of 10th-percentile voxels per object."""
     print(f'{"sensor":<8}{"pipeline":<14}{"on objects":>11}{"median/obj":>11}{"p10/obj":>9}'
           f'{"voxels/obj":>11}{"p10":>6}{"s/room":>8}{"obj. thinned":>14}')
     gains, grid_gains = {}, {}
@@ -197,6 +195,31 @@ def main() -> None:
         grid_gains[sensor] = (
             np.percentile(stats['grid+thinned']['voxels'], 10) /
             max(np.percentile(stats['thinned']['voxels'], 10), 1))
+    return gains, grid_gains
+
+
+def main() -> None:
+    """Sample generated rooms of every sensor with and without the thinning and the grid."""
+    args = parse_args()
+    sample = TRANSFORMS.build(dict(type='PointSample', num_points=args.sample))
+    thin = TRANSFORMS.build(dict(type='ThinRoomStructure', keep=args.keep))
+    grid = TRANSFORMS.build(dict(type='VoxelGridSample', voxel_size=args.voxel))
+    pipelines = {
+        'PointSample': [sample],
+        'thinned': [thin, sample],
+        'grid+thinned': [grid, thin, sample]
+    }
+    grid_seconds = {'VoxelGridSample': [], 'np.unique': []}
+    if args.pictures:
+        args.pictures.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix='synthdet-bench-thinning-') as work:
+        rows = {
+            sensor: measure_sensor(sensor, Path(work), args, pipelines, grid_seconds)
+            for sensor in SENSORS
+        }
+    print(f'{args.rooms} rooms x {args.points:,} points per sensor, {args.sample:,} sampled, '
+          f'structure kept {args.keep:.0%}')
+    gains, grid_gains = print_rows(rows)
     sparsest = min(rows, key=lambda s: np.median(rows[s][0]['PointSample']['per_object']))
     print(f'structure thinning: {gains[sparsest]:.1f}x the median points per object on {sparsest} '
           f'rooms ({", ".join(f"{s} {g:.1f}x" for s, g in gains.items())})')
@@ -205,7 +228,6 @@ def main() -> None:
           f'{plain:.3f} s, x{plain / ours:.2f} faster')
     print('voxel grid first: 10th-percentile voxels per object '
           + ', '.join(f'{s} {g:.2f}x' for s, g in grid_gains.items()))
-
 
 if __name__ == '__main__':
     main()

@@ -27,7 +27,7 @@ def set_size(doc, part, size: list) -> None:
         for name, metres in zip(SIZE_PROPERTIES, size):
             setattr(part, name, 1000.0 * metres)
         return
-    sheet = labels._parameter_sheet(doc, part)
+    sheet = labels.parameter_sheet(doc, part)
     for alias, metres in zip(labels.SIZE_ALIASES, size):
         sheet.set(sheet.getCellFromAlias(alias), '=%.3f mm' % (1000.0 * metres))
 

@@ -28,7 +28,8 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 from scipy.spatial import ConvexHull
 
-from configurator.corners import CornerDetectionError, CornerParams, Levels, wall_points
+from configurator.corners.levels import Levels, wall_points
+from configurator.corners.params import CornerDetectionError, CornerParams
 from configurator.lattice_outline import trace_boundary
 from synthdet.geometry import points_in_polygon, signed_area
 

@@ -32,7 +32,7 @@ _BOX_TRIANGLES = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5]
                           dtype=np.int32)
 
 
-class _Solids:
+class ColoredSolids:
     """Collects closed, outward-wound solids with one color each."""
 
     def __init__(self) -> None:
@@ -294,7 +294,7 @@ def sample_primitive(rng: np.random.Generator, kind: str, size_range: Sequence[f
 # ----------------------------------------------------------------------------- meshes
 
 
-def _build_primitive(s: _Solids, size: Size, p: dict) -> None:
+def _build_primitive(s: ColoredSolids, size: Size, p: dict) -> None:
     sx, sy, sz = size
     if p['kind'] == 'box':
         s.box((-sx / 2, -sy / 2, 0), (sx / 2, sy / 2, sz), p['color'])
@@ -324,7 +324,7 @@ def line_up_items(fill: np.random.Generator, rows: Iterable[tuple[float, float]]
             x += width + fill.uniform(*gap_range)
 
 
-def _build_shelf(s: _Solids, size: Size, p: dict) -> None:
+def _build_shelf(s: ColoredSolids, size: Size, p: dict) -> None:
     w, d, h = size
     post, board = (0.07, 0.03) if p['style'] == 'rack' else (0.035, 0.02)
     for x in (-w / 2, w / 2 - post):
@@ -349,7 +349,7 @@ def _build_shelf(s: _Solids, size: Size, p: dict) -> None:
                   (0.01, 0.1), p['fill'], goods)
 
 
-def _build_cabinet(s: _Solids, size: Size, p: dict) -> None:
+def _build_cabinet(s: ColoredSolids, size: Size, p: dict) -> None:
     w, d, h = size
     plinth, worktop = 0.06, (0.03 if p['style'] == 'low' else 0.0)
     handle_y, front_y, body_y = -d / 2, -d / 2 + 0.025, -d / 2 + 0.045
@@ -374,7 +374,7 @@ def _build_cabinet(s: _Solids, size: Size, p: dict) -> None:
                   palette.METAL[2])
 
 
-def _build_machine(s: _Solids, size: Size, p: dict) -> None:
+def _build_machine(s: ColoredSolids, size: Size, p: dict) -> None:
     w, d, h = size
     tower = 0.3 if p['tower'] else 0.0
     body = h - tower
@@ -402,7 +402,7 @@ def _build_machine(s: _Solids, size: Size, p: dict) -> None:
             s.cylinder(base + [0, 0, 0.06 + 0.08 * k], 2, 0.04, 0.08, rgb)
 
 
-def _build_pallet(s: _Solids, size: Size, p: dict) -> None:
+def _build_pallet(s: ColoredSolids, size: Size, p: dict) -> None:
     w, d, _ = size
     t, block = 0.022, 0.078
     xs = (-w / 2, -0.0725, w / 2 - 0.145)
@@ -419,7 +419,7 @@ def _build_pallet(s: _Solids, size: Size, p: dict) -> None:
               (w / 2 - 0.02, d / 2 - 0.02, PALLET_HEIGHT + p['load']), p['load_color'])
 
 
-def _build_crate(s: _Solids, size: Size, p: dict) -> None:
+def _build_crate(s: ColoredSolids, size: Size, p: dict) -> None:
     w, d, h = size
     step = h / p['layers']
     for k in range(p['layers']):
@@ -439,7 +439,7 @@ def _build_crate(s: _Solids, size: Size, p: dict) -> None:
                 s.box((-w / 2, -d / 2, zb), (w / 2, d / 2, zb + 0.08), palette.WOOD[1])
 
 
-def _build_cart(s: _Solids, size: Size, p: dict) -> None:
+def _build_cart(s: ColoredSolids, size: Size, p: dict) -> None:
     w, d, h = size
     r, rod = p['wheel_radius'], 0.0125
     deck = 2 * r + 0.03
@@ -462,7 +462,7 @@ def _build_cart(s: _Solids, size: Size, p: dict) -> None:
     s.cylinder((xh, -half - rod, h - rod), 1, rod, 2 * (half + rod), p['color'])
 
 
-def _build_bin(s: _Solids, size: Size, p: dict) -> None:
+def _build_bin(s: ColoredSolids, size: Size, p: dict) -> None:
     w, d, h = size
     if p['style'] == 'drum':
         s.cylinder((0, 0, 0), 2, w / 2 - 0.01, h, p['color'], segments=24)
@@ -500,7 +500,7 @@ def _build_bin(s: _Solids, size: Size, p: dict) -> None:
             s.box((-w / 2, y, h - 0.03), (w / 2, y + 0.03, h), p['color'])
 
 
-def _build_pipe(s: _Solids, size: Size, p: dict) -> None:
+def _build_pipe(s: ColoredSolids, size: Size, p: dict) -> None:
     length, depth, height = size
     diameter, gap = p['diameter'], p['gap']
     flange, radius = diameter / 2, 0.4 * diameter  # flanges set the run's outer diameter
@@ -530,7 +530,7 @@ def _build_pipe(s: _Solids, size: Size, p: dict) -> None:
                            segments=8)
 
 
-_BUILDERS: dict[str, Callable[[_Solids, Size, dict], None]] = {
+_BUILDERS: dict[str, Callable[[ColoredSolids, Size, dict], None]] = {
     'box': _build_primitive,
     'cylinder': _build_primitive,
     'shelf': _build_shelf,
@@ -547,6 +547,6 @@ _BUILDERS: dict[str, Callable[[_Solids, Size, dict], None]] = {
 def clutter_mesh(spec: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Vertices (V, 3), triangles (T, 3) and colors (T, 3) uint8 of a clutter spec, in its
     local frame; closed solids whose bounds are exactly ``spec.size``."""
-    solids = _Solids()
+    solids = ColoredSolids()
     _BUILDERS[spec.params['kind']](solids, tuple(spec.size), spec.params)
     return solids.arrays()

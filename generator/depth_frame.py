@@ -13,8 +13,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from generator.scanner import ScanResult, Scanner, row_norms
-from generator.sensor_common import (RoomGeometry, _cast_grid, _clearance, _depth_edges, _result,
-                                     _surface_loss)
+from generator.sensor_common import (RoomGeometry, cast_grid, depth_edges, labelled_result,
+                                     obstacle_clearance, surface_loss)
 from synthdet.geometry import distance_to_polygon, points_in_polygon
 
 
@@ -59,7 +59,7 @@ def depth_frame_camera(room: RoomGeometry, rng: np.random.Generator,
     xy = low + rng.random((512, 2)) * (high - low)
     xy = xy[points_in_polygon(xy, room.polygon)]
     wall = distance_to_polygon(xy, room.polygon)
-    clearance = _clearance(xy, room.obstacles)
+    clearance = obstacle_clearance(xy, room.obstacles)
     near_wall = (wall >= cfg['wall_distance'][0]) & (wall <= cfg['wall_distance'][1])
     free = np.flatnonzero(near_wall & (clearance >= cfg['object_clearance']))
     if len(free):
@@ -100,15 +100,15 @@ def depth_frame_rays(camera: DepthCamera, columns: int, rows: int) -> np.ndarray
     return plane / row_norms(plane)
 
 
-def _depth_frame_returns(scanner: Scanner, camera: DepthCamera, columns: int, rows: int,
-                         rng: np.random.Generator, cfg: Mapping[str, Any], batch: int,
-                         on_object: np.ndarray,
-                         loss: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def depth_frame_returns(scanner: Scanner, camera: DepthCamera, columns: int, rows: int,
+                        rng: np.random.Generator, cfg: Mapping[str, Any], batch: int,
+                        on_object: np.ndarray,
+                        loss: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The kept returns of one frame of ``columns`` x ``rows`` pixels: points (N, 3) and
     triangles (N,), in pixel order."""
     directions = depth_frame_rays(camera, columns, rows)
     origins = np.broadcast_to(camera.position, directions.shape)
-    ranges, triangle = _cast_grid(
+    ranges, triangle = cast_grid(
         scanner, lambda start, stop: (origins[start:stop], directions[start:stop]),
         len(directions), batch, rng, cfg['min_range'], camera.max_range)
     # a lost column after each row: no depth edge across the image's left and right borders
@@ -116,8 +116,8 @@ def _depth_frame_returns(scanner: Scanner, camera: DepthCamera, columns: int, ro
     grid_ranges[:, :columns] = ranges.reshape(rows, columns)
     grid_triangle = np.zeros((rows, columns + 1), triangle.dtype)
     grid_triangle[:, :columns] = triangle.reshape(rows, columns)
-    edges, _, _ = _depth_edges(grid_ranges.reshape(-1), grid_triangle.reshape(-1), columns + 1,
-                               on_object, scanner.scene.part, cfg['edge_jump'])
+    edges, _, _ = depth_edges(grid_ranges.reshape(-1), grid_triangle.reshape(-1), columns + 1,
+                              on_object, scanner.scene.part, cfg['edge_jump'])
     edges = edges[rng.random(len(edges)) < cfg['edge_dropout']]
     ranges[edges // (columns + 1) * columns + edges % (columns + 1)] = np.inf
     hit = np.flatnonzero(np.isfinite(ranges))
@@ -154,15 +154,15 @@ def cast_depth_frame(scanner: Scanner,
     become the annotated box of a sliver.
     """
     on_object = object_parts[scanner.scene.part]
-    loss = _surface_loss(scanner, cfg, shiny_colors)
+    loss = surface_loss(scanner, cfg, shiny_colors)
     aspect = camera.half_tan[0] / camera.half_tan[1]
     pixels = n_points / 0.7
     rays = 0
     for _ in range(4):
         rows = max(2, int(round(math.sqrt(pixels / aspect))))
         columns = max(2, int(round(rows * aspect)))
-        xyz, triangle = _depth_frame_returns(scanner, camera, columns, rows, rng, cfg, batch,
-                                             on_object, loss)
+        xyz, triangle = depth_frame_returns(scanner, camera, columns, rows, rng, cfg, batch,
+                                            on_object, loss)
         rays += rows * columns
         if len(xyz) >= n_points or pixels >= 16 * n_points:
             break
@@ -181,4 +181,4 @@ def cast_depth_frame(scanner: Scanner,
     record = dict(camera.record(), pixels=[columns, rows], sparse_objects=len(sparse),
                   sparse_object_points=int(dropped.sum()))
     origin = np.broadcast_to(camera.position, xyz.shape)
-    return _result(scanner, xyz, triangle, origin, rays), record
+    return labelled_result(scanner, xyz, triangle, origin, rays), record

@@ -19,7 +19,7 @@ import numpy as np
 
 from generator.asset_spec import AssetSpec
 from generator.assets import palette
-from generator.clutter import _Solids, clutter_mesh, line_up_items
+from generator.clutter import ColoredSolids, clutter_mesh, line_up_items
 
 CLUTTER_HOUSEHOLD_KINDS = ('monitor', 'pc_tower', 'keyboard', 'books', 'storage_box', 'bag',
                            'lamp', 'plant', 'wastebin', 'tv', 'tv_stand', 'bed', 'nightstand',
@@ -274,7 +274,7 @@ def sample_household(rng: np.random.Generator, kind: str, max_height: float):
 # ----------------------------------------------------------------------------- meshes
 
 
-def _legs(s: _Solids, w: float, d: float, h: float, side: float, inset: float,
+def _legs(s: ColoredSolids, w: float, d: float, h: float, side: float, inset: float,
           rgb: Sequence[int]) -> None:
     """Four square legs of ``side`` from the floor to ``h``, ``inset`` from the corners."""
     for x in (-w / 2 + inset, w / 2 - inset - side):
@@ -544,7 +544,7 @@ def _build_corner_sofa(s, size, p):
             s.box((x, y, 0), (x + 0.04, y + 0.04, 0.05), DARK[1])
 
 
-_BUILDERS: dict[str, Callable[[_Solids, Size, dict], None]] = {
+_BUILDERS: dict[str, Callable[[ColoredSolids, Size, dict], None]] = {
     'monitor': _build_monitor, 'pc_tower': _build_pc_tower, 'keyboard': _build_keyboard,
     'books': _build_books, 'storage_box': _build_storage_box, 'bag': _build_bag,
     'lamp': _build_lamp, 'plant': _build_plant, 'wastebin': _build_wastebin, 'tv': _build_tv,
@@ -560,7 +560,7 @@ _BUILDERS: dict[str, Callable[[_Solids, Size, dict], None]] = {
 def household_mesh(spec: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Vertices (V, 3), triangles (T, 3) and colors (T, 3) uint8 of a household spec, in its
     local frame."""
-    solids = _Solids()
+    solids = ColoredSolids()
     _BUILDERS[spec.params['kind']](solids, tuple(spec.size), spec.params)
     return solids.arrays()
 

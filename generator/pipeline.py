@@ -109,7 +109,6 @@ class RoomGenerator:
         from generator.sensor_common import room_geometry
         from generator.sensors import choose_sensor, label_stray_returns, scan_room
         from generator.writer import TMP_PREFIX, clean_stale, write_room
-        from synthdet.contracts import ROOM_FORMAT
         start = time.perf_counter()
         options = self.options
         area_dir = Path(options.out) / f'Area_{task.area}'
@@ -135,10 +134,6 @@ class RoomGenerator:
         scanner = Scanner(triangles, options.threads, SEE_THROUGH, scan_cfg['glass_transmission'])
         scan, sensor = scan_room(scanner, room, model, options.points, options.object_ratio,
                                  rng_scan, scan_cfg, METAL)
-        paper = {} if model != 'paper' else {
-            'sensor_path': sensor.pop('path'),
-            'sensor_height': sensor.pop('height')
-        }
         # a stream of its own: appearance settings change neither the layout nor the scan
         appearance = draw_appearance(
             np.random.default_rng([task.seed, 3]), options.config['appearance'], len(names))
@@ -147,27 +142,8 @@ class RoomGenerator:
         if stray_instance:
             sensor['stray_instance'] = stray_instance
             sensor['stray_points'] = int(scan.stray.sum())
-        meta = {
-            'format': ROOM_FORMAT,
-            'seed': task.seed,
-            'generator': {
-                'points': options.points,
-                'object_ratio': options.object_ratio,
-                'run_seed': options.seed,
-                'area': task.area,
-                'room_index': task.index,
-                'asset_seed': options.asset_seed,
-                'library': 'procedural' if not options.library else 'user',
-                'version': META_VERSION,
-                'object_points': int(scan.object_points),
-                'rays': int(scan.rays_cast),
-                'sensor': sensor,
-                **paper,
-                'appearance': appearance.meta(),
-                'config': options.config
-            },
-            **layout_meta(layout)
-        }
+        meta = _room_meta(options, task, sensor, (scan.object_points, scan.rays_cast),
+                          appearance.meta(), layout_meta(layout))
         write_room(
             area_dir,
             task.name,
@@ -180,6 +156,41 @@ class RoomGenerator:
             preview=options.preview,
             extra_files=extra)
         return task, 'written', time.perf_counter() - start
+
+
+def _room_meta(options: RunOptions, task: RoomTask, sensor: dict[str, Any],
+               counts: tuple[int, int], appearance: dict[str, Any],
+               layout: dict[str, Any]) -> dict[str, Any]:
+    """The room's meta.json: its seed, the run's settings, the sensor's record (the paper
+    sensor's path and height as fields of their own) with the scan's ``counts`` (object
+    points, rays cast), the appearance and the ``layout``."""
+    from synthdet.contracts import ROOM_FORMAT
+
+    paper = {} if sensor['model'] != 'paper' else {
+        'sensor_path': sensor.pop('path'),
+        'sensor_height': sensor.pop('height')
+    }
+    return {
+        'format': ROOM_FORMAT,
+        'seed': task.seed,
+        'generator': {
+            'points': options.points,
+            'object_ratio': options.object_ratio,
+            'run_seed': options.seed,
+            'area': task.area,
+            'room_index': task.index,
+            'asset_seed': options.asset_seed,
+            'library': 'procedural' if not options.library else 'user',
+            'version': META_VERSION,
+            'object_points': int(counts[0]),
+            'rays': int(counts[1]),
+            'sensor': sensor,
+            **paper,
+            'appearance': appearance,
+            'config': options.config
+        },
+        **layout
+    }
 
 
 _WORKER: RoomGenerator | None = None

@@ -15,7 +15,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from generator.scanner import ScanResult, Scanner, row_norms
-from generator.sensor_common import RoomGeometry, _result
+from generator.sensor_common import RoomGeometry, labelled_result
 from generator.tablet import cast_tablet, tablet_trajectory
 from synthdet.voxels import VoxelFilter
 
@@ -94,6 +94,6 @@ def scan_reconstruction(
     ray = raw.xyz[kept] - origin
     ray /= row_norms(ray) + 1e-12
     xyz = raw.xyz[kept] + ray * (rng.standard_normal(len(kept)) * cfg['range_noise'])[:, None]
-    scan = _result(scanner, xyz, raw.triangle[kept], origin, raw.rays_cast)
+    scan = labelled_result(scanner, xyz, raw.triangle[kept], origin, raw.rays_cast)
     return scan, {'trajectory': np.round(positions, 3).tolist(), 'fused_points': len(fused),
                   'grid_offset': offset.tolist()}

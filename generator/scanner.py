@@ -164,8 +164,8 @@ _MAX_GLASS_FACES = 16
 
 # no triangle map: the hit triangles are the scene's own
 _NO_MAP = np.zeros(0, dtype=np.int64)
-# no stray returns (see :func:`_labels`)
-_NO_STRAY = np.zeros(0, dtype=bool)
+# no stray returns (see :func:`label_returns`)
+NO_STRAY = np.zeros(0, dtype=bool)
 
 
 @numba.njit(cache=True, nogil=True, inline='always')
@@ -183,9 +183,9 @@ def _write_ray(ray: int, path: np.ndarray, step: int, x: float, y: float, z: flo
 
 
 @numba.njit(cache=True, nogil=True)
-def _path_rays(path: np.ndarray, start: int, seed: np.uint64, origins: np.ndarray,
-               directions: np.ndarray, cast_origins: np.ndarray,
-               cast_directions: np.ndarray) -> None:
+def path_rays(path: np.ndarray, start: int, seed: np.uint64, origins: np.ndarray,
+              directions: np.ndarray, cast_origins: np.ndarray,
+              cast_directions: np.ndarray) -> None:
     """Write a batch of uniform rays: origins (N, 3) going round ``path`` from ``start``, unit
     directions (N, 3) of three standard normal draws each, normalised as
     :func:`random_directions` does, and their float32 copies, which Embree casts. Ray r's
@@ -213,10 +213,10 @@ _COUNTED_TARGETS = 512
 
 
 @numba.njit(cache=True, nogil=True)
-def _aimed_rays(path: np.ndarray, start: int, cumulative: np.ndarray, low: np.ndarray,
-                extent: np.ndarray, seed: np.uint64, origins: np.ndarray,
-                directions: np.ndarray, cast_origins: np.ndarray,
-                cast_directions: np.ndarray) -> None:
+def aimed_rays(path: np.ndarray, start: int, cumulative: np.ndarray, low: np.ndarray,
+               extent: np.ndarray, seed: np.uint64, origins: np.ndarray,
+               directions: np.ndarray, cast_origins: np.ndarray,
+               cast_directions: np.ndarray) -> None:
     """Write a batch of aimed rays: origins (N, 3) going round ``path`` from ``start``, unit
     directions (N, 3) towards a uniform random point ``low + uniform * extent`` of a random
     target's bounds (target k with probability ``cumulative[k] - cumulative[k - 1]``), as
@@ -300,9 +300,9 @@ def _glass_hits(t_hit: np.ndarray, primitive: np.ndarray, glass: np.ndarray) -> 
 
 
 @numba.njit(cache=True, nogil=True)
-def _labels(triangle: np.ndarray, colors: np.ndarray, part_of: np.ndarray,
-            movable_tri: np.ndarray, stray: np.ndarray, rgb: np.ndarray, part: np.ndarray,
-            triangles: np.ndarray) -> int:
+def label_returns(triangle: np.ndarray, colors: np.ndarray, part_of: np.ndarray,
+                  movable_tri: np.ndarray, stray: np.ndarray, rgb: np.ndarray, part: np.ndarray,
+                  triangles: np.ndarray) -> int:
     """Write each return's color, part and triangle (int64) in one pass; returns the number
     of returns on objects, ``stray`` ones (empty: none) left out."""
     object_points = 0
@@ -424,87 +424,105 @@ class Scanner:
     def scan(self, path: np.ndarray, n_points: int, object_ratio: float, rng: np.random.Generator,
              config: Mapping[str, Any]) -> ScanResult:
         """Collect ``n_points`` labelled points, ``object_ratio`` of them on movable objects."""
-        batch = int(config['batch_rays'])
         target_objects = int(round(object_ratio *
                                    n_points)) if self.object_scene is not None else 0
-        # the points in ray order, written in place batch by batch
-        xyz = np.empty((n_points, 3))
-        origin = np.empty((n_points, 3), dtype=np.float32)
-        tri = np.empty(n_points, dtype=np.int64)
-        state = {'rays': 0, 'step': 0, 'points': 0}
-
-        aim = bool(config['aim_at_objects'])
-        # one batch's rays (float64, and the float32 copies Embree casts), reused by every batch
-        origins, nominal = np.empty((batch, 3)), np.empty((batch, 3))
-        rays = (origins, nominal, np.empty((batch, 3), dtype=np.float32),
-                np.empty((batch, 3), dtype=np.float32))
-
-        def collect(raycaster, tri_map, wanted, keep_movable, max_batches, aimed=False):
-            got = 0
-            for _ in range(max_batches):
-                if got >= wanted:
-                    break
-                start = state['step']
-                state['step'] = int((state['step'] + batch) % len(path))
-                if aimed:  # towards a random point of a random object's bounds (area-weighted)
-                    _aimed_rays(path, start, self.target_cumulative, self.target_lo,
-                                self.target_extent, stream_seed(rng), *rays)
-                else:
-                    _path_rays(path, start, stream_seed(rng), *rays)
-                cast_origins, cast_dirs = rays[2:]
-                if config['angular_jitter'] > 0:
-                    cast_dirs = nominal + rng.standard_normal(
-                        (batch, 3)) * config['angular_jitter']
-                    cast_dirs /= row_norms(cast_dirs)
-                t_hit, prim = self.cast(raycaster, cast_origins, cast_dirs, rng)
-                state['rays'] += batch
-                kept = (rng.random(batch) >= config['dropout']
-                        if config['dropout'] > 0 else np.ones(0, dtype=bool))
-                # the returns' rows and labels (a miss has no primitive), at most the rest wanted
-                rows, labels = _returns(t_hit, prim, kept, self.movable_tri,
-                                        _NO_MAP if tri_map is None else tri_map, keep_movable,
-                                        wanted - got)
-                if len(rows) == 0:
-                    continue
-                noise = (rng.normal(0.0, config['range_noise'], len(rows))
-                         if config['range_noise'] > 0 else np.zeros(0))
-                first, last = state['points'], state['points'] + len(rows)
-                _return_points(origins, nominal, t_hit, rows, noise, xyz[first:last],
-                               origin[first:last])
-                tri[first:last] = labels
-                state['points'] = last
-                got += len(rows)
-            return got
-
+        rays = _PathRays(self, path, n_points, rng, config)
         got_objects = 0
         if target_objects > 0:
-            got_objects = collect(
+            got_objects = rays.collect(
                 self.object_scene,
                 self.object_tri,
                 target_objects,
                 True,
                 int(config['max_object_rays']),
-                aimed=aim)
+                aimed=bool(config['aim_at_objects']))
             if got_objects < target_objects:
                 warnings.warn(f'only {got_objects} of {target_objects} object points after '
                               f'{config["max_object_rays"]} ray batches; the rest goes to the '
                               f'structure')
         remaining = n_points - got_objects
-        max_batches = max(64, 8 * remaining // batch + 64)
-        got = collect(self.full_scene, None, remaining, False, max_batches)
+        max_batches = max(64, 8 * remaining // rays.batch + 64)
+        got = rays.collect(self.full_scene, None, remaining, False, max_batches)
         if got < remaining:
             warnings.warn(f'only {got_objects + got} of {n_points} points: most rays escape the '
                           f'scene (is the room closed?)')
-        count = state['points']
-        xyz, origin, tri = xyz[:count], origin[:count], tri[:count]
+        count = rays.points
+        xyz, origin, tri = rays.xyz[:count], rays.origin[:count], rays.tri[:count]
         rgb, part = np.empty((count, 3), dtype=np.uint8), np.empty(count, dtype=np.int32)
-        _labels(tri, self.scene.colors, self.scene.part, self.movable_tri, _NO_STRAY, rgb, part,
-                tri)
+        label_returns(tri, self.scene.colors, self.scene.part, self.movable_tri, NO_STRAY, rgb,
+                      part, tri)
         return ScanResult(
             xyz=xyz,
             rgb=rgb,
             part=part,
             triangle=tri,
             origin=origin,
-            rays_cast=state['rays'],
+            rays_cast=rays.rays_cast,
             object_points=got_objects)
+
+
+class _PathRays:
+    """The rays of one :meth:`Scanner.scan`, batch after batch from the points of its path, and
+    the returns they collect, written in place in ray order."""
+
+    def __init__(self, scanner: Scanner, path: np.ndarray, n_points: int,
+                 rng: np.random.Generator, config: Mapping[str, Any]) -> None:
+        self.scanner, self.path, self.rng, self.config = scanner, path, rng, config
+        self.batch = batch = int(config['batch_rays'])
+        self.xyz = np.empty((n_points, 3))
+        self.origin = np.empty((n_points, 3), dtype=np.float32)
+        self.tri = np.empty(n_points, dtype=np.int64)
+        self.rays_cast, self.step, self.points = 0, 0, 0
+        # one batch's rays (float64, and the float32 copies Embree casts), reused by every batch
+        self.origins, self.nominal = np.empty((batch, 3)), np.empty((batch, 3))
+        self.rays = (self.origins, self.nominal, np.empty((batch, 3), dtype=np.float32),
+                     np.empty((batch, 3), dtype=np.float32))
+
+    def collect(self, raycaster, tri_map: np.ndarray | None, wanted: int, keep_movable: bool,
+                max_batches: int, aimed: bool = False) -> int:
+        """Cast at most ``max_batches`` batches into ``raycaster`` until ``wanted`` returns
+        (``keep_movable``: on movable objects, else on the rest) are collected; returns how
+        many were."""
+        config, rng = self.config, self.rng
+        got = 0
+        for _ in range(max_batches):
+            if got >= wanted:
+                break
+            t_hit, prim = self._cast_batch(raycaster, aimed)
+            kept = (rng.random(self.batch) >= config['dropout']
+                    if config['dropout'] > 0 else np.ones(0, dtype=bool))
+            # the returns' rows and labels (a miss has no primitive), at most the rest wanted
+            rows, labels = _returns(t_hit, prim, kept, self.scanner.movable_tri,
+                                    _NO_MAP if tri_map is None else tri_map, keep_movable,
+                                    wanted - got)
+            if len(rows) == 0:
+                continue
+            noise = (rng.normal(0.0, config['range_noise'], len(rows))
+                     if config['range_noise'] > 0 else np.zeros(0))
+            first, last = self.points, self.points + len(rows)
+            _return_points(self.origins, self.nominal, t_hit, rows, noise, self.xyz[first:last],
+                           self.origin[first:last])
+            self.tri[first:last] = labels
+            self.points = last
+            got += len(rows)
+        return got
+
+    def _cast_batch(self, raycaster, aimed: bool) -> tuple[np.ndarray, np.ndarray]:
+        """The first hits of the next batch of rays: aimed at a random point of a random
+        object's bounds (area-weighted) or uniform, with the configured angular jitter."""
+        scanner, rng = self.scanner, self.rng
+        start = self.step
+        self.step = int((self.step + self.batch) % len(self.path))
+        if aimed:
+            aimed_rays(self.path, start, scanner.target_cumulative, scanner.target_lo,
+                       scanner.target_extent, stream_seed(rng), *self.rays)
+        else:
+            path_rays(self.path, start, stream_seed(rng), *self.rays)
+        cast_origins, cast_dirs = self.rays[2:]
+        if self.config['angular_jitter'] > 0:
+            cast_dirs = self.nominal + rng.standard_normal(
+                (self.batch, 3)) * self.config['angular_jitter']
+            cast_dirs /= row_norms(cast_dirs)
+        t_hit, prim = scanner.cast(raycaster, cast_origins, cast_dirs, rng)
+        self.rays_cast += self.batch
+        return t_hit, prim

@@ -13,7 +13,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numba
 import numpy as np
 
-from generator.scanner import (_NO_STRAY, ScanResult, Scanner, TriangleScene, _labels,
+from generator.scanner import (NO_STRAY, ScanResult, Scanner, TriangleScene, label_returns,
                                part_bounds, triangles_of_colors)
 from synthdet.geometry import grid_cells
 
@@ -47,7 +47,7 @@ def room_geometry(polygon: np.ndarray, height: float, bays: list[np.ndarray], sc
     return RoomGeometry(polygon, height, bays, obstacles, object_parts)
 
 
-def _clearance(xy: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
+def obstacle_clearance(xy: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
     """Distance (N,) from each point to the nearest obstacle box (inf without obstacles)."""
     if len(obstacles) == 0:
         return np.full(len(xy), np.inf)
@@ -57,21 +57,21 @@ def _clearance(xy: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
     return np.sqrt((gap**2).sum(axis=2)).min(axis=1)
 
 
-def _inset(cell: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
+def inset_cell(cell: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
     """Low and high corners of ``cell`` moved ``margin`` inwards (at most 30 % of a side)."""
     low, high = cell.min(axis=0), cell.max(axis=0)
     margin = np.minimum(margin, 0.3 * (high - low))
     return low + margin, high - margin
 
 
-def _cast_grid(scanner: Scanner,
-               rays: Callable[[int, int], tuple[np.ndarray, np.ndarray]],
-               size: int,
-               batch: int,
-               rng: np.random.Generator,
-               min_range: float,
-               max_range: float,
-               out: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+def cast_grid(scanner: Scanner,
+              rays: Callable[[int, int], tuple[np.ndarray, np.ndarray]],
+              size: int,
+              batch: int,
+              rng: np.random.Generator,
+              min_range: float,
+              max_range: float,
+              out: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """First hits of ``size`` rays in batches, ``rays(start, stop)`` giving the origins and
     directions of rays start to stop: ranges (float64; inf for a miss and outside
     [min_range, max_range]) and triangle index (int32, half the memory of int64; 0 for a miss,
@@ -108,9 +108,9 @@ def _steep(mine: float, theirs: float, jump: float) -> bool:
 
 
 @numba.njit(cache=True, nogil=True)
-def _depth_edges(ranges: np.ndarray, triangle: np.ndarray, columns: int, on_object: np.ndarray,
-                 part: np.ndarray,
-                 jump: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def depth_edges(ranges: np.ndarray, triangle: np.ndarray, columns: int, on_object: np.ndarray,
+                part: np.ndarray,
+                jump: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The beams (ascending) of a grid (flattened, ``columns`` azimuths per row) at an object
     edge, with the range and triangle of the neighbour across the largest range step. The
     neighbours in this order: azimuth - 1 and + 1 (wrapping around), elevation - 1 and + 1; a
@@ -174,7 +174,7 @@ def _depth_edges(ranges: np.ndarray, triangle: np.ndarray, columns: int, on_obje
 
 
 @numba.njit(cache=True, nogil=True)
-def _rows_of(table: np.ndarray, index: np.ndarray) -> np.ndarray:
+def rows_of(table: np.ndarray, index: np.ndarray) -> np.ndarray:
     """Row ``index[k]`` of ``table`` (M, 3) for every k (where each return was seen from): one
     pass, faster than ``np.take`` along an axis."""
     rows = np.empty((len(index), 3), dtype=table.dtype)
@@ -184,8 +184,8 @@ def _rows_of(table: np.ndarray, index: np.ndarray) -> np.ndarray:
     return rows
 
 
-def _surface_loss(scanner: Scanner, cfg: Mapping[str, Any],
-                  shiny_colors: Sequence[Sequence[int]]) -> np.ndarray:
+def surface_loss(scanner: Scanner, cfg: Mapping[str, Any],
+                 shiny_colors: Sequence[Sequence[int]]) -> np.ndarray:
     """Per triangle: the probability that a return on it is lost, ``dark_dropout`` when its
     color's luminance is below ``dark_luminance``, at least ``shiny_dropout`` when its color is
     one of ``shiny_colors``, else 0."""
@@ -196,21 +196,21 @@ def _surface_loss(scanner: Scanner, cfg: Mapping[str, Any],
     return np.where(shiny, np.maximum(loss, cfg['shiny_dropout']), loss)
 
 
-def _result(scanner: Scanner,
-            xyz: np.ndarray,
-            triangle: np.ndarray,
-            origin: np.ndarray,
-            rays: int,
-            stray: np.ndarray | None = None) -> ScanResult:
+def labelled_result(scanner: Scanner,
+                    xyz: np.ndarray,
+                    triangle: np.ndarray,
+                    origin: np.ndarray,
+                    rays: int,
+                    stray: np.ndarray | None = None) -> ScanResult:
     """Label the returns by their triangles; ``origin`` (N, 3): where each was seen from;
     ``stray`` (N,): returns between two surfaces, which count as no object's points."""
     scene = scanner.scene
     rgb = np.empty((len(triangle), 3), dtype=np.uint8)
     part = np.empty(len(triangle), dtype=np.int32)
     triangles = np.empty(len(triangle), dtype=np.int64)
-    object_points = _labels(triangle, scene.colors, scene.part, scanner.movable_tri,
-                            _NO_STRAY if stray is None else stray, rgb, part,
-                            triangles)
+    object_points = label_returns(triangle, scene.colors, scene.part, scanner.movable_tri,
+                                  NO_STRAY if stray is None else stray, rgb, part,
+                                  triangles)
     return ScanResult(
         xyz=xyz.astype(np.float64, copy=False),
         rgb=rgb,

@@ -11,7 +11,7 @@ aimed directions). The other models have no object-ratio phase: the share of obj
 what the geometry gives. What they share (the room's geometry, the grid cast, depth edges, the
 labelled result) is in :mod:`generator.sensor_common`.
 """
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
@@ -50,76 +50,118 @@ def scan_room(
     ``object_ratio`` applies to the paper model only; ``shiny_colors`` (RGB triples) mark the
     triangles the tablet loses returns on as shiny.
     """
-    if model == 'paper':
-        cfg = scanner_config
-        # a hall gets a cross per bay, with as many sensor positions per bay as a room
-        path, segments = sensor_path(room.polygon, room.height, rng, cfg['path_coverage'],
-                                     cfg['sensor_height'],
-                                     cfg['path_steps'] * max(1, len(room.bays)), room.cells)
-        scan = scanner.scan(path, n_points, object_ratio, rng, cfg)
-        return scan, {
-            'model': 'paper',
-            'path': np.round(segments, 6).tolist(),
-            'height': round(cfg['sensor_height'] * room.height, 6),
-            **{
-                k: cfg[k]
-                for k in ('aim_at_objects', 'range_noise', 'angular_jitter', 'dropout')
-            }
+    if model not in _SENSOR_SCANS:
+        raise ValueError(f'unknown sensor model {model!r} (known: {", ".join(SENSOR_MODELS)})')
+    request = _ScanRequest(scanner, room, n_points, object_ratio, rng, scanner_config,
+                           shiny_colors)
+    return _SENSOR_SCANS[model](request)
+
+
+class _ScanRequest(NamedTuple):
+    """The arguments of :func:`scan_room` that every sensor model reads from."""
+
+    scanner: Scanner
+    room: RoomGeometry
+    n_points: int
+    object_ratio: float
+    rng: np.random.Generator
+    scanner_config: Mapping[str, Any]
+    shiny_colors: Sequence[Sequence[int]]
+
+
+def _scan_paper(request: _ScanRequest) -> tuple[ScanResult, dict[str, Any]]:
+    """The paper's crossing path: a cross per room or hall bay, with as many sensor positions
+    per bay as a room."""
+    cfg, room, rng = request.scanner_config, request.room, request.rng
+    path, segments = sensor_path(room.polygon, room.height, rng, cfg['path_coverage'],
+                                 cfg['sensor_height'],
+                                 cfg['path_steps'] * max(1, len(room.bays)), room.cells)
+    scan = request.scanner.scan(path, request.n_points, request.object_ratio, rng, cfg)
+    return scan, {
+        'model': 'paper',
+        'path': np.round(segments, 6).tolist(),
+        'height': round(cfg['sensor_height'] * room.height, 6),
+        **{
+            k: cfg[k]
+            for k in ('aim_at_objects', 'range_noise', 'angular_jitter', 'dropout')
         }
-    if model == 'tls':
-        cfg = scanner_config['tls']
-        stations = tls_stations(room, rng, cfg)
-        scan, step = scan_tls(scanner, stations, n_points, rng, cfg, scanner_config['batch_rays'],
-                              room.object_parts[scanner.scene.part])
-        return scan, {
-            'model': 'tls',
-            'stations': np.round(stations, 6).tolist(),
-            'angular_step_deg': step,
-            **{
-                k: cfg[k]
-                for k in ('min_elevation_deg', 'min_range', 'max_range', 'range_noise',
-                          'mixed_pixels', 'edge_jump', 'oversample', 'point_spacing')
-            }
+    }
+
+
+def _scan_tls(request: _ScanRequest) -> tuple[ScanResult, dict[str, Any]]:
+    """A terrestrial laser scanner's stations and their merged, thinned returns."""
+    cfg, scanner = request.scanner_config['tls'], request.scanner
+    stations = tls_stations(request.room, request.rng, cfg)
+    scan, step = scan_tls(scanner, stations, request.n_points, request.rng, cfg,
+                          request.scanner_config['batch_rays'],
+                          request.room.object_parts[scanner.scene.part])
+    return scan, {
+        'model': 'tls',
+        'stations': np.round(stations, 6).tolist(),
+        'angular_step_deg': step,
+        **{
+            k: cfg[k]
+            for k in ('min_elevation_deg', 'min_range', 'max_range', 'range_noise',
+                      'mixed_pixels', 'edge_jump', 'oversample', 'point_spacing')
         }
-    if model == 'tablet':
-        cfg = scanner_config['tablet']
-        positions, look = tablet_trajectory(room, rng, cfg)
-        scan, _ = cast_tablet(scanner, positions, look, n_points, rng, cfg,
-                              scanner_config['batch_rays'], shiny_colors)
-        return scan, {
-            'model': 'tablet',
-            'trajectory': np.round(positions, 3).tolist(),
-            **{k: cfg[k] for k in _WALK_RECORD}
+    }
+
+
+def _scan_tablet(request: _ScanRequest) -> tuple[ScanResult, dict[str, Any]]:
+    """A handheld tablet LiDAR's walk through the room."""
+    cfg = request.scanner_config['tablet']
+    positions, look = tablet_trajectory(request.room, request.rng, cfg)
+    scan, _ = cast_tablet(request.scanner, positions, look, request.n_points, request.rng, cfg,
+                          request.scanner_config['batch_rays'], request.shiny_colors)
+    return scan, {
+        'model': 'tablet',
+        'trajectory': np.round(positions, 3).tolist(),
+        **{k: cfg[k] for k in _WALK_RECORD}
+    }
+
+
+def _scan_depth_frame(request: _ScanRequest) -> tuple[ScanResult, dict[str, Any]]:
+    """One RGB-D depth frame of the room."""
+    cfg = request.scanner_config['depth_frame']
+    camera = depth_frame_camera(request.room, request.rng, cfg)
+    scan, record = cast_depth_frame(request.scanner, camera, request.n_points, request.rng, cfg,
+                                    request.scanner_config['batch_rays'],
+                                    request.room.object_parts, request.shiny_colors)
+    return scan, {
+        'model': 'depth_frame',
+        **record,
+        **{
+            k: cfg[k]
+            for k in ('min_range', 'depth_noise', 'edge_jump', 'edge_dropout', 'dark_luminance',
+                      'dark_dropout', 'shiny_dropout', 'min_object_points')
         }
-    if model == 'depth_frame':
-        cfg = scanner_config['depth_frame']
-        camera = depth_frame_camera(room, rng, cfg)
-        scan, record = cast_depth_frame(scanner, camera, n_points, rng, cfg,
-                                        scanner_config['batch_rays'], room.object_parts,
-                                        shiny_colors)
-        return scan, {
-            'model': 'depth_frame',
-            **record,
-            **{
-                k: cfg[k]
-                for k in ('min_range', 'depth_noise', 'edge_jump', 'edge_dropout',
-                          'dark_luminance', 'dark_dropout', 'shiny_dropout',
-                          'min_object_points')
-            }
+    }
+
+
+def _scan_reconstruction(request: _ScanRequest) -> tuple[ScanResult, dict[str, Any]]:
+    """A fused RGB-D reconstruction of a tablet walk."""
+    cfg = request.scanner_config['reconstruction']
+    scan, record = scan_reconstruction(request.scanner, request.room, request.n_points,
+                                       request.rng, cfg, request.scanner_config['batch_rays'],
+                                       request.shiny_colors)
+    return scan, {
+        'model': 'reconstruction',
+        **record,
+        **{
+            k: cfg[k]
+            for k in (*_WALK_RECORD, 'oversample', 'surface_spacing', 'ceiling_keep')
         }
-    if model == 'reconstruction':
-        cfg = scanner_config['reconstruction']
-        scan, record = scan_reconstruction(scanner, room, n_points, rng, cfg,
-                                           scanner_config['batch_rays'], shiny_colors)
-        return scan, {
-            'model': 'reconstruction',
-            **record,
-            **{
-                k: cfg[k]
-                for k in (*_WALK_RECORD, 'oversample', 'surface_spacing', 'ceiling_keep')
-            }
-        }
-    raise ValueError(f'unknown sensor model {model!r} (known: {", ".join(SENSOR_MODELS)})')
+    }
+
+
+# the scan of each sensor model (every model of synthdet.contracts.SENSOR_MODELS)
+_SENSOR_SCANS: dict[str, Callable[[_ScanRequest], tuple[ScanResult, dict[str, Any]]]] = {
+    'paper': _scan_paper,
+    'tls': _scan_tls,
+    'tablet': _scan_tablet,
+    'depth_frame': _scan_depth_frame,
+    'reconstruction': _scan_reconstruction,
+}
 
 
 def label_stray_returns(part: np.ndarray, names: Sequence[str],

@@ -16,8 +16,8 @@ import numpy as np
 from generator.counter_random import (DRAW_CHUNK, ITEM_COUNTERS, normals, stream_seed,
                                      uniform)
 from generator.scanner import ScanResult, Scanner, row_norms
-from generator.sensor_common import (RoomGeometry, _clearance, _inset, _result, _rows_of,
-                                     _surface_loss)
+from generator.sensor_common import (RoomGeometry, inset_cell, labelled_result,
+                                     obstacle_clearance, rows_of, surface_loss)
 from synthdet.geometry import points_in_polygon
 
 
@@ -66,7 +66,7 @@ def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
     """
     waypoints, centres = [], []
     for cell in room.cells:
-        low, high = _inset(cell, cfg['wall_distance'])
+        low, high = inset_cell(cell, cfg['wall_distance'])
         loop = np.array([[low[0], low[1]], [low[0], high[1]], [high[0], high[1]],
                          [high[0], low[1]]])
         loop = np.roll(loop, int(rng.integers(4)), axis=0)
@@ -106,7 +106,8 @@ def tablet_trajectory(room: RoomGeometry, rng: np.random.Generator,
     look = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], 1)
     xy = _push_clear(xy, centre, room.obstacles, 0.3, room.polygon)
     positions = np.column_stack([xy, np.full(len(xy), rng.uniform(*cfg['height']))])
-    keep = points_in_polygon(xy, room.polygon) & (_clearance(xy, room.obstacles) > 0.3 - 1e-6)
+    clear = obstacle_clearance(xy, room.obstacles) > 0.3 - 1e-6
+    keep = points_in_polygon(xy, room.polygon) & clear
     if not keep.any():
         raise ValueError('tablet: every pose of the walk is inside an object or outside the room')
     return positions[keep], look[keep]
@@ -131,11 +132,11 @@ def _tablet_ray(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up: 
 
 
 @numba.njit(cache=True, nogil=True)
-def _tablet_rays(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up: np.ndarray,
-                 seed: np.uint64, half: np.ndarray, cast_origins: np.ndarray,
-                 cast_directions: np.ndarray) -> None:
+def tablet_rays(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up: np.ndarray,
+                seed: np.uint64, half: np.ndarray, cast_origins: np.ndarray,
+                cast_directions: np.ndarray) -> None:
     """Write the rays of a batch (:func:`_tablet_ray`) as the float32 origins and unit
-    directions (N, 3) Embree casts; :func:`_tablet_points` draws the kept ones again in float64
+    directions (N, 3) Embree casts; :func:`tablet_points` draws the kept ones again in float64
     (the batch's rays are written once, in half the memory)."""
     for ray in range(len(cast_origins)):
         p, x, y, z = _tablet_ray(positions, look, right, up, seed, half, ray)
@@ -148,9 +149,9 @@ def _tablet_rays(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up:
 
 
 @numba.njit(cache=True, nogil=True)
-def _tablet_returns(t_hit: np.ndarray, primitive: np.ndarray, seed: np.uint64,
-                    loss: np.ndarray, range_noise: float, far_keep: float, near: float,
-                    far: float, most: int) -> tuple[np.ndarray, np.ndarray]:
+def tablet_returns(t_hit: np.ndarray, primitive: np.ndarray, seed: np.uint64,
+                   loss: np.ndarray, range_noise: float, far_keep: float, near: float,
+                   far: float, most: int) -> tuple[np.ndarray, np.ndarray]:
     """The first ``most`` of the batch's hits the tablet keeps and their measured ranges: the
     distance plus a standard normal draw x ``range_noise`` within [near, far], kept when a
     uniform draw is below the keep probability (falling from 1 at ``near`` to ``far_keep`` at
@@ -183,10 +184,10 @@ def _tablet_returns(t_hit: np.ndarray, primitive: np.ndarray, seed: np.uint64,
 
 
 @numba.njit(cache=True, nogil=True)
-def _tablet_points(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up: np.ndarray,
-                   seed: np.uint64, half: np.ndarray, primitive: np.ndarray, rows: np.ndarray,
-                   measured: np.ndarray, xyz: np.ndarray, triangle: np.ndarray,
-                   pose_of: np.ndarray) -> None:
+def tablet_points(positions: np.ndarray, look: np.ndarray, right: np.ndarray, up: np.ndarray,
+                  seed: np.uint64, half: np.ndarray, primitive: np.ndarray, rows: np.ndarray,
+                  measured: np.ndarray, xyz: np.ndarray, triangle: np.ndarray,
+                  pose_of: np.ndarray) -> None:
     """Write the returns of ``rows`` of the batch of stream ``seed`` (:func:`_tablet_ray`):
     points at origin + unit direction x measured range into ``xyz`` (N, 3), their triangles and
     poses into ``triangle`` and ``pose_of`` (N,)."""
@@ -217,7 +218,7 @@ def cast_tablet(
     falling linearly from 1 at ``min_range`` to ``far_keep`` at ``max_range``, and lost with
     ``dark_dropout`` on dark and ``shiny_dropout`` on shiny triangles.
     """
-    loss = _surface_loss(scanner, cfg, shiny_colors)
+    loss = surface_loss(scanner, cfg, shiny_colors)
     right = np.stack([look[:, 1], -look[:, 0], np.zeros(len(look))], axis=1)
     right /= row_norms(right) + 1e-12
     up = np.cross(right, look)
@@ -236,17 +237,17 @@ def cast_tablet(
         if got >= n_points:
             break
         seed = stream_seed(rng)  # the batch's poses, pixels, range errors and dropouts
-        _tablet_rays(positions, look, right, up, seed, half, cast_origins, cast_directions)
+        tablet_rays(positions, look, right, up, seed, half, cast_origins, cast_directions)
         t_hit, prim = scanner.cast(scanner.full_scene, cast_origins, cast_directions, rng)
         rays += batch
-        rows, measured = _tablet_returns(t_hit, prim, seed, loss, cfg['range_noise'],
-                                         cfg['far_keep'], near, far, n_points - got)
+        rows, measured = tablet_returns(t_hit, prim, seed, loss, cfg['range_noise'],
+                                        cfg['far_keep'], near, far, n_points - got)
         end = got + len(rows)
-        _tablet_points(positions, look, right, up, seed, half, prim, rows, measured,
-                       xyz[got:end], triangle[got:end], pose_of[got:end])
+        tablet_points(positions, look, right, up, seed, half, prim, rows, measured,
+                      xyz[got:end], triangle[got:end], pose_of[got:end])
         got = end
     if got < n_points:
         warnings.warn(f'tablet: only {got} of {n_points} points after {rays} rays')
     pose = pose_of[:got]
-    origin = _rows_of(positions.astype(np.float32), pose)
-    return _result(scanner, xyz[:got], triangle[:got], origin, rays), pose
+    origin = rows_of(positions.astype(np.float32), pose)
+    return labelled_result(scanner, xyz[:got], triangle[:got], origin, rays), pose

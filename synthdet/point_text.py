@@ -42,13 +42,18 @@ class BadLine:
     reason: str
 
 
-@numba.njit(cache=True, nogil=True)
-def _parse_fast(buf: np.ndarray, out: np.ndarray, pow10: np.ndarray) -> tuple[int, int]:
+def parse_fast(buf: np.ndarray, out: np.ndarray) -> tuple[int, int]:
     """Parse rows of ``out.shape[1]`` decimal numbers (columns 3-5, the colors, within 0-255)
-    into ``out``.
+    from the bytes ``buf`` (uint8) into ``out`` with the compiled fast path.
 
     Returns (rows, 0) on success or (-1, line) at the first line it cannot handle.
     """
+    return _parse_rows(buf, out, _POW10)
+
+
+@numba.njit(cache=True, nogil=True)
+def _parse_rows(buf: np.ndarray, out: np.ndarray, pow10: np.ndarray) -> tuple[int, int]:
+    """:func:`parse_fast` with the table of exact powers of ten."""
     n = buf.shape[0]
     columns = out.shape[1]
     i = 0
@@ -65,49 +70,9 @@ def _parse_fast(buf: np.ndarray, out: np.ndarray, pow10: np.ndarray) -> tuple[in
             continue
         col = 0
         while True:
-            negative = False
-            if buf[i] == 45 or buf[i] == 43:  # '-' or '+'
-                negative = buf[i] == 45
-                i += 1
-            mantissa = 0
-            digits = 0
-            exponent = 0
-            while i < n and 48 <= buf[i] <= 57:
-                mantissa = mantissa * 10 + (buf[i] - 48)
-                digits += 1
-                i += 1
-            if i < n and buf[i] == 46:  # '.'
-                i += 1
-                start = i
-                while i < n and 48 <= buf[i] <= 57:
-                    mantissa = mantissa * 10 + (buf[i] - 48)
-                    i += 1
-                digits += i - start
-                exponent = start - i
-            if digits == 0 or digits > _MAX_DIGITS or mantissa > _MAX_EXACT_MANTISSA:
+            value, i, handled = _parse_number(buf, i, pow10)
+            if not handled or col >= columns or row >= out.shape[0]:
                 return -1, line
-            if i < n and (buf[i] == 101 or buf[i] == 69):  # 'e' or 'E'
-                i += 1
-                exp_negative = False
-                if i < n and (buf[i] == 45 or buf[i] == 43):
-                    exp_negative = buf[i] == 45
-                    i += 1
-                exp_value = 0
-                exp_digits = 0
-                while i < n and 48 <= buf[i] <= 57 and exp_value < 1000:
-                    exp_value = exp_value * 10 + (buf[i] - 48)
-                    exp_digits += 1
-                    i += 1
-                if exp_digits == 0:
-                    return -1, line
-                exponent += -exp_value if exp_negative else exp_value
-            if exponent > 22 or exponent < -22 or col >= columns or row >= out.shape[0]:
-                return -1, line
-            # one correctly rounded operation on exact operands: nearest float64 of the text
-            value = float(mantissa) * pow10[exponent] if exponent >= 0 else \
-                float(mantissa) / pow10[-exponent]
-            if negative:
-                value = -value
             if col >= 3 and not 0.0 <= value <= 255.0:
                 return -1, line
             out[row, col] = value
@@ -124,6 +89,55 @@ def _parse_fast(buf: np.ndarray, out: np.ndarray, pow10: np.ndarray) -> tuple[in
         i += 1
         line += 1
     return row, 0
+
+
+@numba.njit(cache=True, nogil=True)
+def _parse_number(buf: np.ndarray, i: int, pow10: np.ndarray) -> tuple[float, int, bool]:
+    """The decimal number starting at ``buf[i]``: its value, the index after it and whether
+    the fast path handles it (at most 18 exact mantissa digits, a power of ten within 1e22)."""
+    n = buf.shape[0]
+    negative = False
+    if buf[i] == 45 or buf[i] == 43:  # '-' or '+'
+        negative = buf[i] == 45
+        i += 1
+    mantissa = 0
+    digits = 0
+    exponent = 0
+    while i < n and 48 <= buf[i] <= 57:
+        mantissa = mantissa * 10 + (buf[i] - 48)
+        digits += 1
+        i += 1
+    if i < n and buf[i] == 46:  # '.'
+        i += 1
+        start = i
+        while i < n and 48 <= buf[i] <= 57:
+            mantissa = mantissa * 10 + (buf[i] - 48)
+            i += 1
+        digits += i - start
+        exponent = start - i
+    if digits == 0 or digits > _MAX_DIGITS or mantissa > _MAX_EXACT_MANTISSA:
+        return 0.0, i, False
+    if i < n and (buf[i] == 101 or buf[i] == 69):  # 'e' or 'E'
+        i += 1
+        exp_negative = False
+        if i < n and (buf[i] == 45 or buf[i] == 43):
+            exp_negative = buf[i] == 45
+            i += 1
+        exp_value = 0
+        exp_digits = 0
+        while i < n and 48 <= buf[i] <= 57 and exp_value < 1000:
+            exp_value = exp_value * 10 + (buf[i] - 48)
+            exp_digits += 1
+            i += 1
+        if exp_digits == 0:
+            return 0.0, i, False
+        exponent += -exp_value if exp_negative else exp_value
+    if exponent > 22 or exponent < -22:
+        return 0.0, i, False
+    # one correctly rounded operation on exact operands: nearest float64 of the text
+    value = float(mantissa) * pow10[exponent] if exponent >= 0 else \
+        float(mantissa) / pow10[-exponent]
+    return (-value if negative else value), i, True
 
 
 def _describe_bad_token(token: bytes) -> str:
@@ -178,7 +192,7 @@ def _parse_reference(path: Path,
 
 def compile_parser() -> None:
     """Compile (or load from numba's cache) the fast parser, e.g. before forking workers."""
-    _parse_fast(np.frombuffer(b'', dtype=np.uint8), np.empty((1, NUM_COLUMNS)), _POW10)
+    parse_fast(np.frombuffer(b'', dtype=np.uint8), np.empty((1, NUM_COLUMNS)))
 
 
 def max_rows(num_bytes: int, columns: int = NUM_COLUMNS) -> int:
@@ -213,7 +227,7 @@ def read_point_file(path: str | Path,
         out = np.empty((max_rows(len(data), columns), columns))  # untouched pages cost nothing
     elif len(out) < max_rows(len(data), columns) or out.shape[1] != columns:
         raise ValueError(f'{path}: output array of shape {out.shape} is too small')
-    rows, _ = _parse_fast(np.frombuffer(data, dtype=np.uint8), out, _POW10)
+    rows, _ = parse_fast(np.frombuffer(data, dtype=np.uint8), out)
     bad_lines: list[BadLine] = []
     if rows < 0:
         points, bad_lines = _parse_reference(path, data, skip_bad_lines, columns)

@@ -65,24 +65,9 @@ def draw_top_view(out: str | os.PathLike,
     import matplotlib
     matplotlib.use('Agg')
     from matplotlib import pyplot as plt
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch, Polygon
 
     color_by = color_by or default_coloring(scan)
-    points, labels = scan.points, scan.labels
-    if labels is not None:
-        keep = labels != 'ceiling'  # the ceiling would hide the room
-    else:
-        z = points[:, 2]
-        keep = z < z.min() + 0.85 * np.ptp(z)  # no labels: cut the top (ceiling) off
-    colors = point_colors(scan, color_by)[keep]
-    points = points[keep]
-    labels = labels[keep] if labels is not None else None
-    if len(points) > max_points:
-        chosen = np.sort(
-            np.random.default_rng(seed).choice(len(points), max_points, replace=False))
-        points, colors = points[chosen], colors[chosen]
-        labels = labels[chosen] if labels is not None else None
+    points, colors, labels = _visible_points(scan, color_by, max_points, seed)
     order = np.argsort(points[:, 2], kind='stable')  # higher points on top, as seen from above
 
     extent = np.vstack([points[:, :2]] + [box.footprint() for box in (*gt, *pred)] +
@@ -100,6 +85,59 @@ def draw_top_view(out: str | os.PathLike,
         s=marker,
         linewidths=0,
         rasterized=True)
+    _draw_boxes(axes, gt, pred)
+    if corners is not None:
+        _draw_corners(axes, corners)
+    shown = set(labels.astype(str)) if labels is not None else set()
+    handles = _legend_handles(shown | {box.label for box in (*gt, *pred)}, color_by, bool(gt),
+                              bool(pred), corners, corners_label)
+    if handles:
+        axes.legend(
+            handles=handles,
+            loc='upper left',
+            bbox_to_anchor=(1.01, 1.0),
+            fontsize=8,
+            frameon=False)
+    margin = 0.3
+    axes.set_xlim(lo[0] - margin, hi[0] + margin)
+    axes.set_ylim(lo[1] - margin, hi[1] + margin)
+    axes.set_aspect('equal')
+    axes.set_xlabel('x (m)')
+    axes.set_ylabel('y (m)')
+    axes.set_title(title or Path(scan.source).name, fontsize=10)
+    figure.tight_layout()
+    picture = io.BytesIO()
+    figure.savefig(picture, format='png')
+    plt.close(figure)
+    write_bytes(out, picture.getvalue())
+
+
+def _visible_points(scan: Scan, color_by: str, max_points: int,
+                    seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The points seen from above (the ceiling removed), their colors and labels, at most
+    ``max_points`` of them (a seeded random choice)."""
+    points, labels = scan.points, scan.labels
+    if labels is not None:
+        keep = labels != 'ceiling'  # the ceiling would hide the room
+    else:
+        z = points[:, 2]
+        keep = z < z.min() + 0.85 * np.ptp(z)  # no labels: cut the top (ceiling) off
+    colors = point_colors(scan, color_by)[keep]
+    points = points[keep]
+    labels = labels[keep] if labels is not None else None
+    if len(points) > max_points:
+        chosen = np.sort(
+            np.random.default_rng(seed).choice(len(points), max_points, replace=False))
+        points, colors = points[chosen], colors[chosen]
+        labels = labels[chosen] if labels is not None else None
+    return points, colors, labels
+
+
+def _draw_boxes(axes, gt: list[Box], pred: list[Box]) -> None:
+    """Ground-truth footprints solid in their class colors; predictions dashed, with a label
+    of their class and score."""
+    from matplotlib.patches import Polygon
+
     for box in gt:
         color = np.array(class_color(box.label)) / 255.0
         axes.add_patch(
@@ -131,25 +169,33 @@ def draw_top_view(out: str | os.PathLike,
             fontsize=6.5,
             color='black',
             bbox=dict(boxstyle='round,pad=0.15', fc='white', ec=color, lw=0.8, alpha=0.85))
-    if corners is not None:
-        ring = np.vstack([corners, corners[:1]])
-        axes.plot(ring[:, 0], ring[:, 1], '-', color='black', linewidth=1.6)
-        axes.plot(corners[:, 0], corners[:, 1], 'o', color='black', markersize=4)
-        for index, (x, y) in enumerate(corners):
-            axes.annotate(
-                str(index), (x, y), textcoords='offset points', xytext=(4, 4), fontsize=8)
+
+
+def _draw_corners(axes, corners: np.ndarray) -> None:
+    """The closed corner polygon in black, its corners numbered."""
+    ring = np.vstack([corners, corners[:1]])
+    axes.plot(ring[:, 0], ring[:, 1], '-', color='black', linewidth=1.6)
+    axes.plot(corners[:, 0], corners[:, 1], 'o', color='black', markersize=4)
+    for index, (x, y) in enumerate(corners):
+        axes.annotate(str(index), (x, y), textcoords='offset points', xytext=(4, 4), fontsize=8)
+
+
+def _legend_handles(shown: set[str], color_by: str, has_gt: bool, has_pred: bool,
+                    corners: np.ndarray | None, corners_label: str) -> list:
+    """Legend entries: the ``shown`` classes (when colored by class), then ground truth,
+    predictions and the corners when drawn."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
 
     handles = []
-    shown = set(labels.astype(str)) if labels is not None else set()
-    shown |= {box.label for box in (*gt, *pred)}
     if color_by == 'class':
         handles += [
             Patch(color=np.array(class_color(name)) / 255, label=name) for name in CLASS_COLORS
             if name in shown
         ]
-    if gt:
+    if has_gt:
         handles.append(Line2D([], [], color='grey', lw=2.2, label='ground truth'))
-    if pred:
+    if has_pred:
         handles.append(Line2D([], [], color='black', lw=1.6, ls=(0, (3, 2)), label='prediction'))
     if corners is not None:
         handles.append(
@@ -159,22 +205,4 @@ def draw_top_view(out: str | os.PathLike,
                    marker='o',
                    ms=4,
                    label=f'{corners_label} ({len(corners)})'))
-    if handles:
-        axes.legend(
-            handles=handles,
-            loc='upper left',
-            bbox_to_anchor=(1.01, 1.0),
-            fontsize=8,
-            frameon=False)
-    margin = 0.3
-    axes.set_xlim(lo[0] - margin, hi[0] + margin)
-    axes.set_ylim(lo[1] - margin, hi[1] + margin)
-    axes.set_aspect('equal')
-    axes.set_xlabel('x (m)')
-    axes.set_ylabel('y (m)')
-    axes.set_title(title or Path(scan.source).name, fontsize=10)
-    figure.tight_layout()
-    picture = io.BytesIO()
-    figure.savefig(picture, format='png')
-    plt.close(figure)
-    write_bytes(out, picture.getvalue())
+    return handles

@@ -93,15 +93,15 @@ def make_room(shape: str = 'rect',
     density = n_points / (2 * floor_area + perimeter * height + 6.0 * furniture)
 
     parts = [
-        _sample_flat(polygon, 0.0, int(density * floor_area), rng, (150, 140, 130)),
-        _sample_flat(polygon, height, int(density * floor_area), rng, (230, 230, 225))
+        sample_flat(polygon, 0.0, int(density * floor_area), rng, (150, 140, 130)),
+        sample_flat(polygon, height, int(density * floor_area), rng, (230, 230, 225))
     ]
-    walls = _sample_walls(polygon, height, density, rng, openings)
+    walls = sample_walls(polygon, height, density, rng, openings)
     boxes = _place_furniture(polygon, furniture, rng)
     for box in boxes:
-        parts.append(_sample_box(box, density, rng))
-        parts[0] = _outside_box(parts[0], box, margin=0.0)
-        walls = _outside_box(walls, box, margin=0.15)  # a box against a wall hides it
+        parts.append(sample_box(box, density, rng))
+        parts[0] = outside_box(parts[0], box, margin=0.0)
+        walls = outside_box(walls, box, margin=0.15)  # a box against a wall hides it
     parts.append(walls)
     points = np.concatenate(parts)
 
@@ -134,7 +134,8 @@ def _colored(xyz: np.ndarray, color: tuple[int, int, int], rng: np.random.Genera
     return np.hstack([xyz, np.rint(rgb)])
 
 
-def _sample_flat(polygon, z, count, rng, color):
+def sample_flat(polygon, z, count, rng, color):
+    """``count`` colored points spread uniformly over the polygon at height ``z``."""
     low, high = polygon.min(axis=0), polygon.max(axis=0)
     ratio = np.prod(high - low) / _area(polygon)
     xy = rng.uniform(low, high, size=(int(count * ratio * 1.05) + 10, 2))
@@ -142,7 +143,8 @@ def _sample_flat(polygon, z, count, rng, color):
     return _colored(np.column_stack([xy, np.full(len(xy), z)]), color, rng)
 
 
-def _sample_walls(polygon, height, density, rng, openings):
+def sample_walls(polygon, height, density, rng, openings):
+    """Points on the polygon's walls up to ``height``; ``openings``: a door and a window."""
     chunks = []
     edges = list(zip(polygon, np.roll(polygon, -1, axis=0)))
     lengths = [float(np.linalg.norm(b - a)) for a, b in edges]
@@ -204,7 +206,7 @@ def _box_corners(centre, size, yaw):
     return local @ np.array([[c, s], [-s, c]]) + centre
 
 
-def _sample_box(box, density, rng):
+def sample_box(box, density, rng):
     """Points on the top and sides of a box; the back of a box against a wall is hidden."""
     centre, size, yaw, against_wall = box
     faces = [(size[0] * size[1], 'top'), (size[0] * size[2], 'x'), (size[0] * size[2], 'x'),
@@ -228,7 +230,7 @@ def _sample_box(box, density, rng):
     return _colored(np.concatenate(chunks), color, rng)
 
 
-def _outside_box(points, box, margin):
+def outside_box(points, box, margin):
     """Drop points inside the box's footprint (grown by margin) below its top."""
     centre, size, yaw, _ = box
     c, s = math.cos(yaw), math.sin(yaw)

@@ -45,6 +45,7 @@ from synthdet.cli import OneLineParser, int_in
 from synthdet.contracts import read_corners, read_predictions, read_room
 from synthdet.info_files import RAW_DIR
 from synthdet.outputs import write_text
+from synthdet.work_dir import StepError, claim_work_dir
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -110,23 +111,6 @@ SIZES = {
         log_interval=4,
         score_thr=0.3),
 }
-
-
-class StepError(RuntimeError):
-    """A pipeline step failed; the message names the step and its log file."""
-
-
-def claim_work_dir(stamp: Path, wanted: dict) -> None:
-    """Record a run's settings ``wanted`` in the work dir's ``stamp`` file; raise
-    ``StepError`` if the stamp holds a run with other settings."""
-    if stamp.is_file():
-        found = json.loads(stamp.read_text())
-        if found != wanted:
-            raise StepError(f'{stamp}: this work dir holds a run with {found}, not {wanted}; '
-                            'choose another --work-dir')
-    else:
-        stamp.parent.mkdir(parents=True, exist_ok=True)
-        write_text(stamp, json.dumps(wanted) + '\n')
 
 
 class Demo:

@@ -118,11 +118,6 @@ class MeshBuilder:
         return tuple(self.material(name, params[key]) for name, key in color_keys.items())
 
     @property
-    def material_names(self) -> list[str]:
-        """Material names in index order."""
-        return list(self._materials)
-
-    @property
     def colors(self) -> list[RGB]:
         """Material colors in index order."""
         return list(self._colors)

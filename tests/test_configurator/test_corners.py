@@ -1,4 +1,4 @@
-"""Room corners (configurator/corners.py, the corners CLI)."""
+"""Room corners (configurator/corners/, the corners CLI)."""
 import json
 import math
 import subprocess
@@ -7,8 +7,10 @@ import sys
 import numpy as np
 import pytest
 
-from configurator.corners import (CornerDetectionError, detect_corners, dominant_wall_angle,
-                                  find_levels, simplify_outline, trace_boundary)
+from configurator.corners import CornerDetectionError, detect_corners
+from configurator.corners.levels import dominant_wall_angle, find_levels
+from configurator.corners.simplify import simplify_outline
+from configurator.lattice_outline import trace_boundary
 from synthdet.contracts import CORNERS_FORMAT, read_corners
 from synthdet.scan_io import read_scan, write_scan
 from tests.room_scans import SHAPES, NoiseModel, inside_polygon, make_room

@@ -306,7 +306,7 @@ def test_an_inner_corner_poking_into_a_footprint_pushes_it_out():
     square = detection('table', 0.9, [3.4, 2.6, 0.4], [0.5 * 2**0.5] * 2 + [0.75], math.pi / 4)
     placed, warnings = arrangement.arrange([square], {'corners': L_ROOM, 'floor_z': FLOOR_Z})
     item = placed[0]
-    assert all(arrangement._point_in_polygon(x, y, L_ROOM) for x, y in item.footprint())
+    assert all(arrangement.point_in_polygon(x, y, L_ROOM) for x, y in item.footprint())
     assert not any(item.contains_xy(x, y, 1e-6) for x, y in L_ROOM)
     assert len(warnings) == 1 and 'table 1 crossed a wall by' in warnings[0]
     assert item.base_z == FLOOR_Z

@@ -12,15 +12,15 @@ import numpy as np
 import pytest
 
 from configurator.__main__ import main as configurator_main
-from configurator.corners import (CornerDetectionError, CornerParams, detect_corners,
-                                  floor_prominence, room_outline)
+from configurator.corners import CornerDetectionError, CornerParams, detect_corners, room_outline
+from configurator.corners.levels import floor_prominence
 from synthdet.contracts import read_corners, read_predictions, write_predictions
 from synthdet.geometry import (distance_to_polygon, first_self_crossing, points_in_polygon,
                                rotation2d, signed_area)
 from synthdet.prepare import detect_up_axis, prepare_scan
 from synthdet.scan_io import LoadedScan, load_scan, write_scan
-from tests.room_scans import _outside_box, _sample_box, _sample_flat, _sample_walls
-from tests.test_tools.test_scan2cad import TINY, _predict, tiny  # noqa: F401 (tiny: a fixture)
+from tests.room_scans import outside_box, sample_box, sample_flat, sample_walls
+from tests.test_tools.test_scan2cad import TINY, predict_scan, tiny  # noqa: F401 (tiny: the model fixture)
 from tests.test_tools.test_tr3d_tools import load_tool
 
 WIDTH, DEPTH = 6.0, 5.0
@@ -43,19 +43,19 @@ def room_scan(*,
     boxes standing free (``furniture_density`` times as dense)."""
     rng = np.random.default_rng(seed)
     polygon = np.array([[0.0, 0.0], [0.0, depth], [width, depth], [width, 0.0]])
-    floor = _sample_flat(polygon, 0.0, int(density * width * depth * floor_share), rng,
-                         (150, 140, 130))
+    floor = sample_flat(polygon, 0.0, int(density * width * depth * floor_share), rng,
+                        (150, 140, 130))
     parts = []
     if ceiling:
-        parts.append(_sample_flat(polygon, height, int(density * width * depth), rng,
-                                  (230, 230, 225)))
-    walls = _sample_walls(polygon, height, density, rng, openings=True)
+        parts.append(sample_flat(polygon, height, int(density * width * depth), rng,
+                                 (230, 230, 225)))
+    walls = sample_walls(polygon, height, density, rng, openings=True)
     for _ in range(furniture):
         size = np.array([rng.uniform(0.5, 1.2), rng.uniform(0.5, 0.9), rng.uniform(0.45, 0.8)])
         box = (rng.uniform([1.5, 1.5], [width - 1.5, depth - 1.5]), size,
                rng.uniform(0, math.pi), False)
-        parts.append(_sample_box(box, furniture_density * density, rng))
-        floor = _outside_box(floor, box, 0.0)
+        parts.append(sample_box(box, furniture_density * density, rng))
+        floor = outside_box(floor, box, 0.0)
     points = np.concatenate([floor, walls, *parts])
     return points[rng.permutation(len(points))]
 
@@ -132,8 +132,8 @@ def test_open_top_room_has_no_ceiling_and_walls_of_the_default_height():
     were taken for the ceiling. They cover a strip of the room, no ceiling does that."""
     rng = np.random.default_rng(0)
     cabinets = [
-        _sample_box((np.array([x, DEPTH - 0.3]), np.array([1.0, 0.5, 1.4]), 0.0, True), 6000.0,
-                    rng) for x in (1.0, 2.5, 4.0)
+        sample_box((np.array([x, DEPTH - 0.3]), np.array([1.0, 0.5, 1.4]), 0.0, True), 6000.0,
+                   rng) for x in (1.0, 2.5, 4.0)
     ]
     points = np.vstack([room_scan(ceiling=False, height=2.2, furniture=0, seed=2), *cabinets])
     outline = detect_corners(points)
@@ -151,8 +151,8 @@ def test_furniture_in_front_of_an_unseen_wall_stays_out_of_the_outline():
         points = room_scan(ceiling=False, height=2.4, furniture=2, seed=int(gap * 10))
         hidden = (points[:, 0] > 1.5) & (points[:, 0] < 4.5) & \
             (points[:, 1] > DEPTH - 0.95 - gap)
-        sofa = _sample_box((np.array([3.0, DEPTH - gap - 0.45]), np.array([3.0, 0.9, 0.85]),
-                            0.0, False), 6000.0, np.random.default_rng(0))
+        sofa = sample_box((np.array([3.0, DEPTH - gap - 0.45]), np.array([3.0, 0.9, 0.85]),
+                           0.0, False), 6000.0, np.random.default_rng(0))
         outline = detect_corners(np.vstack([points[~hidden], sofa]))
         assert_rectangle(outline.corners)
 
@@ -245,8 +245,8 @@ def open_top_scan() -> np.ndarray:
     """The open-top room of the corner test: no ceiling, cabinets 1.4 m tall along a wall."""
     rng = np.random.default_rng(0)
     cabinets = [
-        _sample_box((np.array([x, DEPTH - 0.3]), np.array([1.0, 0.5, 1.4]), 0.0, True), 6000.0,
-                    rng) for x in (1.0, 2.5, 4.0)
+        sample_box((np.array([x, DEPTH - 0.3]), np.array([1.0, 0.5, 1.4]), 0.0, True), 6000.0,
+                   rng) for x in (1.0, 2.5, 4.0)
     ]
     return np.vstack([room_scan(ceiling=False, height=2.2, furniture=0, seed=2), *cabinets])
 
@@ -287,7 +287,7 @@ def scan2cad_args(tiny: dict, scan: Path, out: Path, threshold: str, *options: s
 
 def best_scores_threshold(tiny: dict, scan: Path, folder: Path, keep: int = 8) -> str:
     """A score threshold keeping the weak model's best ``keep`` boxes of ``scan``."""
-    scores = sorted((d['score'] for d in _predict(tiny, scan, folder)['detections']),
+    scores = sorted((d['score'] for d in predict_scan(tiny, scan, folder)['detections']),
                     reverse=True)
     assert scores, f'the tiny model found nothing in {scan.name}'
     return str(scores[min(keep, len(scores)) - 1])

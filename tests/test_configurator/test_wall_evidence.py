@@ -15,9 +15,9 @@ from configurator.corners import CornerParams, detect_corners, room_outline
 from configurator.wall_evidence import WallEvidenceParams, wall_planes, walled_outline
 from synthdet.geometry import distance_to_polygon, first_self_crossing, points_in_polygon
 from synthdet.scan_io import write_scan
-from tests.room_scans import _sample_box, _sample_flat, _sample_walls
-from tests.test_configurator.test_real_scan_geometry import (DEPTH, RECTANGLE, WIDTH, depth_view,
-                                                             in_view, occluded_view, room_scan)
+from tests.room_scans import sample_box, sample_flat, sample_walls
+from tests.test_configurator.test_real_scan_geometry import (DEPTH, RECTANGLE, WIDTH, depth_view, in_view,
+                                          occluded_view, room_scan)
 
 REPO = Path(__file__).resolve().parents[2]
 L_ROOM = np.array([[0.0, 0.0], [0.0, 6.0], [4.0, 6.0], [4.0, 3.0], [7.0, 3.0], [7.0, 0.0]])
@@ -39,12 +39,12 @@ def l_room_scan(seed: int = 0) -> np.ndarray:
     """The L-shaped room ``L_ROOM`` (walls 2.6 m, no ceiling, floor at 0) with a table and
     a cabinet, as x y z r g b."""
     rng = np.random.default_rng(seed)
-    floor = _sample_flat(L_ROOM, 0.0, int(1500 * 33), rng, (150, 140, 130))
-    walls = _sample_walls(L_ROOM, 2.6, 1500.0, rng, openings=True)
-    table = _sample_box((np.array([1.5, 4.5]), np.array([1.2, 0.8, 0.75]), 0.0, False), 6000.0,
-                        rng)
-    cabinet = _sample_box((np.array([5.5, 0.35]), np.array([1.0, 0.5, 1.8]), 0.0, True),
-                          6000.0, rng)
+    floor = sample_flat(L_ROOM, 0.0, int(1500 * 33), rng, (150, 140, 130))
+    walls = sample_walls(L_ROOM, 2.6, 1500.0, rng, openings=True)
+    table = sample_box((np.array([1.5, 4.5]), np.array([1.2, 0.8, 0.75]), 0.0, False), 6000.0,
+                       rng)
+    cabinet = sample_box((np.array([5.5, 0.35]), np.array([1.0, 0.5, 1.8]), 0.0, True),
+                         6000.0, rng)
     return np.concatenate([floor, walls, table, cabinet])
 
 
@@ -77,8 +77,8 @@ def test_floor_seen_through_a_door_stays_out_of_a_partial_outline():
     points = room_scan(ceiling=False, height=2.5, furniture=3, seed=11)
     door = on_wall(points, 0, 0.0, 1.5, 2.5) & (points[:, 2] < 2.1)
     missing = on_wall(points, 1, DEPTH, -1.0, WIDTH + 1) & (points[:, 2] > 0.05)
-    hall = _sample_flat(np.array([[-2.5, 0.5], [-2.5, 3.5], [0.0, 3.5], [0.0, 0.5]]), 0.0,
-                        9000, rng, (150, 140, 130))
+    hall = sample_flat(np.array([[-2.5, 0.5], [-2.5, 3.5], [0.0, 3.5], [0.0, 0.5]]), 0.0,
+                       9000, rng, (150, 140, 130))
     outline = detect_corners(np.concatenate([points[~door & ~missing], hall]))
     assert not outline.approximate and len(outline.corners) == 4
     assert corner_errors(outline.corners, RECTANGLE).max() < 0.06, outline.corners

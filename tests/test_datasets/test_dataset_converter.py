@@ -10,9 +10,9 @@ import pytest
 
 from projects.synthdet.datasets.s3dis_converter import (S3DIS_DIR, WRITE_PIECE_BYTES,
                                                         S3DISLayoutError, UnknownClassWarning,
-                                                        _write_bin, convert_s3dis)
+                                                        convert_s3dis, write_bin)
 from synthdet.classes import DETECTION_CLASSES, SEMANTIC_CLASSES
-from synthdet.point_text import _POW10, PointFileError, _parse_fast, max_rows, read_point_file
+from synthdet.point_text import PointFileError, max_rows, parse_fast, read_point_file
 from tests.s3dis_fixtures import write_synthetic_area
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -147,7 +147,7 @@ def test_a_room_after_a_larger_one_converts_as_it_does_alone(tmp_path):
 @pytest.mark.parametrize('num_bytes', [0, 8, WRITE_PIECE_BYTES, 3 * WRITE_PIECE_BYTES + 24])
 def test_bin_files_hold_the_array_bytes_whatever_their_size(tmp_path, num_bytes):
     array = np.arange(num_bytes // 8, dtype=np.int64)
-    _write_bin(array, tmp_path / 'mask.bin')
+    write_bin(array, tmp_path / 'mask.bin')
     assert (tmp_path / 'mask.bin').read_bytes() == array.tobytes()
 
 
@@ -183,7 +183,7 @@ def test_reader_fast_path_matches_reference_parser(tmp_path):
     lines = _write_points(path, ['{:.3f}', '{:.6f}', '{:.4e}', '{:+.2f}', '{:.15g}'], seed=0)
     expected = _reference_values(lines)
     out = np.empty((len(lines) + 2, 6))
-    rows, _ = _parse_fast(np.frombuffer(path.read_bytes(), dtype=np.uint8), out, _POW10)
+    rows, _ = parse_fast(np.frombuffer(path.read_bytes(), dtype=np.uint8), out)
     assert rows == len(lines)  # the compiled path accepted every line ...
     assert np.array_equal(out[:rows], expected)  # ... bit for bit like float()
     assert np.array_equal(np.signbit(out[:rows]), np.signbit(expected))
@@ -195,7 +195,7 @@ def test_reader_falls_back_for_long_mantissas(tmp_path):
     path = tmp_path / 'points.txt'
     lines = _write_points(path, ['{:.17g}', '{:.3f}'], seed=1)
     out = np.empty((len(lines) + 2, 6))
-    rows, line = _parse_fast(np.frombuffer(path.read_bytes(), dtype=np.uint8), out, _POW10)
+    rows, line = parse_fast(np.frombuffer(path.read_bytes(), dtype=np.uint8), out)
     assert (rows, line) == (-1, 1)  # 17 significant digits: not exact in the compiled path
     points, bad = read_point_file(path)
     assert not bad and np.array_equal(points, _reference_values(lines))

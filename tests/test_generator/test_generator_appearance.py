@@ -16,7 +16,7 @@ from generator.appearance import RoomAppearance, apply_appearance, draw_appearan
 from generator.config import DEFAULTS, ConfigError, load_config
 from generator.scanner import Scanner, TriangleScene, sensor_path
 from synthdet.point_text import read_point_file
-from tests.test_generator.test_generator_pipeline import _box_room_scene
+from tests.test_generator.test_generator_pipeline import box_room_scene
 
 PROFILES = Path(__file__).resolve().parents[2] / 'generator' / 'profiles'
 OFF = {'shading': 0.0, 'instance_variation': 0.0, 'colorless': 0.0}
@@ -101,7 +101,7 @@ def test_shaded_profile_changes_colors_only(asset_cache, tmp_path):
 
 def _two_cube_room() -> tuple[TriangleScene, np.ndarray]:
     """The pipeline tests' box room with a second, equal cube (part 3) 2 m further along x."""
-    scene, polygon = _box_room_scene()
+    scene, polygon = box_room_scene()
     cube = scene.triangles[scene.part == 2]
     vertices = np.concatenate([scene.vertices, scene.vertices[8:16] + [2.0, 0.0, 0.0]])
     triangles = np.concatenate([scene.triangles, cube + 8])

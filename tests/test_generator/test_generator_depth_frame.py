@@ -9,15 +9,15 @@ import bpy  # noqa: F401  (bpy before open3d: both ship libtbb)
 import numpy as np
 import pytest
 
-from generator.config import DEFAULTS, ConfigError, load_config
-from generator.depth_frame import DepthCamera, _depth_frame_returns, cast_depth_frame
+from generator.config import DEFAULTS, load_config
+from generator.depth_frame import DepthCamera, cast_depth_frame, depth_frame_returns
 from generator.scanner import Scanner
 from generator.sensor_common import ROOM_STRUCTURE, RoomGeometry
 from generator.sensors import scan_room
 from synthdet.geometry import distance_to_polygon
 from synthdet.point_text import read_point_file
-from tests.generator_runs import generate_rooms
-from tests.test_generator.test_generator_pipeline import _same_tree
+from tests.generator_runs import assert_sensor_config_error, generate_rooms, sensor_records
+from tests.test_generator.test_generator_pipeline import same_tree
 from tests.test_generator.test_generator_sensors import room_scene
 
 FRAME = DEFAULTS['scanner']['depth_frame']
@@ -122,9 +122,9 @@ def test_returns_are_lost_at_depth_edges_only():
     quiet = dict(FRAME, depth_noise=[0.0, 0.0])
     camera = straight_camera()
     columns, rows = 200, 150
-    full, edged = (_depth_frame_returns(scanner, camera, columns, rows,
-                                        np.random.default_rng(1), dict(quiet, edge_dropout=share),
-                                        BATCH, on_object, np.zeros(len(on_object)))[0]
+    full, edged = (depth_frame_returns(scanner, camera, columns, rows,
+                                       np.random.default_rng(1), dict(quiet, edge_dropout=share),
+                                       BATCH, on_object, np.zeros(len(on_object)))[0]
                    for share in (0.0, 1.0))
     kept = {tuple(p) for p in edged}
     lost = np.array([p for p in full if tuple(p) not in kept])
@@ -183,12 +183,7 @@ def frame_rooms(tmp_path_factory):
 
 def test_generated_rooms_record_the_camera_and_keep_no_sparse_object(frame_rooms):
     work, _ = frame_rooms
-    metas = sorted((work / 'out').rglob('meta.json'))
-    assert len(metas) == 2
-    for meta_path in metas:
-        meta, room = json.loads(meta_path.read_text()), meta_path.parent
-        sensor = meta['generator']['sensor']
-        assert sensor['model'] == 'depth_frame' and 'sensor_path' not in meta['generator']
+    for room, sensor in sensor_records(work / 'out', 'depth_frame', 2):
         assert {'position', 'look', 'pitch_deg', 'fov_deg', 'max_range', 'pixels', 'min_range',
                 'depth_noise', 'edge_dropout', 'min_object_points'} <= set(sensor)
         for value, (low, high) in zip(sensor['fov_deg'], (FRAME['horizontal_fov_deg'],
@@ -209,7 +204,7 @@ def test_generated_rooms_record_the_camera_and_keep_no_sparse_object(frame_rooms
 def test_same_seed_gives_the_same_frame_files(frame_rooms):
     work, options = frame_rooms
     generate_rooms(work / 'again', 7, 2, 20000, 3, *options)
-    _same_tree(work / 'out', work / 'again')
+    same_tree(work / 'out', work / 'again')
 
 
 def test_the_depth_frame_profile_draws_it_and_mixed_rooms_does_not():
@@ -232,7 +227,4 @@ def test_the_depth_frame_profile_draws_it_and_mixed_rooms_does_not():
     ({'fov': 60}, 'unknown key "scanner.depth_frame.fov"'),
 ])
 def test_depth_frame_configuration_errors_name_the_file_and_key(tmp_path, settings, message):
-    config = tmp_path / 'bad.json'
-    config.write_text(json.dumps({'scanner': {'depth_frame': settings}}))
-    with pytest.raises(ConfigError, match=f'{config}: .*{message}'.replace('[', r'\[')):
-        load_config(config)
+    assert_sensor_config_error(tmp_path, 'depth_frame', settings, message)

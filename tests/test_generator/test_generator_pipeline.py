@@ -65,7 +65,8 @@ def _rooms(out: Path) -> list[Path]:
     return sorted(p for p in out.glob('Area_*/*') if p.is_dir())
 
 
-def _same_tree(a: Path, b: Path) -> None:
+def same_tree(a: Path, b: Path) -> None:
+    """Assert that the folders ``a`` and ``b`` hold the same files with the same bytes."""
     files_a = sorted(p.relative_to(a) for p in a.rglob('*') if p.is_file())
     files_b = sorted(p.relative_to(b) for p in b.rglob('*') if p.is_file())
     assert files_a == files_b
@@ -170,13 +171,13 @@ def test_workers_and_shards_give_byte_identical_files(reference_run, tmp_path):
     out, args = reference_run
     parallel = tmp_path / 'parallel'
     assert main([*args, '--out', str(parallel), '--workers', '2']) == 0
-    _same_tree(out, parallel)
+    same_tree(out, parallel)
     sharded = tmp_path / 'sharded'
     assert main([*args, '--out', str(sharded), '--shard', '2/3']) == 0
     assert len(_rooms(sharded)) == 1  # rooms 2, 5, 8, ... of the run: Area_7/factory_2
     assert main([*args, '--out', str(sharded), '--shard', '1/3']) == 0
     assert main([*args, '--out', str(sharded), '--shard', '3/3']) == 0
-    _same_tree(out, sharded)
+    same_tree(out, sharded)
 
 
 def test_resume_completes_an_interrupted_run(reference_run, tmp_path):
@@ -193,7 +194,7 @@ def test_resume_completes_an_interrupted_run(reference_run, tmp_path):
     stamp = finished.stat().st_mtime_ns
     os.utime(finished, ns=(stamp - 10**9, stamp - 10**9))
     assert main([*args, '--out', str(resumed), '--workers', '2']) == 0
-    _same_tree(out, resumed)
+    same_tree(out, resumed)
     assert not list(resumed.glob(f'Area_*/{TMP_PREFIX}*'))
     assert finished.stat().st_mtime_ns == stamp - 10**9  # finished rooms are not redone
 
@@ -214,7 +215,7 @@ def test_resume_after_a_killed_run(reference_run, tmp_path):
     process.wait()
     assert (killed / 'Area_7' / 'factory_1' / 'meta.json').exists()
     assert main([*args, '--out', str(killed)]) == 0
-    _same_tree(out, killed)
+    same_tree(out, killed)
     assert not list(killed.glob(f'Area_*/{TMP_PREFIX}*'))
 
 
@@ -319,7 +320,7 @@ def box(lo, hi, inward: bool) -> tuple[np.ndarray, np.ndarray]:
     return v, (f[:, ::-1] if inward else f)
 
 
-def _box_room_scene() -> tuple[TriangleScene, np.ndarray]:
+def box_room_scene() -> tuple[TriangleScene, np.ndarray]:
     """A 6 x 4 x 3 m box room (2 parts) with a 1 m cube (movable part 2) on the floor."""
     room_v, room_f = box((0, 0, 0), (6, 4, 3), True)
     cube_v, cube_f = box((2, 1, 0), (3, 2, 1), False)
@@ -332,7 +333,7 @@ def _box_room_scene() -> tuple[TriangleScene, np.ndarray]:
 
 
 def test_scanner_on_a_hand_made_room():
-    scene, polygon = _box_room_scene()
+    scene, polygon = box_room_scene()
     config = dict(DEFAULTS['scanner'], batch_rays=8192)
     path, segments = sensor_path(polygon, 3.0, np.random.default_rng(0))
     assert np.allclose(path[:, 2], 2.0) and points_in_polygon(path[:, :2], polygon).all()
@@ -367,7 +368,7 @@ def test_scanner_on_a_hand_made_room():
 def test_scanner_cast_is_the_same_on_one_and_two_threads():
     """Threads cast slices of a batch: the same hits, in ray order, as one thread; a miss is
     inf and the largest uint32; the distance is in units of the direction's length."""
-    scene, _ = _box_room_scene()
+    scene, _ = box_room_scene()
     rng = np.random.default_rng(0)
     origins = np.concatenate([
         rng.uniform([0.5, 0.5, 1.5], [5.5, 3.5, 2.5], (60000, 3)),
@@ -385,7 +386,7 @@ def test_scanner_cast_is_the_same_on_one_and_two_threads():
     down = one.cast(one.full_scene, np.array([[1.0, 1.0, 2.0]]), np.array([[0.0, 0.0, -2.0]]))
     assert down[0][0] == pytest.approx(1.0) and scene.part[down[1][0]] == 0  # the floor
     config = dict(DEFAULTS['scanner'], batch_rays=65536)
-    path, _ = sensor_path(_box_room_scene()[1], 3.0, np.random.default_rng(0))
+    path, _ = sensor_path(box_room_scene()[1], 3.0, np.random.default_rng(0))
     scans = [s.scan(path, 50000, 0.3, np.random.default_rng(1), config) for s in (one, two)]
     assert np.array_equal(scans[0].xyz, scans[1].xyz)
     assert np.array_equal(scans[0].part, scans[1].part)

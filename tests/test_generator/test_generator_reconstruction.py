@@ -9,15 +9,15 @@ import bpy  # noqa: F401  (bpy before open3d: both ship libtbb)
 import numpy as np
 import pytest
 
-from generator.config import DEFAULTS, ConfigError, load_config
+from generator.config import DEFAULTS, load_config
 from generator.reconstruction import scan_reconstruction
 from generator.scanner import Scanner
 from generator.sensor_common import RoomGeometry
 from generator.sensors import scan_room
 from synthdet.point_text import read_point_file
 from synthdet.voxels import cube_keys
-from tests.generator_runs import generate_rooms
-from tests.test_generator.test_generator_pipeline import _same_tree
+from tests.generator_runs import assert_sensor_config_error, generate_rooms, sensor_records
+from tests.test_generator.test_generator_pipeline import same_tree
 from tests.test_generator.test_generator_sensors import room_scene
 from tools.check_annotations import main as check_annotations
 
@@ -126,12 +126,7 @@ def reconstruction_rooms(tmp_path_factory):
 def test_generated_rooms_record_the_reconstruction_and_pass_the_annotation_check(
         reconstruction_rooms, tmp_path):
     work, _ = reconstruction_rooms
-    metas = sorted((work / 'out').rglob('meta.json'))
-    assert len(metas) == 2
-    for meta_path in metas:
-        meta, room = json.loads(meta_path.read_text()), meta_path.parent
-        sensor = meta['generator']['sensor']
-        assert sensor['model'] == 'reconstruction' and 'sensor_path' not in meta['generator']
+    for room, sensor in sensor_records(work / 'out', 'reconstruction', 2):
         assert {'trajectory', 'fused_points', 'grid_offset', 'surface_spacing', 'ceiling_keep',
                 'oversample', 'range_noise', 'max_range'} <= set(sensor)
         points, _ = read_point_file(room / f'{room.name}.txt')
@@ -147,7 +142,7 @@ def test_generated_rooms_record_the_reconstruction_and_pass_the_annotation_check
 def test_same_seed_gives_the_same_room_files(reconstruction_rooms):
     work, options = reconstruction_rooms
     generate_rooms(work / 'again', 7, 2, 20000, 3, *options)
-    _same_tree(work / 'out', work / 'again')
+    same_tree(work / 'out', work / 'again')
 
 
 def test_the_profile_draws_a_quarter_of_reconstructions_and_the_defaults_none():
@@ -176,7 +171,4 @@ def test_the_profile_draws_a_quarter_of_reconstructions_and_the_defaults_none():
     ({'spacing': 0.01}, 'unknown key "scanner.reconstruction.spacing"'),
 ])
 def test_reconstruction_configuration_errors_name_the_file_and_key(tmp_path, settings, message):
-    config = tmp_path / 'bad.json'
-    config.write_text(json.dumps({'scanner': {'reconstruction': settings}}))
-    with pytest.raises(ConfigError, match=f'{config}: .*{message}'.replace('[', r'\[')):
-        load_config(config)
+    assert_sensor_config_error(tmp_path, 'reconstruction', settings, message)

@@ -18,12 +18,13 @@ from generator.scanner import Scanner, TriangleScene
 from generator.sensor_common import RoomGeometry, room_geometry
 from generator.sensors import choose_sensor, scan_room
 from generator.tablet import cast_tablet
-from generator.tls import cast_tls, scan_tls, tls_grid
+from generator.tls import cast_tls, scan_tls
+from generator.tls_grid import tls_grid
 from synthdet.contracts import SENSOR_MODELS
 from synthdet.point_text import read_point_file
 from synthdet.voxels import cube_keys
 from tests.test_configurator.test_corners import corner_errors
-from tests.test_generator.test_generator_pipeline import _same_tree, box
+from tests.test_generator.test_generator_pipeline import box, same_tree
 from synthdet.annotation_check import object_fit
 from synthdet.geometry import rotation_z
 from tools.check_annotations import main as check_annotations
@@ -572,7 +573,7 @@ def test_check_annotations_passes_the_rooms_and_catches_points_given_to_an_objec
 def test_same_seed_gives_the_same_files(mixed_run):
     work, args = mixed_run
     assert main(['--out', str(work / 'again'), *args, '--workers', '2']) == 0
-    _same_tree(work / 'out', work / 'again')
+    same_tree(work / 'out', work / 'again')
 
 
 def test_profile_option_selects_a_packaged_profile(mixed_run, capsys):

@@ -11,11 +11,12 @@ from scipy import stats
 
 from generator.config import DEFAULTS
 from generator.counter_random import normal, uniform
-from generator.scanner import Scanner, _aimed_rays, _path_rays
-from generator.tablet import _tablet_points, _tablet_rays, _tablet_returns
-from generator.sensor_common import _depth_edges
-from generator.tls import (SpacingFilter, _add_range_noise, _angle_tables, _grid_points,
-                           _mixed_pixels, _priorities, _uniform_subset, cast_tls, tls_grid)
+from generator.scanner import Scanner, aimed_rays, path_rays
+from generator.sensor_common import depth_edges
+from generator.spacing_filter import SpacingFilter, beam_priorities
+from generator.tablet import tablet_points, tablet_returns, tablet_rays
+from generator.tls import add_range_noise, cast_tls, mix_at_depth_edges, uniform_subset
+from generator.tls_grid import angle_tables, grid_points, tls_grid
 
 
 @numba.njit
@@ -45,7 +46,7 @@ def test_counter_draws_are_standard_normal_and_uniform_and_repeat_with_their_see
 
 def _station_grid(rng: np.random.Generator, step: float):
     azimuth, elevation = tls_grid(step, -60.0)
-    angles = _angle_tables(azimuth, elevation)
+    angles = angle_tables(azimuth, elevation)
     ranges = rng.uniform(0.6, 8.0, len(azimuth) * len(elevation))
     ranges[rng.random(len(ranges)) < 0.1] = np.inf
     return angles, ranges
@@ -68,15 +69,15 @@ def test_spacing_filter_keeps_the_smallest_priority_return_of_every_new_cube():
         seed = np.uint64(100 + number)
         kept = spacing.new_returns(station, angles, ranges, seed)
         beams = np.flatnonzero(np.isfinite(ranges))
-        cubes = _cubes(_grid_points(station, *angles, beams, ranges[beams]), side, stations[0])
-        priority = _priorities(seed, beams)
+        cubes = _cubes(grid_points(station, *angles, beams, ranges[beams]), side, stations[0])
+        priority = beam_priorities(seed, beams)
         # the reference: per cube not seen before, the return of smallest priority
         best: dict[tuple, int] = {}
         for index, cube in enumerate(cubes):
             if cube not in seen and (cube not in best or priority[index] < priority[best[cube]]):
                 best[cube] = index
         np.testing.assert_array_equal(kept, np.sort(beams[list(best.values())]))
-        kept_cubes = _cubes(_grid_points(station, *angles, kept, ranges[kept]), side,
+        kept_cubes = _cubes(grid_points(station, *angles, kept, ranges[kept]), side,
                             stations[0])
         # one return per cube, and every cube of the returns represented (here or before)
         assert len(set(kept_cubes)) == len(kept_cubes)
@@ -105,7 +106,7 @@ def test_spacing_filter_draws_each_return_of_a_cube_equally_often():
     # one station, five returns in one cube (along one grid row, in a cube of 10 m): the kept
     # return is uniform over the five across seeds
     azimuth, elevation = tls_grid(5.0, -60.0)
-    angles = _angle_tables(azimuth, elevation)
+    angles = angle_tables(azimuth, elevation)
     ranges = np.full(len(azimuth) * len(elevation), np.inf)
     row = len(elevation) // 2
     beams = row * len(azimuth) + np.arange(5)
@@ -125,13 +126,13 @@ def test_range_noise_has_the_configured_std_and_spares_lost_beams():
     ranges[::7] = np.inf
     a, b = 0.002, 0.0005
     noisy = ranges.copy()
-    _add_range_noise(noisy, np.uint64(9), a, b)
+    add_range_noise(noisy, np.uint64(9), a, b)
     finite = np.isfinite(ranges)
     assert not np.isfinite(noisy[~finite]).any()
     error = (noisy[finite] - ranges[finite]) / (a + b * ranges[finite])
     assert abs(error.mean()) < 0.01 and abs(error.std() - 1.0) < 0.01
     again = ranges.copy()
-    _add_range_noise(again, np.uint64(9), a, b)
+    add_range_noise(again, np.uint64(9), a, b)
     np.testing.assert_array_equal(again, noisy)
 
 
@@ -139,17 +140,17 @@ def test_the_final_subset_has_exactly_the_wanted_size_and_every_item_the_same_ch
     total, wanted = 50, 20
     taken = np.zeros(total, dtype=int)
     for seed in range(4000):
-        chosen = _uniform_subset(total, wanted, np.uint64(seed))
+        chosen = uniform_subset(total, wanted, np.uint64(seed))
         assert len(chosen) == wanted and np.all(np.diff(chosen) > 0)
         assert chosen[0] >= 0 and chosen[-1] < total
         taken[chosen] += 1
     # each item in wanted / total of the subsets
     assert stats.chisquare(taken).pvalue > 1e-3
     # the pairs too (a subset, not independent picks): items 0 and 1 together
-    both = sum(set(_uniform_subset(total, wanted, np.uint64(s))) >= {0, 1} for s in range(4000))
+    both = sum(set(uniform_subset(total, wanted, np.uint64(s))) >= {0, 1} for s in range(4000))
     expected = 4000 * wanted * (wanted - 1) / (total * (total - 1))
     assert abs(both - expected) < 4 * np.sqrt(expected)
-    np.testing.assert_array_equal(_uniform_subset(10, 10, np.uint64(1)), np.arange(10))
+    np.testing.assert_array_equal(uniform_subset(10, 10, np.uint64(1)), np.arange(10))
 
 
 def test_aimed_rays_pick_targets_by_their_weights():
@@ -160,7 +161,7 @@ def test_aimed_rays_pick_targets_by_their_weights():
     n = 60_000
     rays = (np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3), np.float32),
             np.empty((n, 3), np.float32))
-    _aimed_rays(path, 0, np.cumsum(weights), low, extent, np.uint64(4), *rays)
+    aimed_rays(path, 0, np.cumsum(weights), low, extent, np.uint64(4), *rays)
     directions = rays[1]
     np.testing.assert_allclose(np.linalg.norm(directions, axis=1), 1.0)
     # the target of each ray: the axis its direction points along
@@ -180,7 +181,7 @@ def test_aimed_rays_take_the_target_of_their_first_draw(targets):
     cumulative /= cumulative[-1]
     rays = (np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3), np.float32),
             np.empty((n, 3), np.float32))
-    _aimed_rays(path, 0, cumulative, low, np.zeros((targets, 3)), np.uint64(9), *rays)
+    aimed_rays(path, 0, cumulative, low, np.zeros((targets, 3)), np.uint64(9), *rays)
     target = np.rint(rays[1][:, 0] / rays[1][:, 1]).astype(int) - 1
     draws = _uniforms_every(np.uint64(9), 4, n)
     expected = np.minimum(np.searchsorted(cumulative, draws, side='right'), targets - 1)
@@ -197,7 +198,7 @@ def test_uniform_path_rays_are_uniform_on_the_sphere_and_go_round_the_path():
     path = np.arange(21.0).reshape(7, 3)
     rays = (np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3), np.float32),
             np.empty((n, 3), np.float32))
-    _path_rays(path, 3, np.uint64(5), *rays)
+    path_rays(path, 3, np.uint64(5), *rays)
     origins, directions = rays[0], rays[1]
     np.testing.assert_array_equal(origins, path[(3 + np.arange(n)) % 7])
     np.testing.assert_allclose(np.linalg.norm(directions, axis=1), 1.0)
@@ -208,7 +209,7 @@ def test_uniform_path_rays_are_uniform_on_the_sphere_and_go_round_the_path():
     np.testing.assert_array_equal(rays[2], origins.astype(np.float32))
     np.testing.assert_array_equal(rays[3], directions.astype(np.float32))
     again = tuple(np.empty_like(r) for r in rays)
-    _path_rays(path, 3, np.uint64(5), *again)
+    path_rays(path, 3, np.uint64(5), *again)
     np.testing.assert_array_equal(again[1], directions)
 
 
@@ -216,8 +217,8 @@ def test_tablet_returns_get_range_noise_of_the_configured_std():
     t_hit = np.full(200_000, 2.0, dtype=np.float32)
     t_hit[::5] = np.inf  # misses
     primitive = np.zeros(len(t_hit), dtype=np.uint32)
-    rows, measured = _tablet_returns(t_hit, primitive, np.uint64(3), np.zeros(1), 0.01, 1.0,
-                                     0.3, 5.0, len(t_hit))
+    rows, measured = tablet_returns(t_hit, primitive, np.uint64(3), np.zeros(1), 0.01, 1.0,
+                                    0.3, 5.0, len(t_hit))
     assert len(rows) == np.isfinite(t_hit).sum()  # all kept: far_keep 1, no loss
     error = (measured - 2.0) / 0.01
     assert abs(error.mean()) < 0.02 and abs(error.std() - 1.0) < 0.02
@@ -230,10 +231,10 @@ def test_mixed_pixels_take_the_configured_share_of_the_edge_beams():
     triangle = np.zeros((200, 300), dtype=np.int32)
     ranges[:, 100:200], triangle[:, 100:200] = 2.0, 1
     on_object, part = np.array([False, True]), np.array([0, 1])
-    edges = _depth_edges(ranges.reshape(-1), triangle.reshape(-1), 300, on_object, part, 0.1)[0]
+    edges = depth_edges(ranges.reshape(-1), triangle.reshape(-1), 300, on_object, part, 0.1)[0]
     assert len(edges) == 200 * 4
-    mixed, _, stray = _mixed_pixels(np.random.default_rng(6), ranges.copy(), triangle.copy(),
-                                    on_object, part, 0.3, 0.1)
+    mixed, _, stray = mix_at_depth_edges(np.random.default_rng(6), ranges.copy(), triangle.copy(),
+                                         on_object, part, 0.3, 0.1)
     assert set(np.flatnonzero(stray)) <= set(edges)
     assert abs(stray.sum() - 0.3 * len(edges)) < 4 * np.sqrt(0.3 * 0.7 * len(edges))
     # a mixed return lies between the two ranges, uniformly
@@ -250,7 +251,7 @@ def test_tablet_rays_take_uniform_poses_and_pixels_and_the_kept_points_lie_on_th
     right, up = np.tile([0.0, -1.0, 0.0], (poses, 1)), np.tile([0.0, 0.0, 1.0], (poses, 1))
     half = np.array([0.5, 0.4])
     origins, directions = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32)
-    _tablet_rays(positions, look, right, up, np.uint64(2), half, origins, directions)
+    tablet_rays(positions, look, right, up, np.uint64(2), half, origins, directions)
     pose = origins[:, 2].astype(int)
     assert stats.chisquare(np.bincount(pose, minlength=poses)).pvalue > 1e-3
     # the pixel on the image plane at distance 1: (-y, z) / x, uniform within the half sizes
@@ -264,8 +265,8 @@ def test_tablet_rays_take_uniform_poses_and_pixels_and_the_kept_points_lie_on_th
     primitive = np.arange(n, dtype=np.uint32)
     xyz, triangle, pose_of = np.empty((len(rows), 3)), np.empty(len(rows), np.int64), np.empty(
         len(rows), np.int64)
-    _tablet_points(positions, look, right, up, np.uint64(2), half, primitive, rows, measured, xyz,
-                   triangle, pose_of)
+    tablet_points(positions, look, right, up, np.uint64(2), half, primitive, rows, measured, xyz,
+                  triangle, pose_of)
     np.testing.assert_array_equal(pose_of, pose[rows])
     np.testing.assert_array_equal(triangle, rows)
     expected = origins[rows] + directions[rows].astype(np.float64) * measured[:, None]
@@ -306,8 +307,8 @@ def test_depth_edges_follow_the_edge_rule_beam_by_beam():
     triangle = rng.integers(0, 6, (13, 17)).astype(np.int32)
     on_object, part = np.array([False, False, True, True, True, False]), np.array([0, 0, 1, 1, 2,
                                                                                    0])
-    edges, other, other_tri = _depth_edges(ranges.reshape(-1), triangle.reshape(-1), 17,
-                                           on_object, part, 0.1)
+    edges, other, other_tri = depth_edges(ranges.reshape(-1), triangle.reshape(-1), 17,
+                                          on_object, part, 0.1)
     expected = _edge_rule(ranges, triangle, on_object, part, 0.1)
     assert len(expected) > 20
     assert list(zip(edges.tolist(), other.tolist(), other_tri.tolist())) == expected
@@ -324,7 +325,7 @@ def test_range_noise_is_each_beams_own_normal_draw():
     ranges = np.random.default_rng(2).uniform(0.5, 9.0, 10_000)
     ranges[::9] = np.inf
     noisy = ranges.copy()
-    _add_range_noise(noisy, np.uint64(21), 0.002, 0.0005)
+    add_range_noise(noisy, np.uint64(21), 0.002, 0.0005)
     finite = np.isfinite(ranges)
     draws = _beam_draws(np.uint64(21), len(ranges))
     np.testing.assert_array_equal(noisy[finite], ranges[finite] + draws[finite] *
@@ -333,14 +334,14 @@ def test_range_noise_is_each_beams_own_normal_draw():
 
 
 def test_grid_points_of_beams_in_any_order():
-    angles = _angle_tables(*tls_grid(3.0, -60.0))
+    angles = angle_tables(*tls_grid(3.0, -60.0))
     station = np.array([1.0, -2.0, 1.5])
     beams = np.random.default_rng(5).permutation(len(angles[0]) * len(angles[2]))[:3000]
     measured = np.linspace(1.0, 7.0, len(beams))
     row, column = np.divmod(beams, len(angles[2]))
     direction = np.stack([angles[0][row] * angles[2][column], angles[0][row] * angles[3][column],
                           angles[1][row]], axis=1)
-    np.testing.assert_allclose(_grid_points(station, *angles, beams, measured),
+    np.testing.assert_allclose(grid_points(station, *angles, beams, measured),
                                station + direction * measured[:, None], atol=1e-12)
 
 
@@ -371,8 +372,8 @@ def test_tablet_returns_follow_the_keep_rule_ray_by_ray(most):
     t_hit[rng.random(len(t_hit)) < 0.1] = np.inf
     primitive = rng.integers(0, 50, len(t_hit)).astype(np.uint32)
     loss = rng.choice([0.0, 0.3, 0.7], 50)
-    rows, measured = _tablet_returns(t_hit, primitive, np.uint64(8), loss, 0.05, 0.3, 0.3, 5.0,
-                                     most)
+    rows, measured = tablet_returns(t_hit, primitive, np.uint64(8), loss, 0.05, 0.3, 0.3, 5.0,
+                                    most)
     errors, keeps = _ray_draws(np.uint64(8), len(t_hit))
     distance = t_hit.astype(np.float64) + errors * 0.05
     chance = (1.0 - 0.7 * (distance - 0.3) / 4.7) * (1.0 - loss[primitive])

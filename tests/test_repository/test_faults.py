@@ -36,7 +36,7 @@ from synthdet.classes import SEMANTIC_CLASSES
 from synthdet.scan_io import write_scan
 from tests.room_scans import NoiseModel, make_room
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
-from tests.test_generator.test_generator_pipeline import _same_tree as same_tree
+from tests.test_generator.test_generator_pipeline import same_tree
 from tests.test_tools.test_tr3d_tools import data_options
 
 REPO = Path(__file__).resolve().parents[2]
@@ -111,7 +111,7 @@ def kill_group(process: subprocess.Popen) -> None:
 # ------------------------------------------------------------------------------ checkpoints
 
 
-class _OpensMarker:
+class OpensMarker:
     """Unpickling this object calls ``open(marker, 'w')``: a stand-in for any hidden code."""
 
     def __init__(self, marker: Path):
@@ -135,7 +135,7 @@ def trained(tmp_path_factory) -> dict:
     weights = torch.load(work / 'inference.pth', weights_only=True)['state_dict']
     marker = root / 'MARKER'
     evil = root / 'evil.pth'
-    torch.save({'meta': {}, 'state_dict': weights, 'payload': _OpensMarker(marker)}, evil)
+    torch.save({'meta': {}, 'state_dict': weights, 'payload': OpensMarker(marker)}, evil)
     return {
         'root': root,
         'data': root / 'data',
@@ -149,7 +149,7 @@ def trained(tmp_path_factory) -> dict:
 
 def test_the_malicious_checkpoint_really_runs_code_when_fully_unpickled(trained, tmp_path):
     probe = tmp_path / 'probe.pth'
-    torch.save({'payload': _OpensMarker(tmp_path / 'PROBE')}, probe)
+    torch.save({'payload': OpensMarker(tmp_path / 'PROBE')}, probe)
     torch.load(probe, weights_only=False)
     assert (tmp_path / 'PROBE').exists()  # so a missing MARKER below means: refused
 
@@ -606,7 +606,7 @@ def test_create_data_exit_codes_and_float32_overflow(tmp_path):
 def test_dataset_stats_reads_info_pickles_as_plain_data(tmp_path):
     marker = tmp_path / 'MARKER'
     for name, data in (('empty', b''), ('garbage', b'\x80\x05not a pickle'),
-                       ('code', pickle.dumps({'x': _OpensMarker(marker)}))):
+                       ('code', pickle.dumps({'x': OpensMarker(marker)}))):
         folder = tmp_path / name
         folder.mkdir()
         (folder / 's3dis_infos_Area_1.pkl').write_bytes(data)

@@ -54,7 +54,8 @@ def tiny(tmp_path_factory: pytest.TempPathFactory) -> dict:
     return {'root': root, 'checkpoint': root / 'work' / 'epoch_1.pth', 'rooms': rooms}
 
 
-def _predict(tiny: dict, scan: Path, out: Path, *options: str) -> dict:
+def predict_scan(tiny: dict, scan: Path, out: Path, *options: str) -> dict:
+    """tools/predict.py's document of ``scan`` with the tiny model, written into ``out``."""
     [written] = load_tool('predict').main([
         str(TINY),
         str(tiny['checkpoint']),
@@ -67,7 +68,7 @@ def _predict(tiny: dict, scan: Path, out: Path, *options: str) -> dict:
 def test_room_sized_scan_is_one_window_as_before(tiny, tmp_path):
     """A room-sized scan: one window, the model's single inference on the prepared scan."""
     scan = tiny['rooms'][0]
-    document = _predict(tiny, scan, tmp_path)
+    document = predict_scan(tiny, scan, tmp_path)
     assert document['detections'], 'the tiny model found nothing to compare'
     prepared = prepare_scan(load_scan(scan))
     cfg = load_config(TINY)
@@ -189,8 +190,8 @@ def test_rotated_and_tilted_copy_gives_the_same_objects(overfit, tmp_path):
     write_scan(tmp_path / 'original.ply', points)
     write_scan(tmp_path / 'turned.ply', turned)
     threshold = ('--score-thr', '0.3')  # predict's default
-    original = _predict(overfit, tmp_path / 'original.ply', tmp_path / 'a', *threshold)
-    copy = _predict(overfit, tmp_path / 'turned.ply', tmp_path / 'b', *threshold)
+    original = predict_scan(overfit, tmp_path / 'original.ply', tmp_path / 'a', *threshold)
+    copy = predict_scan(overfit, tmp_path / 'turned.ply', tmp_path / 'b', *threshold)
     original, copy = original['detections'], copy['detections']
     assert len(original) >= 3 and copy
     centres = np.array([d['center'] for d in copy]) @ rotation  # rotation.T applied to each
@@ -222,8 +223,8 @@ def test_shifted_copy_gives_boxes_shifted_by_exactly_the_offset(tiny, tmp_path):
     shifted = points.copy()
     shifted[:, :3] += OFFSET
     write_scan(georeferenced, shifted)
-    near = _predict(tiny, local, tmp_path / 'near')['detections']
-    far = _predict(tiny, georeferenced, tmp_path / 'far')['detections']
+    near = predict_scan(tiny, local, tmp_path / 'near')['detections']
+    far = predict_scan(tiny, georeferenced, tmp_path / 'far')['detections']
     assert near and len(near) == len(far)
     assert [d['class'] for d in near] == [d['class'] for d in far]
     centres = np.array([d['center'] for d in near])
@@ -237,7 +238,7 @@ def test_scan2cad_equals_the_stages_one_by_one(tiny, tmp_path):
     # the untrained model scores hundreds of boxes near 0.01: keep its best 20 for FreeCAD
     voxel = ('--voxel', str(SCAN_VOXEL))  # scan2cad's default, as the corners
     scores = [
-        d['score'] for d in _predict(tiny, scan, tmp_path / 'scores', *voxel)['detections']
+        d['score'] for d in predict_scan(tiny, scan, tmp_path / 'scores', *voxel)['detections']
     ]
     threshold = str(sorted(scores, reverse=True)[19])
     out = tmp_path / 'one' / 'room.FCStd'
@@ -251,7 +252,7 @@ def test_scan2cad_equals_the_stages_one_by_one(tiny, tmp_path):
     assert out.is_file()
     stages = tmp_path / 'stages'
     predictions = stages / f'{scan.stem}.pred.json'
-    assert _predict(tiny, scan, stages, *voxel, '--score-thr', threshold) == read_predictions(
+    assert predict_scan(tiny, scan, stages, *voxel, '--score-thr', threshold) == read_predictions(
         str(out.with_suffix('.pred.json')))
     assert len(read_predictions(str(predictions))['detections']) >= 10
     corners = stages / 'corners.json'

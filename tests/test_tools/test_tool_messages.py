@@ -21,8 +21,7 @@ import torch
 from synthdet.contracts import SchemaError, read_corners, read_predictions
 from tests.checkpoints import initial_checkpoint
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
-from tests.test_repository.test_faults import (REPO, TINY, TINY_CLASSES, _OpensMarker,
-                                              assert_clean_error, run)
+from tests.test_repository.test_faults import REPO, TINY, TINY_CLASSES, OpensMarker, assert_clean_error, run
 
 HUGE = str(10**300)
 
@@ -51,7 +50,7 @@ def files(tmp_path_factory) -> dict:
     truncated = root / 'truncated.pth'
     truncated.write_bytes(untrained.read_bytes()[:5000])
     evil = root / 'evil.pth'
-    torch.save({'state_dict': {}, 'payload': _OpensMarker(root / 'MARKER')}, evil)
+    torch.save({'state_dict': {}, 'payload': OpensMarker(root / 'MARKER')}, evil)
     return {
         'root': root,
         'scan': root / 'raw' / S3DIS_DIR / 'Area_1' / 'office_1' / 'office_1.txt',

@@ -190,7 +190,8 @@ def merge_overlapping(detections: list[dict]) -> list[tuple[dict, list[dict]]]:
     return [(detections[index], winners[index]) for index in sorted(winners)]
 
 
-def _point_in_polygon(x: float, y: float, polygon: list[list[float]]) -> bool:
+def point_in_polygon(x: float, y: float, polygon: list[list[float]]) -> bool:
+    """Whether the point (x, y) lies inside ``polygon`` (even-odd rule)."""
     inside = False
     for index, (x0, y0) in enumerate(polygon):
         x1, y1 = polygon[(index + 1) % len(polygon)]
@@ -216,7 +217,7 @@ def _wall_push(item: Placed, polygon: list[list[float]]) -> tuple[float, float]:
     """The largest move needed to get one footprint corner (or wall corner) out of a wall."""
     best = (0.0, 0.0)
     for x, y in item.footprint():
-        if not _point_in_polygon(x, y, polygon):
+        if not point_in_polygon(x, y, polygon):
             px, py = _nearest_on_boundary(x, y, polygon)
             dx, dy = px - x, py - y
             length = math.hypot(dx, dy)

@@ -50,7 +50,8 @@ def _make_labels_unique(doc) -> None:
         used.add(label)
 
 
-def _group(doc, name: str):
+def document_group(doc, name: str):
+    """The document's group ``name``, added when it has none."""
     existing = doc.getObject(name)
     if existing is not None and existing.TypeId == 'App::DocumentObjectGroup':
         return existing
@@ -199,9 +200,9 @@ def import_detections(doc,
 def _build(doc, predictions: dict, corners: dict | None, library_dir: str | None, min_score: float,
            wall_thickness: float, look) -> dict:
     look = look if look is not None else appearance.Look()
-    room = _group(doc, 'Room')
-    furniture = _group(doc, 'Furniture')
-    equipment = _group(doc, 'Equipment')
+    room = document_group(doc, 'Room')
+    furniture = document_group(doc, 'Furniture')
+    equipment = document_group(doc, 'Equipment')
     room_sheet = None
     if corners is not None:
         room_sheet = build_room(doc, corners, wall_thickness, room, look)
@@ -223,7 +224,7 @@ def _build(doc, predictions: dict, corners: dict | None, library_dir: str | None
         if class_name in step_paths:
             if class_name not in step_objects:
                 step_objects[class_name] = _import_step(doc, class_name, step_paths[class_name],
-                                                        _group(doc, 'Library'))
+                                                        document_group(doc, 'Library'))
             library_object = step_objects[class_name]
         container, kind = library.add_detection(doc, placed, predictions['scan'],
                                                 predictions['model'], library_object, next_numbers)
@@ -244,18 +245,8 @@ def _build(doc, predictions: dict, corners: dict | None, library_dir: str | None
         container, kind = built[placed]
         group = furniture if placed.class_name in FURNITURE_CLASSES else equipment
         members[group].append(container)
-        alternatives = []
-        for other in placed.alternatives:
-            alternative, _ = build(other)
-            alternative.Visibility = False
-            alternatives.append(alternative)
+        alternatives = _linked_alternatives(container, placed, build)
         hidden_alternatives.extend(alternatives)
-        if alternatives:
-            container.addProperty(
-                'App::PropertyLinkList', 'Alternatives', 'Synthdet',
-                'other classes detected on this box (hidden in the '
-                'Alternatives group: show one and hide this part to switch)')
-            container.Alternatives = alternatives
         objects.append({
             'name': container.Name,
             'label': container.Label,
@@ -266,14 +257,37 @@ def _build(doc, predictions: dict, corners: dict | None, library_dir: str | None
             'orientation': placed.orientation,
             'alternatives': [alternative.Label for alternative in alternatives],
         })
+    _fill_groups_and_recompute(doc, members, hidden_alternatives)
+    return {'objects': objects, 'warnings': warnings, 'skipped_low_score': skipped}
+
+
+def _linked_alternatives(container, placed, build) -> list:
+    """The other classes detected on the box of ``placed``, built (``build``) and hidden, and
+    linked from its ``container``'s ``Alternatives`` property."""
+    alternatives = []
+    for other in placed.alternatives:
+        alternative, _ = build(other)
+        alternative.Visibility = False
+        alternatives.append(alternative)
+    if alternatives:
+        container.addProperty(
+            'App::PropertyLinkList', 'Alternatives', 'Synthdet',
+            'other classes detected on this box (hidden in the '
+            'Alternatives group: show one and hide this part to switch)')
+        container.Alternatives = alternatives
+    return alternatives
+
+
+def _fill_groups_and_recompute(doc, members: dict, hidden_alternatives: list) -> None:
+    """Fill every group with its ``members`` at once, the hidden alternatives into a hidden
+    Alternatives group, and recompute; raise if FreeCAD cannot."""
     for group, containers_of_group in members.items():
         _add_members(group, containers_of_group)
     if hidden_alternatives:
-        _add_members(_group(doc, 'Alternatives'), hidden_alternatives)
+        _add_members(document_group(doc, 'Alternatives'), hidden_alternatives)
     if doc.getObject('Alternatives') is not None:
         doc.getObject('Alternatives').Visibility = False
     doc.recompute()
     broken = [obj.Name for obj in doc.Objects if not obj.isValid()]
     if broken:
         raise RuntimeError(f'FreeCAD could not recompute: {", ".join(broken)}')
-    return {'objects': objects, 'warnings': warnings, 'skipped_low_score': skipped}

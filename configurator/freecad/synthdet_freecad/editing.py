@@ -53,7 +53,7 @@ def add_part(doc,
     if sheet is not None:
         part.setExpression('.Placement.Base.z', f'{sheet.Name}.floor_z')
     group_name = 'Furniture' if class_name in document.FURNITURE_CLASSES else 'Equipment'
-    document._group(doc, group_name).addObject(part)
+    document.document_group(doc, group_name).addObject(part)
     doc.recompute()
     return part
 

@@ -93,7 +93,7 @@ def part_children(part) -> list:
     return []
 
 
-def _parameter_sheet(doc, part):
+def parameter_sheet(doc, part):
     """The spreadsheet holding the part's size cells: among its children, else by name."""
     candidates = part_children(part) + [doc.getObject(f'{part.Name}_Parameters')]
     for obj in candidates:
@@ -119,7 +119,7 @@ def part_size(doc, part) -> list[float]:
     what = f'part {part.Label!r}'
     if all(name in part.PropertiesList for name in SIZE_PROPERTIES):
         return [_positive(getattr(part, name), name, what) for name in SIZE_PROPERTIES]
-    sheet = _parameter_sheet(doc, part)
+    sheet = parameter_sheet(doc, part)
     return [_millimetres(sheet, alias, what) for alias in SIZE_ALIASES]
 
 

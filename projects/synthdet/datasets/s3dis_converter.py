@@ -48,7 +48,7 @@ PARTIAL_SUFFIX = '.partial'
 ON_ERROR_CHOICES = ('raise', 'skip')
 _SEMANTIC_ID = {name: i for i, name in enumerate(SEMANTIC_CLASSES)}
 _DETECTION_LABEL = {name: i for i, name in enumerate(DETECTION_CLASSES)}
-# Output files are written in pieces of this size: small page-cache folios (see _write_bin).
+# Output files are written in pieces of this size: small page-cache folios (see write_bin).
 WRITE_PIECE_BYTES = 1 << 16
 
 
@@ -213,7 +213,7 @@ class _Scratch:
 _SCRATCH = _Scratch()
 
 
-def _write_bin(array: np.ndarray, path: Path) -> None:
+def write_bin(array: np.ndarray, path: Path) -> None:
     """Write the bytes of a C-contiguous ``array`` to ``path``, 64 KiB per ``write`` call.
 
     One multi-megabyte ``write`` lets Linux back the file with large page-cache folios (up to
@@ -329,7 +329,7 @@ def convert_room(room_dir: Path, name: str, out_dir: Path, skip: bool) -> RoomRe
         room.skipped.append(SkippedInput(str(room_dir), None, f'room left out: {error}'))
         return RoomResult(name, 0, [], room.skipped, room.unknown)
     for array, path in zip((points, instance, semantic), _partial_paths(out_dir, name)):
-        _write_bin(array, path)
+        write_bin(array, path)
     return RoomResult(name, num_points, instances, room.skipped, room.unknown, room.repaired)
 
 
