@@ -36,7 +36,7 @@ from pathlib import Path
 
 from benchmarks import bench_teach
 from benchmarks.bench_teach import (StepFailed, data_root_options, evaluate_held_out,
-                                    run_step, test_area)
+                                    run_measured, run_step, test_area)
 from benchmarks.tool_runs import add_fork_tools_option
 from projects.synthdet.evaluation.real_scans import LabelledScan, find_labelled_scans, labels_path
 from projects.synthdet.self_training import UNSURE_THR
@@ -246,26 +246,22 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
+def run(args: argparse.Namespace) -> dict:
+    """Every protocol asked for; its figures and goals."""
+    scans, _ = find_labelled_scans([args.scans])
+    rows = {}
+    for protocol in args.protocols:
+        row = adapt(args, scans) if protocol == 'unlabelled' else teach(args, protocol, scans)
+        rows[protocol] = {**row, 'goals': goals(protocol, row)}
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    try:
-        for path in (args.config, args.checkpoint, args.finetune_config, args.adapt_config):
-            if not path.is_file():
-                raise ValueError(f'{path}: file not found')
-        scans, _ = find_labelled_scans([args.scans])
-        rows = {}
-        for protocol in args.protocols:
-            row = adapt(args, scans) if protocol == 'unlabelled' else teach(args, protocol, scans)
-            rows[protocol] = {**row, 'goals': goals(protocol, row)}
-    except ValueError as error:  # a bad argument or scan folder
-        print(f'bench_protocols: bad input: {error}', file=sys.stderr)
-        return 2
-    except (RuntimeError, OSError) as error:  # StepFailed
-        print(f'bench_protocols: failed: {error}', file=sys.stderr)
-        return 1
-    (args.work / 'protocols.json').write_text(json.dumps(rows, indent=1))
-    print(report(rows))
-    return 0
+    args.work.mkdir(parents=True, exist_ok=True)
+    return run_measured('bench_protocols',
+                        [args.config, args.checkpoint, args.finetune_config, args.adapt_config],
+                        lambda: run(args), args.work / 'protocols.json', report)
 
 
 if __name__ == '__main__':

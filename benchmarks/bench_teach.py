@@ -46,6 +46,7 @@ import resource
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -532,22 +533,30 @@ def run(args: argparse.Namespace) -> dict:
     return results
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
+def run_measured(name: str, inputs: list[Path], measure: Callable[[], dict], out: Path,
+                 describe: Callable[[dict], str]) -> int:
+    """Check that the ``inputs`` exist, ``measure``, write the figures to ``out`` and print
+    ``describe(figures)``: exit code 0; 2 for bad input, 1 for a failing step (one line)."""
     try:
-        for path in (args.config, args.checkpoint, args.finetune_config):
+        for path in inputs:
             if not path.is_file():
                 raise ValueError(f'{path}: file not found')
-        results = run(args)
+        results = measure()
     except ValueError as error:  # LabelsError, LabelsInputError, a bad argument
-        print(f'bench_teach: bad input: {error}', file=sys.stderr)
+        print(f'{name}: bad input: {error}', file=sys.stderr)
         return 2
     except (RuntimeError, OSError) as error:  # StepFailed, FreecadFailed
-        print(f'bench_teach: failed: {error}', file=sys.stderr)
+        print(f'{name}: failed: {error}', file=sys.stderr)
         return 1
-    (args.work / 'teach.json').write_text(json.dumps(results, indent=1))
-    print(report(results))
+    out.write_text(json.dumps(results, indent=1))
+    print(describe(results))
     return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    return run_measured('bench_teach', [args.config, args.checkpoint, args.finetune_config],
+                        lambda: run(args), args.work / 'teach.json', report)
 
 
 if __name__ == '__main__':

@@ -12,14 +12,13 @@ import pytest
 
 from benchmarks.bench_protocols import goals, main, split, summary_line
 from benchmarks.bench_real_scans import write_generated_scans
-from benchmarks.tool_runs import run_tool
 from projects.synthdet.evaluation.real_scans import LabelledScan
 from synthdet.contracts import read_labels, write_labels
 from synthdet.scan_io import write_scan
 from tests.checkpoints import initial_checkpoint
 from tests.room_scans import make_room
-from tests.s3dis_fixtures import write_synthetic_area
-from tests.test_benchmarks.test_bench_teach import ONE_REPEAT_FINETUNE
+from tests.test_benchmarks.test_bench_teach import (ONE_REPEAT_FINETUNE, generated_areas,
+                                                     run_from_repo)
 
 REPO = Path(__file__).resolve().parents[2]
 CLASSES = ['table', 'chair', 'sofa', 'yumi', '3dprinter']
@@ -85,12 +84,7 @@ def labelled_rooms(folder: Path) -> None:
 
 @pytest.mark.slow
 def test_a_whole_run_of_the_three_protocols_prints_their_lines(tmp_path, capsys, monkeypatch):
-    generated, data = tmp_path / 'generated', tmp_path / 'data'
-    for area in (7, 8, 9):
-        write_synthetic_area(generated, area, n_rooms=1, seed=area, points_per_object=300)
-    converted = run_tool(['tools/create_data.py', 's3dis', '--root-path', generated, '--out-dir',
-                          data], forked=True)
-    assert converted.returncode == 0, converted.stderr[-3000:]
+    data = generated_areas(tmp_path)
     scans = tmp_path / 'scans'
     labelled_rooms(scans)
     checkpoint = initial_checkpoint(REPO / 'configs/tr3d/exp2_cpu.py',
@@ -104,12 +98,7 @@ def test_a_whole_run_of_the_three_protocols_prints_their_lines(tmp_path, capsys,
         '--work', work, '--new-rooms', 'office', '--finetune-config', finetune, '--iters', 1,
         '--rounds', 1, '--refresh', 1, '--score-thr', 0.511, '--fork-tools'
     ]
-    monkeypatch.setenv('OMP_NUM_THREADS', '1')
-    monkeypatch.chdir(REPO)
-    capsys.readouterr()
-    code = main([str(item) for item in command])
-    out, err = capsys.readouterr()
-    assert code == 0, out[-3000:] + err[-3000:]
+    out = run_from_repo(main, command, monkeypatch, capsys)
     lines = out.strip().splitlines()[-3:]
     assert [SUMMARY.fullmatch(line).group(1) for line in lines] == [
         'teach, next scan', 'teach, new room', 'adapt, unlabelled'], lines

@@ -9,6 +9,7 @@ import json
 import math
 import re
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import pytest
@@ -74,14 +75,33 @@ train_dataloader = dict(
 """
 
 
-@pytest.mark.slow
-def test_a_whole_run_on_generated_rooms_prints_the_headline(tmp_path, capsys, monkeypatch):
-    generated, data = tmp_path / 'generated', tmp_path / 'data'
+def generated_areas(root: Path) -> Path:
+    """One small generated room in each of the areas 7, 8 and 9, converted under ``root``; the
+    data root."""
+    generated, data = root / 'generated', root / 'data'
     for area in (7, 8, 9):
         write_synthetic_area(generated, area, n_rooms=1, seed=area, points_per_object=300)
     converted = run_tool(['tools/create_data.py', 's3dis', '--root-path', generated, '--out-dir',
                           data], forked=True)
     assert converted.returncode == 0, converted.stderr[-3000:]
+    return data
+
+
+def run_from_repo(main: Callable[[list[str]], int], command: list, monkeypatch, capsys) -> str:
+    """A benchmark's ``main`` run from the repository root on one thread: what it printed
+    (it must exit 0)."""
+    monkeypatch.setenv('OMP_NUM_THREADS', '1')
+    monkeypatch.chdir(REPO)
+    capsys.readouterr()
+    code = main([str(item) for item in command])
+    out, err = capsys.readouterr()
+    assert code == 0, out[-3000:] + err[-3000:]
+    return out
+
+
+@pytest.mark.slow
+def test_a_whole_run_on_generated_rooms_prints_the_headline(tmp_path, capsys, monkeypatch):
+    data = generated_areas(tmp_path)
     before = sorted(path.name for path in data.rglob('*'))
     scans = tmp_path / 'scans'
     write_generated_scans(scans, 2)  # office_1 and lab_1, with their true boxes
@@ -125,12 +145,7 @@ def test_a_whole_run_on_generated_rooms_prints_the_headline(tmp_path, capsys, mo
         0.511,
         '--fork-tools'
     ]
-    monkeypatch.setenv('OMP_NUM_THREADS', '1')
-    monkeypatch.chdir(REPO)
-    capsys.readouterr()
-    code = main([str(item) for item in command])
-    out, err = capsys.readouterr()
-    assert code == 0, out[-3000:] + err[-3000:]
+    out = run_from_repo(main, command, monkeypatch, capsys)
     headline = HEADLINE.fullmatch(out.strip().splitlines()[-1])
     assert headline, out[-2000:]
     assert all(math.isfinite(float(value)) for value in headline.groups())
