@@ -14,7 +14,7 @@ from mmengine.structures import InstanceData
 
 from projects.synthdet.models import TR3DDetector, tr3d_assign
 from projects.synthdet.models.tr3d_neck import voxel_keys
-from tests.s3dis_fixtures import write_synthetic_area
+from tests.s3dis_fixtures import read_room_scene, write_synthetic_area
 
 REPO = Path(__file__).resolve().parents[2]
 CLASSES = ('table', 'chair', 'sofa', 'yumi', '3dprinter')
@@ -56,19 +56,8 @@ def scenes(tmp_path_factory):
         root, area=7, n_rooms=2, seed=5, classes=CLASSES, points_per_object=250)
     result = []
     for room, boxes in truth.items():
-        points = np.loadtxt(
-            root / 'Stanford3dDataset_v1.2_Aligned_Version' / 'Area_7' / room / f'{room}.txt',
-            dtype=np.float32)
-        shift = points[:, :3].min(axis=0)
-        points[:, :3] -= shift
-        points[:, 3:] /= 255.0
-        lo = np.array([b['min'] for b in boxes]) - shift
-        hi = np.array([b['max'] for b in boxes]) - shift
-        result.append(
-            dict(
-                points=torch.from_numpy(points),
-                boxes=np.concatenate(((lo + hi) / 2, hi - lo), axis=1),
-                labels=np.array([CLASSES.index(b['class']) for b in boxes])))
+        points, box_array, labels = read_room_scene(root, 7, room, boxes, CLASSES)
+        result.append(dict(points=torch.from_numpy(points), boxes=box_array, labels=labels))
     return result
 
 
