@@ -77,6 +77,21 @@ def make_batch(model, scenes):
     return model.data_preprocessor(data, training=model.training)
 
 
+def test_scenes_hold_their_boxes_in_the_shifted_frame(scenes):
+    """Each scene starts at the origin, its colors are 0-1 and every true box is tight around
+    points of the scene (the fixture's boxes are the written min/max, rounded to 1 mm)."""
+    for scene in scenes:
+        points = scene['points'].numpy()
+        assert np.allclose(points[:, :3].min(axis=0), 0.0)
+        assert points[:, 3:].min() >= 0.0 and points[:, 3:].max() <= 1.0
+        assert len(scene['boxes']) == len(scene['labels']) > 0
+        for centre, size in zip(scene['boxes'][:, :3], scene['boxes'][:, 3:]):
+            lo, hi = centre - size / 2, centre + size / 2
+            inside = np.all((points[:, :3] >= lo - 1e-3) & (points[:, :3] <= hi + 1e-3), axis=1)
+            assert np.allclose(points[inside, :3].min(axis=0), lo, atol=2e-3)
+            assert np.allclose(points[inside, :3].max(axis=0), hi, atol=2e-3)
+
+
 def test_registry_builds_detector_with_published_parameter_count():
     model = MODELS.build(tr3d_config())
     assert isinstance(model, TR3DDetector)
