@@ -46,7 +46,7 @@ MODELS_TIMED = {
 
 def make_room(num_points: int, seed: int, out_file: Path) -> None:
     """Write one generated room as an .npz of (N, 6) float32 points (RGB 0-1), boxes, labels."""
-    from tests.s3dis_fixtures import write_synthetic_area
+    from tests.s3dis_fixtures import read_room_scene, write_synthetic_area
     with tempfile.TemporaryDirectory() as root:
         truth = write_synthetic_area(
             Path(root),
@@ -57,22 +57,10 @@ def make_room(num_points: int, seed: int, out_file: Path) -> None:
             points_per_object=6000,
             room_size=(6.0, 6.0, 3.0))
         room, boxes = next(iter(truth.items()))
-        points = np.loadtxt(
-            Path(root) / 'Stanford3dDataset_v1.2_Aligned_Version' / 'Area_7' / room /
-            f'{room}.txt',
-            dtype=np.float32)
+        points, box_array, labels = read_room_scene(Path(root), 7, room, boxes, CLASSES)
     rng = np.random.default_rng(seed)
     points = points[rng.choice(len(points), num_points, replace=len(points) < num_points)]
-    shift = points[:, :3].min(axis=0)
-    points[:, :3] -= shift
-    points[:, 3:] /= 255.0
-    lo = np.array([b['min'] for b in boxes]) - shift
-    hi = np.array([b['max'] for b in boxes]) - shift
-    np.savez(
-        out_file,
-        points=points,
-        boxes=np.concatenate(((lo + hi) / 2, hi - lo), axis=1),
-        labels=np.array([CLASSES.index(b['class']) for b in boxes]))
+    np.savez(out_file, points=points, boxes=box_array, labels=labels)
 
 
 def run_worker(room_file: Path, name: str, iters: int, threads: int) -> dict:

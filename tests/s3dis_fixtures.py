@@ -186,6 +186,23 @@ def write_synthetic_area(
     return truth
 
 
+def read_room_scene(root_path: Path, area: int, room: str, boxes: list[dict],
+                    classes: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A room written by :func:`write_synthetic_area` as detector input: its (N, 6) float32
+    points moved so that their minimum corner is the origin, with RGB in 0-1, and its true
+    ``boxes`` in that frame as (M, 6) centre and size with their (M,) indices into
+    ``classes``."""
+    points = np.loadtxt(
+        Path(root_path) / S3DIS_DIR / f'Area_{area}' / room / f'{room}.txt', dtype=np.float32)
+    shift = points[:, :3].min(axis=0)
+    points[:, :3] -= shift
+    points[:, 3:] /= 255.0
+    lo = np.array([box['min'] for box in boxes]) - shift
+    hi = np.array([box['max'] for box in boxes]) - shift
+    labels = np.array([classes.index(box['class']) for box in boxes])
+    return points, np.concatenate(((lo + hi) / 2, hi - lo), axis=1), labels
+
+
 def write_hallway_6(data_dir: Path) -> int:
     """``Area_5/hallway_6`` with a ceiling file whose line 180389 has the stray byte at the byte
     offset that mmdet3d repairs, in place of the space after its first number; one chair. Returns

@@ -14,7 +14,7 @@ from mmengine.structures import InstanceData
 
 from projects.synthdet.models import TR3DDetector, tr3d_assign
 from projects.synthdet.models.tr3d_neck import voxel_keys
-from tests.s3dis_fixtures import write_synthetic_area
+from tests.s3dis_fixtures import read_room_scene, write_synthetic_area
 
 REPO = Path(__file__).resolve().parents[2]
 CLASSES = ('table', 'chair', 'sofa', 'yumi', '3dprinter')
@@ -56,19 +56,8 @@ def scenes(tmp_path_factory):
         root, area=7, n_rooms=2, seed=5, classes=CLASSES, points_per_object=250)
     result = []
     for room, boxes in truth.items():
-        points = np.loadtxt(
-            root / 'Stanford3dDataset_v1.2_Aligned_Version' / 'Area_7' / room / f'{room}.txt',
-            dtype=np.float32)
-        shift = points[:, :3].min(axis=0)
-        points[:, :3] -= shift
-        points[:, 3:] /= 255.0
-        lo = np.array([b['min'] for b in boxes]) - shift
-        hi = np.array([b['max'] for b in boxes]) - shift
-        result.append(
-            dict(
-                points=torch.from_numpy(points),
-                boxes=np.concatenate(((lo + hi) / 2, hi - lo), axis=1),
-                labels=np.array([CLASSES.index(b['class']) for b in boxes])))
+        points, box_array, labels = read_room_scene(root, 7, room, boxes, CLASSES)
+        result.append(dict(points=torch.from_numpy(points), boxes=box_array, labels=labels))
     return result
 
 
@@ -86,6 +75,21 @@ def make_batch(model, scenes):
         samples.append(sample)
     data = dict(inputs=dict(points=[s['points'] for s in scenes]), data_samples=samples)
     return model.data_preprocessor(data, training=model.training)
+
+
+def test_scenes_hold_their_boxes_in_the_shifted_frame(scenes):
+    """Each scene starts at the origin, its colors are 0-1 and every true box is tight around
+    points of the scene (the fixture's boxes are the written min/max, rounded to 1 mm)."""
+    for scene in scenes:
+        points = scene['points'].numpy()
+        assert np.allclose(points[:, :3].min(axis=0), 0.0)
+        assert points[:, 3:].min() >= 0.0 and points[:, 3:].max() <= 1.0
+        assert len(scene['boxes']) == len(scene['labels']) > 0
+        for centre, size in zip(scene['boxes'][:, :3], scene['boxes'][:, 3:]):
+            lo, hi = centre - size / 2, centre + size / 2
+            inside = np.all((points[:, :3] >= lo - 1e-3) & (points[:, :3] <= hi + 1e-3), axis=1)
+            assert np.allclose(points[inside, :3].min(axis=0), lo, atol=2e-3)
+            assert np.allclose(points[inside, :3].max(axis=0), hi, atol=2e-3)
 
 
 def test_registry_builds_detector_with_published_parameter_count():
