@@ -30,7 +30,6 @@ shipped and the ratio of CPU seconds (mmdet3d / synthdet, one process each) besi
 
     python benchmarks/bench_convert.py --rooms 20 --points-per-object 18000 --workers 2 --repeats 2
 """
-import argparse
 import contextlib
 import functools
 import glob
@@ -52,6 +51,7 @@ from projects.synthdet.datasets.s3dis_converter import (
     OUTPUT_DIRS, S3DIS_DIR, convert_s3dis)
 from synthdet.room_data import annotation_files  # the converter's file order
 from tests.s3dis_fixtures import write_synthetic_area
+from synthdet.cli import OneLineParser
 
 S3DIS_CLASSES_13 = ('ceiling', 'floor', 'wall', 'beam', 'column', 'window', 'door', 'table',
                     'chair', 'sofa', 'bookcase', 'board', 'clutter')
@@ -202,7 +202,7 @@ def check_identical(root: Path, area: int, out_dir: Path, mm_root: Path, mm_info
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument('--rooms', type=int, default=20)
     parser.add_argument(
         '--points-per-object',

@@ -55,7 +55,6 @@ second of the default sensors' scans against the same scans on the ``BVHTree`` l
 three models, and per model), the bare ray casting ratio on the random rays, and our scan / bare
 cast.
 """
-import argparse
 import contextlib
 import gc
 import os
@@ -85,6 +84,7 @@ from generator.sensor_common import RoomGeometry, room_geometry
 from generator.sensors import label_stray_returns, scan_room
 from generator.writer import write_room
 from synthdet.contracts import ROOM_FORMAT, SENSOR_MODELS
+from synthdet.cli import OneLineParser
 
 Caster = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 ENGINES = ('embree', 'loop')  # the scans' two ray engines: Embree, the BVHTree loop
@@ -445,7 +445,7 @@ def agreement(found: tuple[np.ndarray, np.ndarray], embree: tuple[np.ndarray, np
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = OneLineParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rays', type=int, default=1_000_000, help='rays for BVHTree and Embree')
     parser.add_argument(
         '--slow-rays', type=int, default=20_000, help='rays for Object and scene ray_cast')

@@ -20,7 +20,6 @@ side, and last the gain of the voxel grid in 10th-percentile voxels per object p
 ``--pictures DIR`` also draws the first room of each sensor from above after each pipeline
 (``DIR/<sensor>_<pipeline>.png``, points by class, the true boxes).
 """
-import argparse
 import tempfile
 import time
 import warnings
@@ -48,6 +47,7 @@ from synthdet.room_data import (
 from synthdet.scan_io import read_scan  # noqa: E402
 from synthdet.topview import draw_top_view  # noqa: E402
 from synthdet.voxels import cube_keys, one_point_per_cube  # noqa: E402
+from synthdet.cli import OneLineParser  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -115,7 +115,7 @@ def time_grid(points: np.ndarray, grid, seed: int) -> dict[str, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = OneLineParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rooms', type=int, default=4)
     parser.add_argument('--points', type=int, default=1_000_000)
     parser.add_argument('--sample', type=int, default=40_000)
