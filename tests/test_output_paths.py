@@ -4,6 +4,7 @@
   work (exit 2, one line naming the option and the path) and left as it was;
 - on a full disk (files limited in size, as tests/test_faults.py simulates it) a tool exits 1
   naming the file, keeps the previous output and leaves no empty or truncated file;
+- an output folder on a read-only file system is exit 1 with one line naming the output;
 - what a run killed with ``kill -9`` left is removed by the next run writing there;
 - names that are not UTF-8 are written and reported as given.
 """
@@ -149,6 +150,46 @@ def test_screenshot_on_a_full_disk_is_a_failure_and_keeps_the_picture(document, 
     assert_clean_error(proc, 1, str(picture), 'incomplete')
     assert picture.read_bytes() == previous
     assert temporaries(tmp_path) == []
+
+
+# ------------------------------------------------------------------ a read-only folder
+
+
+def run_read_only(folder: Path, *args: object) -> tuple[subprocess.CompletedProcess, float]:
+    """Run ``python ARGS...`` with ``folder`` a read-only file system: a tmpfs mounted read-only
+    in a private mount namespace of that process (a user namespace: no root needed, and the
+    mount ends with the process). Returns the process and its wall time in seconds."""
+    folder.mkdir()
+    mount = 'mount -t tmpfs -o ro,size=64k tmpfs "$0" && exec "$@"'
+    start = time.perf_counter()
+    proc = subprocess.run(['unshare', '--map-root-user', '--mount', 'sh', '-c', mount,
+                           str(folder), sys.executable, *map(str, args)],
+                          cwd=REPO, capture_output=True, text=True, timeout=600,
+                          env={**os.environ, 'OMP_NUM_THREADS': '1', 'PYTHONWARNINGS': 'ignore'})
+    return proc, time.perf_counter() - start
+
+
+def test_a_read_only_output_folder_is_one_line_naming_the_output(room, document, tmp_path):
+    """Exit 1 and one line naming the output (not a temporary of the run); the tools that
+    check their output folder first do so before FreeCAD, bpy, training or detection start."""
+    read_only = tmp_path / 'read-only'
+    cases = [
+        (['tools/visualize.py', room, '--out', read_only / 'room.png'], 'room.png: cannot write'),
+        (['-m', 'configurator', 'screenshot', document, '--out', read_only / 'room.png'],
+         'cannot write in'),
+        (['-m', 'generator.assets', '--out', read_only / 'assets', '--classes', 'chair'],
+         'cannot write in'),
+        (['tools/train.py', TINY, '--work-dir', read_only / 'train'], 'cannot write in'),
+        (['tools/demo.py', '--size', 'tiny', '--work-dir', read_only / 'demo'],
+         'cannot write in'),
+        (['tools/eval_scans.py', TINY, 'missing.pth', room, '--out', read_only / 'eval'],
+         'cannot write in'),
+    ]
+    for command, message in cases:
+        proc, seconds = run_read_only(read_only, *command)
+        assert_clean_error(proc, 1, str(read_only), message)
+        assert 'partial' not in proc.stderr and seconds < 120, (command, proc.stderr[-2000:])
+        read_only.rmdir()
 
 
 # ------------------------------------------------------------------ leftovers of killed runs
