@@ -5,7 +5,8 @@ Each case runs the real CLI in a subprocess on small files made here and checks 
 naming the option or the file (docs/safety.md):
 
 - argparse errors of every CLI (``python -m generator``, ``generator.assets``, ``configurator``
-  and its sub-commands, every ``tools/*.py``): one line, no usage block;
+  and its sub-commands, every ``tools/*.py`` and ``benchmarks/bench_*.py``): one line, no
+  usage block;
 - option values: NaN, infinite, negative or huge thresholds, tolerances, timeouts, areas,
   thread and worker counts, ``--cfg-options`` that are not ``key=value``, a ``--launcher``
   outside its launcher, ``--device`` this machine lacks;
@@ -107,6 +108,15 @@ def test_module_clis_report_usage_errors_in_one_line(args, prog):
     proc, _ = cli(*args)
     one_line_error(proc, 2, f'{prog}: error: ')
     assert 'usage:' not in proc.stderr
+
+
+BENCHMARKS = sorted(path.name for path in (REPO / 'benchmarks').glob('bench_*.py'))
+
+
+@pytest.mark.parametrize('benchmark', BENCHMARKS)
+def test_every_benchmark_reports_a_usage_error_in_one_line(benchmark):
+    proc, _ = cli(f'benchmarks/{benchmark}', '--no-such-option', library_warnings=False)
+    one_line_error(proc, 2, f'{benchmark}: error: ')
 
 
 def test_the_usage_block_comes_with_help_only():
