@@ -152,6 +152,40 @@ def test_screenshot_on_a_full_disk_is_a_failure_and_keeps_the_picture(document, 
     assert temporaries(tmp_path) == []
 
 
+def test_labels_eval_scans_and_dataset_stats_on_a_full_disk_name_the_output(
+        document, checkpoint, room, tmp_path):
+    """Exit 1, one line naming the file or room that did not fit, nothing half-written."""
+    from tests.test_dataset_stats import _write_infos
+    rng = np.random.default_rng(0)
+    points = np.column_stack([rng.uniform(0.0, 6.0, (50_000, 2)),
+                              rng.uniform(0.0, 2.8, 50_000), np.full((50_000, 3), 128.0)])
+    scan = tmp_path / 'scan.xyz'
+    write_scan(scan, points)
+    labelled = tmp_path / 'labelled' / 'room.txt'
+    labelled.parent.mkdir()
+    labelled.write_bytes(room.read_bytes())
+    labelled.with_name('room.labels.json').write_text(
+        '{"format": "synthdet.labels/1", "scan": "room.txt", "boxes": [], '
+        '"classes": ["table", "chair", "sofa", "yumi", "3dprinter"]}')
+    _write_infos(tmp_path, 1, [[0, 1], [2]])
+    labels, evaluation = tmp_path / 'labels', tmp_path / 'evaluation'
+    cases = [
+        (['-m', 'configurator', 'labels', document, '--scan', scan, '--out', labels],
+         labels / 'Area_10' / 'scan_1'),
+        (['tools/eval_scans.py', TINY, checkpoint, labelled, '--out', evaluation, '--voxel',
+          '0.05'], evaluation / 'room.pred.json'),
+    ]
+    for command, output in cases:
+        proc = run(*command, env={'PYTHONWARNINGS': 'ignore'}, preexec_fn=full_disk)
+        assert_clean_error(proc, 1, f'{output}: cannot write')
+        assert not output.exists() and temporaries(output.parent) == []
+    table = tmp_path / 'table1.md'
+    proc = run('tools/dataset_stats.py', tmp_path, '--out', table,
+               preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (0, 0)))
+    assert_clean_error(proc, 1, f'{table}: cannot write')
+    assert not table.exists() and temporaries(tmp_path) == []
+
+
 # ------------------------------------------------------------------ a read-only folder
 
 
