@@ -91,6 +91,9 @@ def test_an_output_that_is_a_device_a_fifo_or_a_folder_is_refused(room, tmp_path
     proc = run('tools/visualize.py', room, '--out', fifo, timeout=120)
     assert_clean_error(proc, 2, '--out', str(fifo), 'a FIFO')
     assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
+    for output, kind in ((device, 'is a device'), (room, 'is a file, expected a folder')):
+        proc = run('-m', 'generator', '--out', output, '--rooms-per-area', '1', timeout=120)
+        assert_clean_error(proc, 2, '--out', str(output), kind)
 
 
 # ------------------------------------------------------------------ a full disk
@@ -205,7 +208,8 @@ def run_read_only(folder: Path, *args: object) -> tuple[subprocess.CompletedProc
 
 def test_a_read_only_output_folder_is_one_line_naming_the_output(room, document, tmp_path):
     """Exit 1 and one line naming the output (not a temporary of the run); the tools that
-    check their output folder first do so before FreeCAD, bpy, training or detection start."""
+    check their output folder first do so before FreeCAD, Blender, training or detection
+    start."""
     read_only = tmp_path / 'read-only'
     cases = [
         (['tools/visualize.py', room, '--out', read_only / 'room.png'], 'room.png: cannot write'),
@@ -217,6 +221,8 @@ def test_a_read_only_output_folder_is_one_line_naming_the_output(room, document,
         (['tools/demo.py', '--size', 'tiny', '--work-dir', read_only / 'demo'],
          'cannot write in'),
         (['tools/eval_scans.py', TINY, 'missing.pth', room, '--out', read_only / 'eval'],
+         'cannot write in'),
+        (['-m', 'generator', '--out', read_only / 'rooms', '--rooms-per-area', '1'],
          'cannot write in'),
     ]
     for command, message in cases:
