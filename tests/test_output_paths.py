@@ -155,6 +155,21 @@ def test_screenshot_on_a_full_disk_is_a_failure_and_keeps_the_picture(document, 
     assert temporaries(tmp_path) == []
 
 
+def test_screenshot_whose_freecad_cannot_write_at_all_ends_before_its_timeout(document,
+                                                                              tmp_path):
+    """FreeCAD that can write no byte (not even its report) is a failure at once, exit 1, not
+    a wait for ``--timeout``."""
+    full = tmp_path / 'freecad-on-a-full-disk'
+    full.write_text("#!/bin/bash\ntrap '' XFSZ\nulimit -f 0\nexec freecad \"$@\"\n")
+    full.chmod(0o755)
+    picture = tmp_path / 'room.png'
+    start = time.perf_counter()
+    proc = run('-m', 'configurator', 'screenshot', document, '--out', picture, '--freecad', full,
+               '--timeout', '120')
+    assert_clean_error(proc, 1, 'FreeCAD wrote no whole result')
+    assert time.perf_counter() - start < 100 and not picture.exists()
+
+
 def test_labels_eval_scans_and_dataset_stats_on_a_full_disk_name_the_output(
         document, checkpoint, room, tmp_path):
     """Exit 1, one line naming the file or room that did not fit, nothing half-written."""
