@@ -52,6 +52,7 @@ from projects.synthdet.datasets.s3dis_converter import (
     OUTPUT_DIRS, S3DIS_DIR, convert_s3dis)
 from synthdet.room_data import annotation_files  # the converter's file order
 from tests.s3dis_fixtures import write_synthetic_area
+from synthdet.cli import OneLineParser
 
 S3DIS_CLASSES_13 = ('ceiling', 'floor', 'wall', 'beam', 'column', 'window', 'door', 'table',
                     'chair', 'sofa', 'bookcase', 'board', 'clutter')
@@ -203,7 +204,7 @@ def check_identical(root: Path, area: int, out_dir: Path, mm_root: Path, mm_info
 
 def parse_args() -> argparse.Namespace:
     """The benchmark's command line."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument('--rooms', type=int, default=20)
     parser.add_argument(
         '--points-per-object',

@@ -32,7 +32,6 @@ corner error), then every method on all rooms (mean error, worst corner, right c
 order) and the time per 1M points. Errors are given side by side, not as ratios: the traced
 error is a fraction of a millimetre to a few millimetres, too small to divide by.
 """
-import argparse
 import contextlib
 import io
 import json
@@ -57,6 +56,7 @@ from synthdet.contracts import read_corners, read_room
 from synthdet.info_files import room_sensor
 from synthdet.scan_io import read_scan
 from tests.room_scans import SHAPES, NoiseModel, make_room
+from synthdet.cli import OneLineParser
 
 
 class Result(NamedTuple):
@@ -285,7 +285,7 @@ def report_real_scans(folder: Path, views: Path | None) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = OneLineParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rooms', type=int, default=10, help='rooms per shape and noise')
     parser.add_argument('--points', type=int, default=300_000, help='points per room')
     parser.add_argument(

@@ -22,7 +22,6 @@ runs every tool forked from one process that imported the stack once
 (``benchmarks/tool_runs.py``), the two training processes started with the environment
 torchrun gives them instead of through ``tools/dist_train.sh``: no start-up per process.
 """
-import argparse
 import json
 import os
 import socket
@@ -34,6 +33,7 @@ import time
 from pathlib import Path
 
 from benchmarks.tool_runs import add_fork_tools_option, run_tool, start_tool
+from synthdet.cli import OneLineParser
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIG = 'configs/tr3d/exp2_cpu.py'
@@ -156,7 +156,7 @@ def train_forked(work: Path, processes: int, threads: int, options: list[str]) -
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument('--rooms-per-area', type=int, default=4)
     parser.add_argument('--points', type=int, default=1_000_000)
     parser.add_argument('--iters', type=int, default=16, help='training iterations per setup')

@@ -48,6 +48,7 @@ from benchmarks.tool_runs import add_fork_tools_option
 from projects.synthdet.config_helpers import area_info_file, with_num_points
 from synthdet.info_files import RAW_DIR
 from synthdet.work_dir import StepError, claim_work_dir
+from synthdet.cli import OneLineParser
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -482,7 +483,7 @@ def report(results: dict) -> str:
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0].replace('\n', ' '))
+    parser = OneLineParser(description=__doc__.split('\n\n')[0].replace('\n', ' '))
     parser.add_argument('--work-dir', type=Path, default=REPO / 'work_dirs/domain_shift')
     parser.add_argument(
         '--rooms-train', type=int, default=40, help='training rooms per training profile')

@@ -15,7 +15,6 @@ detection, then the ratio of the per-detection wall times of the largest and the
 (about 1.0: the time grows linearly with the detections; 10x the size and 3x: a step that grows
 with the square), for the whole run, the build and the save, and that ratio of the CPU times.
 """
-import argparse
 import json
 import math
 import os
@@ -25,6 +24,8 @@ import sys
 import tempfile
 import textwrap
 from pathlib import Path
+
+from synthdet.cli import OneLineParser
 
 REPO = Path(__file__).resolve().parents[1]
 CLASSES = ('table', 'chair', 'sofa', 'bookcase', '3dprinter', 'forklift')
@@ -102,7 +103,7 @@ def time_document(folder: Path, count: int, freecadcmd: str) -> dict:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser = OneLineParser(description=__doc__.split('\n')[0])
     parser.add_argument('--sizes', type=int, nargs='+', default=[1000, 10000],
                         help='two or more detection counts (default 1000 10000)')
     parser.add_argument('--freecadcmd', default='freecadcmd')

@@ -16,6 +16,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from synthdet.cli import OneLineParser
+
 GOAL_SECONDS = 600.0
 PAPER_ROOMS = 150
 
@@ -35,7 +37,7 @@ def timed_run(out: Path, args: argparse.Namespace, workers: int, cache: Path) ->
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = OneLineParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rooms-per-area', type=int, default=50)
     parser.add_argument('--points', type=int, default=1_000_000)
     parser.add_argument('--workers', type=int, default=2)

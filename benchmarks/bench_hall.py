@@ -40,6 +40,7 @@ from benchmarks.tool_runs import add_fork_tools_option, run_tool
 from synthdet.contracts import read_predictions
 from synthdet.ply import read_ply_vertices
 from synthdet.scan_io import write_las_chunks
+from synthdet.cli import OneLineParser
 
 
 IOU = 0.25
@@ -52,7 +53,7 @@ PEAK_WRAPPER = ('import resource, subprocess, sys\n'
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument('--checkpoint', type=Path, required=True, help='trained model (make demo)')
     parser.add_argument(
         '--config', type=Path, help='its config (default: the .py beside the work dir)')

@@ -33,6 +33,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from synthdet.cli import OneLineParser
 
 CLASSES = ('table', 'chair', 'sofa', 'bookcase', 'board')
 LABEL2LEVEL = (1, 0, 1, 1, 0)  # published TR3D S3DIS
@@ -138,7 +139,7 @@ def run_worker(room_file: Path, name: str, iters: int, threads: int) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument('--points', type=int, default=100_000)
     parser.add_argument('--iters', type=int, default=3, help='timed runs after one warm-up')
     parser.add_argument('--threads', type=int, default=1, help='torch CPU threads')

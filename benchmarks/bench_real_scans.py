@@ -36,12 +36,13 @@ from synthdet.contracts import LABELS_FORMAT, read_labels, read_predictions
 from synthdet.contracts import write_labels
 from synthdet.scan_io import read_scan, write_scan
 from tests.s3dis_fixtures import S3DIS_DIR, write_synthetic_area
+from synthdet.cli import OneLineParser
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument('scans', type=Path, nargs='?', help='folder of labelled scans')
     parser.add_argument('--generate', type=int, help='evaluate N generated rooms instead')
     parser.add_argument('--checkpoint', type=Path, required=True, help='trained model')

@@ -28,6 +28,7 @@ import numpy as np
 
 from synthdet.scan_io import load_scan, read_scan, write_las_chunks
 from tests.room_scans import make_room
+from synthdet.cli import OneLineParser
 
 GEO = np.array([500000.0, 5400000.0, 300.0])
 ROOM_POINTS = 1_000_000
@@ -88,7 +89,7 @@ def run_child(mode: str, args: argparse.Namespace, scan: str) -> tuple[float, in
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument('--points', type=int, default=30_000_000)
     parser.add_argument('--voxel', type=float, default=0.05)
     parser.add_argument('--chunk', type=int, default=1_000_000)

@@ -85,6 +85,7 @@ from generator.sensor_common import RoomGeometry, room_geometry
 from generator.sensors import label_stray_returns, scan_room
 from generator.writer import write_room
 from synthdet.contracts import ROOM_FORMAT, SENSOR_MODELS
+from synthdet.cli import OneLineParser
 
 Caster = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 ENGINES = ('embree', 'loop')  # the scans' two ray engines: Embree, the BVHTree loop
@@ -486,7 +487,7 @@ def print_bare_casts(results: dict[str, tuple], rays: int) -> tuple[str, float]:
 
 def parse_args() -> argparse.Namespace:
     """The benchmark's command line."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = OneLineParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rays', type=int, default=1_000_000, help='rays for BVHTree and Embree')
     parser.add_argument(
         '--slow-rays', type=int, default=20_000, help='rays for Object and scene ray_cast')

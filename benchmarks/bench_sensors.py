@@ -10,7 +10,6 @@ scan and text files, into a temporary folder removed afterwards. The passes go r
 models in turn; the median per room of ``--repeats`` passes is printed with its ratio to the
 aimed paper sensor. The last line gives the slowest model's seconds per 1M-point room.
 """
-import argparse
 import statistics
 import tempfile
 import time
@@ -20,6 +19,7 @@ import bpy  # noqa: F401  (before open3d: both ship libtbb)
 
 from generator.config import load_config
 from generator.pipeline import RoomGenerator, RunOptions, plan_tasks
+from synthdet.cli import OneLineParser
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -34,7 +34,7 @@ PROFILES = {
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = OneLineParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rooms', type=int, default=3)
     parser.add_argument('--points', type=int, default=1_000_000)
     parser.add_argument('--repeats', type=int, default=3)

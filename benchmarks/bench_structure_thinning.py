@@ -48,6 +48,7 @@ from synthdet.room_data import (
 from synthdet.scan_io import read_scan  # noqa: E402
 from synthdet.topview import draw_top_view  # noqa: E402
 from synthdet.voxels import cube_keys, one_point_per_cube  # noqa: E402
+from synthdet.cli import OneLineParser  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -116,7 +117,7 @@ def time_grid(points: np.ndarray, grid, seed: int) -> dict[str, float]:
 
 def parse_args() -> argparse.Namespace:
     """The benchmark's command line."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = OneLineParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rooms', type=int, default=4)
     parser.add_argument('--points', type=int, default=1_000_000)
     parser.add_argument('--sample', type=int, default=40_000)

@@ -60,6 +60,7 @@ from synthdet.contracts import read_labels
 from synthdet.geometry import box_corners_xy
 from synthdet.info_files import RAW_DIR
 from synthdet.processes import work_folder
+from synthdet.cli import OneLineParser
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -405,7 +406,7 @@ def report(results: dict) -> str:
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument('scans', type=Path, help='folder of labelled scans')
     parser.add_argument('--train', nargs='+', required=True, help='training rooms (scan stems)')
     parser.add_argument('--config', type=Path, required=True, help='the synthetic model config')

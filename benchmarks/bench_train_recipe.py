@@ -41,6 +41,7 @@ from pathlib import Path
 
 from benchmarks.bench_dist_train import BATCH, CONFIG, TRAIN_ROOMS_AREAS, make_data, train
 from benchmarks.tool_runs import add_fork_tools_option
+from synthdet.cli import OneLineParser
 
 EXP2_ROOMS_PER_AREA = 50  # make exp2-cpu's areas 7, 8 and 9
 PROFILE_ROOMS = 2  # rooms of one training process per iteration (batch 4 in 2 processes)
@@ -169,7 +170,7 @@ def whole_run_minutes(cfg, seconds_per_iteration: float, validation_room: float,
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument('--rooms-per-area', type=int, default=4)
     parser.add_argument('--points', type=int, default=1_000_000)
     parser.add_argument('--iters', type=int, default=16, help='training iterations per recipe')

@@ -7,7 +7,6 @@ Every method starts from the same numpy arrays (the per-line loop's conversion t
 is timed with it) and gets the best of ``--repeats`` runs, garbage collector off. Ends with
 ``text writer speedup vs the fastest alternative (<name>): <N>x``.
 """
-import argparse
 import gc
 import io
 import time
@@ -15,6 +14,7 @@ import time
 import numpy as np
 
 from generator.writer import format_lines
+from synthdet.cli import OneLineParser
 
 
 def best_of(fn, repeats: int) -> tuple[float, object]:
@@ -34,7 +34,7 @@ def best_of(fn, repeats: int) -> tuple[float, object]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser = OneLineParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--points', type=int, default=1_000_000)
     parser.add_argument('--repeats', type=int, default=3, help='runs per method (best kept)')
     args = parser.parse_args()

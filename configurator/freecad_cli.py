@@ -109,7 +109,10 @@ def run_freecad_process(command: list[str], env: dict, work_dir: Path, timeout: 
         output = (process.stderr.strip() or process.stdout.strip())[-2000:]
         raise FreecadFailed(f'FreeCAD exited with code {process.returncode} without a result '
                             f'from {Path(command[-1]).name}:\n{output}')
-    return load_json(str(result_path))
+    try:
+        return load_json(str(result_path))
+    except ValueError as error:  # cut short: FreeCAD could not write it whole (a full disk)
+        raise FreecadFailed(f'FreeCAD wrote no whole result: {error}') from None
 
 
 def _run_freecad(job: dict, work_dir: Path, freecadcmd: str, timeout: float) -> dict:

@@ -19,7 +19,7 @@ from configurator.freecad_cli import (FreecadFailed, add_program_options, check_
                                       run_freecad_process)
 from synthdet.cli import int_in
 from synthdet.fcstd_guard import check_document
-from synthdet.outputs import check_output, check_png, write_bytes
+from synthdet.outputs import check_output_file, check_png, write_bytes
 from synthdet.processes import ends_with_parent, work_folder
 
 PIXELS = (16, 8000)  # the accepted --width and --height
@@ -100,12 +100,13 @@ def screenshot(document: Path,
 
     Returns FreeCAD's report (``visible`` and ``objects`` counts). Raises ``ValueError`` for
     bad arguments (``RefusedDocument`` for a document FreeCAD would run code or open other
-    files for; an ``out`` that is the document, a folder, a device or a FIFO) and
-    ``FreecadFailed`` when no picture was made. FreeCAD saves the picture in a work folder; a
+    files for; an ``out`` that is the document, a folder, a device or a FIFO),
+    ``OutputFailed`` for an ``out`` in a folder that cannot be written (before FreeCAD starts)
+    and ``FreecadFailed`` when no picture was made. FreeCAD saves the picture in a work folder; a
     whole PNG is then written to ``out`` through a checked temporary file (``OutputFailed``
     if it cannot be, the previous picture kept).
     """
-    check_output(out, '--out', inputs=[document])
+    check_output_file(out, make_parents=True, inputs=[document])  # writable before FreeCAD
     document, out = Path(document).resolve(), Path(out).resolve()
     check_document(document)  # RefusedDocument (a ValueError) before FreeCAD starts
     if out.suffix.lower() != '.png':

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from synthdet.cli import MAX_AREA, OneLineParser, shown
+from synthdet.outputs import OutputFailed, OutputRefused, check_output_dir
 
 PROFILES = Path(__file__).resolve().parent / 'profiles'
 # the accepted ranges of the integer options (docs/generator.md); a hall of 10-50 million
@@ -156,9 +157,19 @@ def check_arguments(args: argparse.Namespace, parser: argparse.ArgumentParser) -
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Generate the rooms; returns 0, 2 for bad usage, a bad config or an ``--out`` that is no
+    folder, 1 for an ``--out`` that cannot be written or a failing write, 130/143 when
+    stopped by SIGINT/SIGTERM."""
     parser = build_parser()
     args = parser.parse_args(argv)
     shard = check_arguments(args, parser)
+    try:  # before the asset library is built: an --out that is no folder or cannot be written
+        check_output_dir(args.out, '--out')
+    except OutputRefused as error:
+        parser.error(str(error))
+    except OutputFailed as error:
+        print(f'generator: error: {error}', file=sys.stderr)
+        return 1
     from generator.config import ConfigError, load_config
     try:
         config = load_config(PROFILES / f'{args.profile}.json' if args.profile else args.config)

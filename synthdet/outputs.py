@@ -218,6 +218,10 @@ def _failed(target: Path, error: OSError) -> OutputFailed:
 
 
 def _remove(path: Path) -> None:
+    """Remove ``path`` if it exists (on a read-only file system unlinking a missing name fails
+    with EROFS, not ENOENT)."""
+    if not os.path.lexists(path):
+        return
     with contextlib.suppress(FileNotFoundError):
         if path.is_dir() and not path.is_symlink():
             shutil.rmtree(path)

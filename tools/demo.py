@@ -44,7 +44,7 @@ from projects.synthdet.config_helpers import with_num_points
 from synthdet.cli import OneLineParser, int_in
 from synthdet.contracts import read_corners, read_predictions, read_room
 from synthdet.info_files import RAW_DIR
-from synthdet.outputs import write_text
+from synthdet.outputs import OutputRefused, check_output_dir, write_text
 from synthdet.work_dir import StepError, claim_work_dir
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -512,11 +512,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the demo; 0, 2 with one line for a ``--work-dir`` that is no folder, 1 with one
+    line for a step that fails or a work dir that cannot be written (checked first)."""
     args = parse_args(argv)
     demo = Demo(args.work_dir, args.size, args.seed, args.threads)
     try:
+        check_output_dir(args.work_dir, '--work-dir')
         demo.run_all(force=args.force)
-    except StepError as error:
+    except OutputRefused as error:
+        print(f'[demo] error: {error}', file=sys.stderr)
+        return 2
+    except (StepError, OSError) as error:  # OutputFailed: a full disk, a read-only folder
         print(f'[demo] error: {error}', file=sys.stderr)
         return 1
     return 0

@@ -22,7 +22,7 @@ detections).
 
 Every scan and labels file is read and checked before the model is loaded. A missing labels
 file, invalid JSON, a bad scan or checkpoint end with one line naming the file and exit code 2;
-failures at run time with exit code 1.
+failures at run time with exit code 1 (an ``--out`` folder that cannot be written: at once).
 """
 import argparse
 from pathlib import Path
@@ -31,6 +31,7 @@ from projects.synthdet.bootstrap import (
     add_detection_arguments, check_device, load_config, run_tool)
 from projects.synthdet.shipped_model import resolve_model, split_model_arguments
 from synthdet.cli import OneLineParser
+from synthdet.outputs import OutputRefused, check_output_dir
 from synthdet.scan_io import load_scan
 
 
@@ -64,6 +65,10 @@ def main(argv: list[str] | None = None) -> dict:
                                                          find_labelled_scans, format_result)
     from projects.synthdet.inference.detector import load_model
     from projects.synthdet.inference.windows import inference_settings
+    try:  # a folder that cannot be written is OutputFailed (exit 1) before any work
+        check_output_dir(args.out, '--out', inputs=args.scans)
+    except OutputRefused as error:
+        raise BadInput(str(error)) from None
     try:
         scans, skipped = find_labelled_scans(args.scans)
         for item in scans:  # every scan readable before the model is loaded

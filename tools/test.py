@@ -162,6 +162,7 @@ def main(argv: list[str] | None = None) -> dict:
         SynthdetFalsePositives, false_positives_document, format_false_positives)
     from projects.synthdet.evaluation.table3 import format_table3, table3
     cfg = runner_config(args)
+    check_output_dir(cfg.work_dir, '--work-dir')  # mmengine writes its logs there
     if args.out:
         check_output_file(args.out, make_parents=True)
     if args.show_dir:

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING
 from projects.synthdet.bootstrap import parse_runner_args, runner_config
 from synthdet.cli import OneLineParser
 from synthdet.info_files import InfoFileError
+from synthdet.outputs import OutputFailed, check_output_dir
 
 if TYPE_CHECKING:
     from mmengine.config import Config
@@ -109,8 +110,9 @@ def publish_final_checkpoint(work_dir: str | Path) -> Path | None:
 def main(argv: list[str] | None = None) -> int:
     """Build the Runner from the config, train, and publish the final inference checkpoint.
 
-    Returns 0, or 2 with a one-line message for a bad option or a checkpoint the weights-only
-    load refuses.
+    Returns 0, 2 with a one-line message for a bad option or a checkpoint the weights-only
+    load refuses, or 1 with one line when the work dir cannot be written (checked first) or a
+    write fails (a full disk).
     """
     args = parse_args(argv)  # bad options end here, before torch and mmengine are loaded
     import torch
@@ -124,12 +126,20 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         cfg = build_config(args)
-    except (CheckpointError, ValueError) as error:
+        check_output_dir(cfg.work_dir, '--work-dir')
+    except (CheckpointError, ValueError) as error:  # OutputRefused too
         print(f'train: error: {error}', file=sys.stderr)
         return 2
+    except OutputFailed as error:  # a work dir this process cannot write in
+        print(f'train: error: {error}', file=sys.stderr)
+        return 1
     try:
         with torch.serialization.safe_globals(TRAINING_CHECKPOINT_TYPES):
             Runner.from_cfg(cfg).train()
+        if is_main_process():
+            published = publish_final_checkpoint(cfg.work_dir)
+            if published is not None:
+                print(f'inference checkpoint (weights and meta only): {published}')
     except pickle.UnpicklingError as error:  # raised by mmengine's weights-only resume
         hint = 'if it is your own, resume it with --trust-checkpoint'
         print(f'train: error: {refused(cfg.load_from or cfg.work_dir, error, hint)}',
@@ -138,10 +148,13 @@ def main(argv: list[str] | None = None) -> int:
     except InfoFileError as error:  # an info pickle that is not plain data (it may hold code)
         print(f'train: error: {error}', file=sys.stderr)
         return 2
-    if is_main_process():
-        published = publish_final_checkpoint(cfg.work_dir)
-        if published is not None:
-            print(f'inference checkpoint (weights and meta only): {published}')
+    except OutputFailed as error:  # the inference checkpoint: the message names it
+        print(f'train: error: {error}', file=sys.stderr)
+        return 1
+    except OSError as error:  # a full disk, a work dir gone: a run-time failure
+        print(f'train: error: {error.filename or cfg.work_dir}: {error.strerror or error}',
+              file=sys.stderr)
+        return 1
     return 0
 
 

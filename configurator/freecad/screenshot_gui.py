@@ -30,6 +30,8 @@ except RuntimeError as error:
 except Exception as error:  # the process boundary: every failure goes to the result file
     result['error'] = f'{type(error).__name__}: {error}\n{traceback.format_exc()}'
 finally:
-    with open(options['result'], 'w', encoding='utf-8') as stream:
-        json.dump(result, stream)
-    os._exit(0)  # quit without the GUI's shutdown (no window manager, no OpenGL teardown)
+    try:  # a result that cannot be written (a full disk) still ends FreeCAD, not the timeout
+        with open(options['result'], 'w', encoding='utf-8') as stream:
+            json.dump(result, stream)
+    finally:
+        os._exit(0)  # quit without the GUI's shutdown (no window manager, no OpenGL teardown)

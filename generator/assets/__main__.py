@@ -12,7 +12,7 @@ from pathlib import Path
 
 from generator.assets.library import ASSET_CLASSES, build_library, load_library
 from synthdet.cli import OneLineParser, int_in
-from synthdet.outputs import OutputFailed, OutputRefused, check_output
+from synthdet.outputs import OutputFailed, OutputRefused, check_output_dir
 
 MAX_INSTANCES = 10_000
 
@@ -48,17 +48,16 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     """Build (and draw) the library; returns 0, 2 with one line for an output that is not a
-    folder (checked first), 1 with one line when a file cannot be written."""
+    folder (checked first), 1 with one line when a folder or a file cannot be written."""
     args = parse_args(argv)
     try:
-        check_output(args.out, '--out', folder=True)
+        check_output_dir(args.out, '--out')
         if args.preview is not None:
-            check_output(args.preview, '--preview', folder=True)
+            check_output_dir(args.preview, '--preview')
+        _build(args)
     except OutputRefused as error:
         print(f'generator.assets: error: {error}', file=sys.stderr)
         return 2
-    try:
-        _build(args)
     except OutputFailed as error:
         print(f'generator.assets: error: {error}', file=sys.stderr)
         return 1

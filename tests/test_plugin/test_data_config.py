@@ -108,7 +108,11 @@ def test_the_inference_tools_refuse_a_data_config_that_runs_code(inputs, tmp_pat
         ['tools/scan2cad.py', scan, '--config', base, '--checkpoint', checkpoint, '--out',
          tmp_path / 'room.FCStd'],
         ['tools/eval_scans.py', base, checkpoint, scan, '--out', tmp_path / 'eval'],
-        ['tools/test.py', base, checkpoint, '--work-dir', tmp_path / 'test'])]
+        ['tools/test.py', base, checkpoint, '--work-dir', tmp_path / 'test'],
+        ['tools/train.py', base, '--work-dir', tmp_path / 'train'],
+        ['tools/count_params.py', base],
+        ['tools/adapt.py', scan.parent, '--config', base, '--checkpoint', checkpoint, '--work',
+         tmp_path / 'adapt', '--out', tmp_path / 'adapted.pth'])]
     for config, expected, command in runs:
         proc = run_with_path(root, *command)
         assert_clean_error(proc, 2, str(config), expected, 'data only')

@@ -5,7 +5,8 @@ Each case runs the real CLI in a subprocess on small files made here and checks 
 naming the option or the file (docs/safety.md):
 
 - argparse errors of every CLI (``python -m generator``, ``generator.assets``, ``configurator``
-  and its sub-commands, every ``tools/*.py``): one line, no usage block;
+  and its sub-commands, every ``tools/*.py`` and ``benchmarks/bench_*.py``): one line, no
+  usage block;
 - option values: NaN, infinite, negative or huge thresholds, tolerances, timeouts, areas,
   thread and worker counts, ``--cfg-options`` that are not ``key=value``, a ``--launcher``
   outside its launcher, ``--device`` this machine lacks;
@@ -15,7 +16,8 @@ naming the option or the file (docs/safety.md):
   colour or a ragged line, a non-UTF-8 generator config, info pickles without categories, the
   bad inputs of ``tools/count_table.py``;
 - bounded work: a YAML config of nested aliases, a corners file of 10,000 corners and a
-  1,000-corner one, a scan 1e15 m from the origin (a warning) and a stray point at 1e300 m.
+  1,000-corner one (refused in linear time; a valid one built in seconds), a scan 1e15 m from
+  the origin (a warning) and a stray point at 1e300 m.
 """
 from __future__ import annotations
 
@@ -107,6 +109,15 @@ def test_module_clis_report_usage_errors_in_one_line(args, prog):
     proc, _ = cli(*args)
     one_line_error(proc, 2, f'{prog}: error: ')
     assert 'usage:' not in proc.stderr
+
+
+BENCHMARKS = sorted(path.name for path in (REPO / 'benchmarks').glob('bench_*.py'))
+
+
+@pytest.mark.parametrize('benchmark', BENCHMARKS)
+def test_every_benchmark_reports_a_usage_error_in_one_line(benchmark):
+    proc, _ = cli(f'benchmarks/{benchmark}', '--no-such-option', library_warnings=False)
+    one_line_error(proc, 2, f'{benchmark}: error: ')
 
 
 def test_the_usage_block_comes_with_help_only():
@@ -348,6 +359,24 @@ def test_corners_files_with_many_corners_are_checked_in_linear_time(inputs, tmp_
         one_line_error(proc, 2, corners, message)
         assert seconds < 30, seconds
     assert not (tmp_path / 'x.FCStd').exists()
+
+
+def test_a_room_of_a_thousand_corners_is_built_in_seconds(inputs, tmp_path):
+    """The largest corners file accepted becomes a document with every corner in its floor
+    sketch (the sketch is solved once, not once per corner)."""
+    import zipfile
+    corners = tmp_path / 'round.corners.json'
+    corners.write_text(json.dumps({
+        'format': 'synthdet.corners/1', 'scan': 'room.xyz', 'floor_z': 0.0, 'ceiling_z': 3.0,
+        'quality': {}, 'corners': polygon_corners(1_000, clockwise=True)}))
+    out = tmp_path / 'round.FCStd'
+    proc, seconds = cli('-m', 'configurator', 'freecad', '--scan', inputs['scan'],
+                        '--predictions', inputs['predictions'], '--corners', corners, '--out',
+                        out, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert seconds < 60, seconds
+    document = zipfile.ZipFile(out).read('Document.xml').decode()
+    assert document.count('<Constrain ') == 1_000
 
 
 def test_far_coordinates_warn_and_a_stray_point_at_1e300_costs_no_overflow(inputs, tmp_path):

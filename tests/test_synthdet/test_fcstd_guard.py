@@ -231,6 +231,8 @@ EDITS = {  # case: (old, new) in Document.xml, what the message names
                                OS_REFUSED),
     'newline inside the element': ((SAFE_PROXY, OS_PROXY.replace(b'<Python ', b'<Python\n ')),
                                    OS_REFUSED),
+    'module named before the value': ((SAFE_PROXY, b'<Python module="os" class="C" '
+                                       b'encoded="yes" value="bnVsbA=="/>'), OS_REFUSED),
     'namespace prefix': ((SAFE_PROXY, b'<x:Python xmlns:x="urn:x" value="bnVsbA==" '
                           b'encoded="yes" module="os" class="C"/>'), OS_REFUSED),
     'pickled state': ((SAFE_PROXY, b'<Python value="Y29z" encoded="yes" pickle="yes"/>'),

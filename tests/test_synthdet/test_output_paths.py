@@ -5,6 +5,7 @@
 - on a full disk (files limited in size, as tests/test_repository/test_faults.py simulates it)
   a tool exits 1 naming the file, keeps the previous output and leaves no empty or truncated
   file;
+- an output folder on a read-only file system is exit 1 with one line naming the output;
 - what a run killed with ``kill -9`` left is removed by the next run writing there;
 - names that are not UTF-8 are written and reported as given.
 """
@@ -91,6 +92,9 @@ def test_an_output_that_is_a_device_a_fifo_or_a_folder_is_refused(room, tmp_path
     proc = run('tools/visualize.py', room, '--out', fifo, timeout=120)
     assert_clean_error(proc, 2, '--out', str(fifo), 'a FIFO')
     assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
+    for output, kind in ((device, 'is a device'), (room, 'is a file, expected a folder')):
+        proc = run('-m', 'generator', '--out', output, '--rooms-per-area', '1', timeout=120)
+        assert_clean_error(proc, 2, '--out', str(output), kind)
 
 
 # ------------------------------------------------------------------ a full disk
@@ -150,6 +154,100 @@ def test_screenshot_on_a_full_disk_is_a_failure_and_keeps_the_picture(document, 
     assert_clean_error(proc, 1, str(picture), 'incomplete')
     assert picture.read_bytes() == previous
     assert temporaries(tmp_path) == []
+
+
+def test_screenshot_whose_freecad_cannot_write_at_all_ends_before_its_timeout(document,
+                                                                              tmp_path):
+    """FreeCAD that can write no byte (not even its report) is a failure at once, exit 1, not
+    a wait for ``--timeout``."""
+    full = tmp_path / 'freecad-on-a-full-disk'
+    full.write_text("#!/bin/bash\ntrap '' XFSZ\nulimit -f 0\nexec freecad \"$@\"\n")
+    full.chmod(0o755)
+    picture = tmp_path / 'room.png'
+    start = time.perf_counter()
+    proc = run('-m', 'configurator', 'screenshot', document, '--out', picture, '--freecad', full,
+               '--timeout', '120')
+    assert_clean_error(proc, 1, 'FreeCAD wrote no whole result')
+    assert time.perf_counter() - start < 100 and not picture.exists()
+
+
+def test_labels_eval_scans_and_dataset_stats_on_a_full_disk_name_the_output(
+        document, checkpoint, room, tmp_path):
+    """Exit 1, one line naming the file or room that did not fit, nothing half-written."""
+    from tests.test_dataset_stats import _write_infos
+    rng = np.random.default_rng(0)
+    points = np.column_stack([rng.uniform(0.0, 6.0, (50_000, 2)),
+                              rng.uniform(0.0, 2.8, 50_000), np.full((50_000, 3), 128.0)])
+    scan = tmp_path / 'scan.xyz'
+    write_scan(scan, points)
+    labelled = tmp_path / 'labelled' / 'room.txt'
+    labelled.parent.mkdir()
+    labelled.write_bytes(room.read_bytes())
+    labelled.with_name('room.labels.json').write_text(
+        '{"format": "synthdet.labels/1", "scan": "room.txt", "boxes": [], '
+        '"classes": ["table", "chair", "sofa", "yumi", "3dprinter"]}')
+    _write_infos(tmp_path, 1, [[0, 1], [2]])
+    labels, evaluation = tmp_path / 'labels', tmp_path / 'evaluation'
+    cases = [
+        (['-m', 'configurator', 'labels', document, '--scan', scan, '--out', labels],
+         labels / 'Area_10' / 'scan_1'),
+        (['tools/eval_scans.py', TINY, checkpoint, labelled, '--out', evaluation, '--voxel',
+          '0.05'], evaluation / 'room.pred.json'),
+    ]
+    for command, output in cases:
+        proc = run(*command, env={'PYTHONWARNINGS': 'ignore'}, preexec_fn=full_disk)
+        assert_clean_error(proc, 1, f'{output}: cannot write')
+        assert not output.exists() and temporaries(output.parent) == []
+    table = tmp_path / 'table1.md'
+    proc = run('tools/dataset_stats.py', tmp_path, '--out', table,
+               preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (0, 0)))
+    assert_clean_error(proc, 1, f'{table}: cannot write')
+    assert not table.exists() and temporaries(tmp_path) == []
+
+
+# ------------------------------------------------------------------ a read-only folder
+
+
+def run_read_only(folder: Path, *args: object) -> tuple[subprocess.CompletedProcess, float]:
+    """Run ``python ARGS...`` with ``folder`` a read-only file system: a tmpfs mounted read-only
+    in a private mount namespace of that process (a user namespace: no root needed, and the
+    mount ends with the process). Returns the process and its wall time in seconds."""
+    folder.mkdir()
+    mount = 'mount -t tmpfs -o ro,size=64k tmpfs "$0" && exec "$@"'
+    start = time.perf_counter()
+    proc = subprocess.run(['unshare', '--map-root-user', '--mount', 'sh', '-c', mount,
+                           str(folder), sys.executable, *map(str, args)],
+                          cwd=REPO, capture_output=True, text=True, timeout=600,
+                          env={**os.environ, 'OMP_NUM_THREADS': '1', 'PYTHONWARNINGS': 'ignore'})
+    return proc, time.perf_counter() - start
+
+
+def test_a_read_only_output_folder_is_one_line_naming_the_output(room, document, tmp_path):
+    """Exit 1 and one line naming the output (not a temporary of the run); the tools that
+    check their output folder first do so before FreeCAD, Blender, training or detection
+    start."""
+    read_only = tmp_path / 'read-only'
+    cases = [
+        (['tools/visualize.py', room, '--out', read_only / 'room.png'], 'room.png: cannot write'),
+        (['-m', 'configurator', 'screenshot', document, '--out', read_only / 'room.png'],
+         'cannot write in'),
+        (['-m', 'generator.assets', '--out', read_only / 'assets', '--classes', 'chair'],
+         'cannot write in'),
+        (['tools/train.py', TINY, '--work-dir', read_only / 'train'], 'cannot write in'),
+        (['tools/test.py', TINY, 'missing.pth', '--work-dir', read_only / 'test'],
+         'cannot write in'),
+        (['tools/demo.py', '--size', 'tiny', '--work-dir', read_only / 'demo'],
+         'cannot write in'),
+        (['tools/eval_scans.py', TINY, 'missing.pth', room, '--out', read_only / 'eval'],
+         'cannot write in'),
+        (['-m', 'generator', '--out', read_only / 'rooms', '--rooms-per-area', '1'],
+         'cannot write in'),
+    ]
+    for command, message in cases:
+        proc, seconds = run_read_only(read_only, *command)
+        assert_clean_error(proc, 1, str(read_only), message)
+        assert 'partial' not in proc.stderr and seconds < 120, (command, proc.stderr[-2000:])
+        read_only.rmdir()
 
 
 # ------------------------------------------------------------------ leftovers of killed runs

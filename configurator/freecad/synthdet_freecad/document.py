@@ -92,10 +92,12 @@ def build_room(doc, corners: dict, wall_thickness: float, group, look):
     group.addObject(sketch)
     points = [App.Vector(1000.0 * x, 1000.0 * y, 0.0) for x, y in corners['corners']]
     count = len(points)
-    for index in range(count):
-        sketch.addGeometry(Part.LineSegment(points[index], points[(index + 1) % count]), False)
-    for index in range(count):
-        sketch.addConstraint(Sketcher.Constraint('Coincident', index, 2, (index + 1) % count, 1))
+    # all edges, then all constraints, in one call each: the sketch is solved once, not once
+    # per constraint (a thousand corners took minutes that way)
+    sketch.addGeometry([Part.LineSegment(points[index], points[(index + 1) % count])
+                        for index in range(count)], False)
+    sketch.addConstraint([Sketcher.Constraint('Coincident', index, 2, (index + 1) % count, 1)
+                          for index in range(count)])
     sketch.setExpression('.Placement.Base.z', f'{sheet.Name}.floor_z')
 
     floor = doc.addObject('Part::Face', 'Floor')
