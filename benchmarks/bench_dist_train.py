@@ -22,6 +22,7 @@ runs every tool forked from one process that imported the stack once
 (``benchmarks/tool_runs.py``), the two training processes started with the environment
 torchrun gives them instead of through ``tools/dist_train.sh``: no start-up per process.
 """
+import argparse
 import json
 import os
 import socket
@@ -48,6 +49,31 @@ def free_port() -> int:
     with socket.socket() as sock:
         sock.bind(('127.0.0.1', 0))
         return sock.getsockname()[1]
+
+
+def add_training_run_options(parser: argparse.ArgumentParser, per: str) -> None:
+    """Add the options of a measured training run on generated rooms: the data (rooms per
+    area, points, seed, workers), the iterations (``per``: what they run per) and the warm-up;
+    ``check_iterations`` checks them."""
+    parser.add_argument('--rooms-per-area', type=int, default=4)
+    parser.add_argument('--points', type=int, default=1_000_000)
+    parser.add_argument('--iters', type=int, default=16, help=f'training iterations per {per}')
+    parser.add_argument('--warmup', type=int, default=4, help='first iterations not counted')
+    parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument(
+        '--workers', type=int, default=2, help='generator and converter processes for the data')
+    add_fork_tools_option(parser)
+
+
+def check_iterations(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """The parser's one-line error unless the iterations cover the training rooms whole and
+    outnumber the warm-up."""
+    train_rooms = args.rooms_per_area * len(TRAIN_ROOMS_AREAS)
+    if args.rooms_per_area < 1 or (args.iters * BATCH) % train_rooms:
+        parser.error(f'--iters x {BATCH} rooms must be a multiple of the {train_rooms} '
+                     'training rooms (--rooms-per-area x 2)')
+    if args.iters <= args.warmup:
+        parser.error('--iters must be larger than --warmup')
 
 
 def make_data(root: Path,
@@ -157,25 +183,14 @@ def train_forked(work: Path, processes: int, threads: int, options: list[str]) -
 
 def main(argv: list[str] | None = None) -> None:
     parser = OneLineParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--rooms-per-area', type=int, default=4)
-    parser.add_argument('--points', type=int, default=1_000_000)
-    parser.add_argument('--iters', type=int, default=16, help='training iterations per setup')
-    parser.add_argument('--warmup', type=int, default=4, help='first iterations not counted')
-    parser.add_argument('--seed', type=int, default=0)
-    parser.add_argument(
-        '--workers', type=int, default=2, help='generator and converter processes for the data')
+    add_training_run_options(parser, 'setup')
     parser.add_argument(
         '--sample-points',
         type=int,
         help='points each training room is sampled to (default: the config\'s 40,000)')
-    add_fork_tools_option(parser)
     args = parser.parse_args(argv)
+    check_iterations(parser, args)
     train_rooms = args.rooms_per_area * len(TRAIN_ROOMS_AREAS)
-    if (args.iters * BATCH) % train_rooms:
-        parser.error(f'--iters x {BATCH} rooms must be a multiple of the {train_rooms} '
-                     'training rooms (--rooms-per-area x 2)')
-    if args.iters <= args.warmup:
-        parser.error('--iters must be larger than --warmup')
     if args.sample_points is not None and args.sample_points < 1:
         parser.error('--sample-points must be >= 1')
     repeats = args.iters * BATCH // train_rooms

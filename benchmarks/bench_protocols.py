@@ -40,6 +40,7 @@ from benchmarks.bench_teach import (StepFailed, data_root_options, evaluate_held
 from benchmarks.tool_runs import add_fork_tools_option
 from projects.synthdet.evaluation.real_scans import LabelledScan, find_labelled_scans, labels_path
 from projects.synthdet.self_training import UNSURE_THR
+from synthdet.cli import OneLineParser
 from synthdet.scan_io import SCAN_SUFFIXES
 
 REPO = Path(__file__).resolve().parents[1]
@@ -224,7 +225,7 @@ def report(rows: dict[str, dict]) -> str:
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument('scans', type=Path, help='folder of (mostly labelled) scans')
     parser.add_argument('--config', type=Path, required=True, help='the synthetic model config')
     parser.add_argument('--checkpoint', type=Path, required=True, help='its checkpoint')

@@ -39,8 +39,9 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-from benchmarks.bench_dist_train import BATCH, CONFIG, TRAIN_ROOMS_AREAS, make_data, train
-from benchmarks.tool_runs import add_fork_tools_option
+from benchmarks.bench_dist_train import (BATCH, CONFIG, TRAIN_ROOMS_AREAS,
+                                         add_training_run_options, check_iterations, make_data,
+                                         train)
 from synthdet.cli import OneLineParser
 
 EXP2_ROOMS_PER_AREA = 50  # make exp2-cpu's areas 7, 8 and 9
@@ -171,23 +172,14 @@ def whole_run_minutes(cfg, seconds_per_iteration: float, validation_room: float,
 
 def main(argv: list[str] | None = None) -> None:
     parser = OneLineParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--rooms-per-area', type=int, default=4)
-    parser.add_argument('--points', type=int, default=1_000_000)
-    parser.add_argument('--iters', type=int, default=16, help='training iterations per recipe')
-    parser.add_argument('--warmup', type=int, default=4, help='first iterations not counted')
+    add_training_run_options(parser, 'recipe')
     parser.add_argument('--profile-iters', type=int, default=8,
                         help='iterations profiled step by step per recipe')
-    parser.add_argument('--seed', type=int, default=0)
-    parser.add_argument(
-        '--workers', type=int, default=2, help='generator and converter processes for the data')
-    add_fork_tools_option(parser)
     args = parser.parse_args(argv)
+    check_iterations(parser, args)
+    if args.profile_iters < 1:
+        parser.error('--profile-iters must be at least 1')
     train_rooms = args.rooms_per_area * len(TRAIN_ROOMS_AREAS)
-    if args.rooms_per_area < 1 or (args.iters * BATCH) % train_rooms:
-        parser.error(f'--iters x {BATCH} rooms must be a multiple of the {train_rooms} '
-                     'training rooms (--rooms-per-area x 2)')
-    if args.iters <= args.warmup or args.profile_iters < 1:
-        parser.error('--iters must be larger than --warmup, --profile-iters at least 1')
     from mmengine.config import Config
     os.environ['OMP_NUM_THREADS'] = '1'
     import torch

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Callable, TypeVar
 
 from configurator.freecad.synthdet_freecad.schema import JOB_FORMAT, RESULT_FORMAT
-from synthdet.cli import MAX_TIMEOUT, check_input_file, float_in, seconds
+from synthdet.cli import MAX_TIMEOUT, add_score_option, check_input_file, float_in, seconds
 from synthdet.contracts import load_json, read_corners, read_predictions, validate_corners
 from synthdet.outputs import check_output, copy_into_place, readable
 from synthdet.processes import ends_with_parent, work_folder
@@ -40,11 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--out', required=True, help='FreeCAD document to write (.FCStd)')
     parser.add_argument('--corners', help='synthdet.corners/1 JSON (default: from the scan)')
     parser.add_argument('--library', help='folder of <class>.step files replacing built-ins')
-    parser.add_argument(
-        '--min-score',
-        type=float_in(0.0, 1.0),
-        default=0.3,
-        help='skip detections scoring below this, in [0, 1] (default 0.3)')
+    add_score_option(parser, '--min-score', 0.3, 'skip detections scoring below this')
     parser.add_argument(
         '--wall-thickness',
         type=wall_thickness_option,

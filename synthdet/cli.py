@@ -78,6 +78,14 @@ def float_in(low: float, high: float, include_low: bool = True) -> Callable[[str
     return parse
 
 
+def add_score_option(parser: argparse.ArgumentParser, flag: str, default: float,
+                     what: str) -> None:
+    """Add a score threshold ``flag`` in [0, 1]; its help is ``what``, the interval and the
+    default."""
+    parser.add_argument(flag, type=float_in(0.0, 1.0), default=default,
+                        help=f'{what}, in [0, 1] (default {default:g})')
+
+
 seconds = float_in(0.0, MAX_TIMEOUT, include_low=False)  # a --timeout: up to a week
 
 

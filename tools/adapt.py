@@ -47,7 +47,7 @@ from projects.synthdet.inference.windows import WindowSpec, inference_settings
 from projects.synthdet.self_training import (
     UNSURE_THR, PseudoLabelRule, adapt_repeat, check_share, pseudo_boxes, raw_area_dir, round_config,
     teacher_pseudo_labels, train_round, write_pseudo_room)
-from synthdet.cli import OneLineParser, float_in, int_in
+from synthdet.cli import OneLineParser, add_score_option, float_in, int_in
 from synthdet.contracts import write_json_atomic
 from synthdet.outputs import check_output, readable
 from synthdet.prepare import prepare_scan
@@ -86,11 +86,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help='refreshes of the pseudo-labels (default 4)')
     parser.add_argument('--refresh', type=int_in(1, 10**6),
                         help="iterations per round (default: the config's refresh_iters)")
-    parser.add_argument('--score-thr', type=float_in(0.0, 1.0), default=0.5,
-                        help='lowest fused score of a pseudo-label (default 0.5)')
-    parser.add_argument('--unsure-thr', type=float_in(0.0, 1.0), default=UNSURE_THR,
-                        help='lowest score of a box whose points are left out of training when '
-                        f'it is no pseudo-label (default {UNSURE_THR}; at most --score-thr)')
+    add_score_option(parser, '--score-thr', 0.5, 'lowest fused score of a pseudo-label')
+    add_score_option(parser, '--unsure-thr', UNSURE_THR, 'lowest score of a box whose points '
+                     'are left out of training when it is no pseudo-label (at most --score-thr)')
     parser.add_argument('--agree-iou', type=float_in(0.0, 1.0, include_low=False), default=0.5,
                         help='3D IoU at which the runs agree on a box (default 0.5)')
     parser.add_argument('--runs', type=int_in(1, 16), default=2,

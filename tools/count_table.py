@@ -32,7 +32,8 @@ from projects.synthdet.evaluation.table4 import (TrueBox, format_table4, table4,
                                                  truth_from_infos)
 from projects.synthdet.evaluation.table_files import write_table
 from synthdet.classes import DETECTION_CLASSES
-from synthdet.cli import InputFileError, OneLineParser, check_input_file, float_in
+from synthdet.cli import (InputFileError, OneLineParser, add_score_option, check_input_file,
+                          float_in)
 from synthdet.contracts import SchemaError, read_predictions, read_room
 from synthdet.info_files import InfoFileError
 
@@ -48,8 +49,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('--infos', nargs='+', help='info pickles holding the ground truth')
     parser.add_argument(
         '--scan-root', default='.', help='directory that relative "scan" paths are relative to')
-    parser.add_argument(
-        '--score-thr', type=float_in(0.0, 1.0), default=0.3, help='in [0, 1] (default 0.3)')
+    add_score_option(parser, '--score-thr', 0.3, 'lowest score counted')
     parser.add_argument(
         '--iou-thr',
         type=float_in(0.0, 1.0, include_low=False),

@@ -28,8 +28,8 @@ import argparse
 from pathlib import Path
 
 from projects.synthdet.bootstrap import (
-    add_detection_arguments, check_device, load_config, run_tool)
-from projects.synthdet.shipped_model import resolve_model, split_model_arguments
+    check_device, load_config, parse_model_and_scans, run_tool)
+from projects.synthdet.shipped_model import resolve_model
 from synthdet.cli import OneLineParser
 from synthdet.outputs import OutputRefused, check_output_dir
 from synthdet.scan_io import load_scan
@@ -41,20 +41,11 @@ class BadInput(ValueError):
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Parse the command line."""
-    parser = OneLineParser(
-        description='Evaluate a checkpoint on labelled scans (X.ply + X.labels.json).')
-    parser.add_argument(
-        'inputs',
-        nargs='+',
-        metavar='[CONFIG CHECKPOINT] SCAN',
-        help='a config file (.py, .json, .yaml) and its checkpoint, then labelled scans or '
-        'folders of them; without a config, the shipped model')
-    parser.add_argument('--out', required=True, help='output directory')
-    add_detection_arguments(parser, voxel=None)
-    args = parser.parse_args(argv)
-    args.config, args.checkpoint, args.scans = split_model_arguments(args.inputs)
-    if not args.scans:
-        parser.error('no labelled scan or folder given')
+    args, args.scans = parse_model_and_scans(
+        OneLineParser(
+            description='Evaluate a checkpoint on labelled scans (X.ply + X.labels.json).'), argv,
+        'labelled scans or folders of them', 'output directory',
+        'no labelled scan or folder given')
     return args
 
 

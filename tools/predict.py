@@ -31,9 +31,9 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from projects.synthdet.bootstrap import (add_detection_arguments, check_device, load_config,
+from projects.synthdet.bootstrap import (check_device, load_config, parse_model_and_scans,
                                          run_tool)
-from projects.synthdet.shipped_model import resolve_model, split_model_arguments
+from projects.synthdet.shipped_model import resolve_model
 from synthdet.cli import OneLineParser
 from synthdet.contracts import write_predictions
 from synthdet.outputs import check_output_dir, readable
@@ -47,19 +47,10 @@ class BadInput(ValueError):
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Parse the command line."""
-    parser = OneLineParser(description='Detect objects in scans with a checkpoint.')
-    parser.add_argument(
-        'inputs',
-        nargs='+',
-        metavar='[CONFIG CHECKPOINT] SCAN',
-        help='a config file (.py, .json, .yaml) and its checkpoint, then the scans: .e57, '
-        '.las/.laz, .ply, .pcd, .xyz/.pts/.csv, .txt, .bin; without a config, the shipped model')
-    parser.add_argument('--out', required=True, help='output directory for <scan>.pred.json')
-    add_detection_arguments(parser, voxel=None)
-    args = parser.parse_args(argv)
-    args.config, args.checkpoint, args.points = split_model_arguments(args.inputs)
-    if not args.points:
-        parser.error('no scan given')
+    args, args.points = parse_model_and_scans(
+        OneLineParser(description='Detect objects in scans with a checkpoint.'), argv,
+        'the scans: .e57, .las/.laz, .ply, .pcd, .xyz/.pts/.csv, .txt, .bin',
+        'output directory for <scan>.pred.json', 'no scan given')
     return args
 
 

@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING
 
 from projects.synthdet.bootstrap import (ConfigFileError, ErrorTypes, TTAConfigError,
                                          parse_runner_args, run_tool, runner_config, tta_settings)
-from synthdet.cli import OneLineParser, float_in
+from synthdet.cli import OneLineParser, add_score_option
 from synthdet.contracts import SENSOR_MODELS
 from synthdet.info_files import InfoFileError, load_info_pickle, rooms_scanned_by
 from synthdet.outputs import OutputRefused, check_output_dir, check_output_file
@@ -56,11 +56,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('--out', help='Table 3 JSON path (default <work_dir>/table3.json)')
     parser.add_argument(
         '--show-dir', help='save a top-view picture of every test scan (truth and predictions)')
-    parser.add_argument(
-        '--score-thr',
-        type=float_in(0.0, 1.0),
-        default=0.1,
-        help='lowest score of the predictions drawn with --show-dir, in [0, 1] (default 0.1)')
+    add_score_option(parser, '--score-thr', 0.1,
+                     'lowest score of the predictions drawn with --show-dir')
     parser.add_argument(
         '--sensor',
         choices=SENSOR_MODELS,

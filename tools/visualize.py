@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from synthdet.cli import OneLineParser, float_in
+from synthdet.cli import OneLineParser, add_score_option
 from synthdet.outputs import check_output, names_as_given
 from synthdet.room_data import (boxes_from_predictions, corner_polygon,
                                  load_ground_truth, load_scan, write_labelled_ply)
@@ -35,11 +35,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         '--color-by',
         choices=('class', 'rgb', 'height'),
         help='point colors (default: class if annotated, else rgb/height)')
-    parser.add_argument(
-        '--min-score',
-        type=float_in(0.0, 1.0),
-        default=0.3,
-        help='draw predictions scoring at least this, in [0, 1] (default 0.3)')
+    add_score_option(parser, '--min-score', 0.3, 'draw predictions scoring at least this')
     parser.add_argument('--title', default='', help='figure title (default: the scan name)')
     return parser.parse_args(argv)
 

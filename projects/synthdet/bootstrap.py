@@ -22,7 +22,8 @@ from typing import TYPE_CHECKING, Callable, NoReturn
 
 from projects.synthdet.config_checks import ConfigValueError, check_config_values
 from projects.synthdet.data_config import ConfigFileError, check_data_config, is_data_config
-from synthdet.cli import float_in, int_in, shown
+from projects.synthdet.shipped_model import split_model_arguments
+from synthdet.cli import add_score_option, float_in, int_in, shown
 
 if TYPE_CHECKING:
     from mmengine.config import Config
@@ -120,11 +121,7 @@ def add_detection_arguments(parser: argparse.ArgumentParser, voxel: float | None
     """Add the options of detecting in scans (``predict.py``, ``scan2cad.py``): ``--score-thr``,
     ``--device``, ``--seed``, ``--tta`` and the reading options ``--voxel`` (default ``voxel``;
     None keeps every point) and ``--columns``."""
-    parser.add_argument(
-        '--score-thr',
-        type=float_in(0.0, 1.0),
-        default=0.3,
-        help='keep detections with at least this score, in [0, 1] (default 0.3)')
+    add_score_option(parser, '--score-thr', 0.3, 'keep detections with at least this score')
     parser.add_argument(
         '--device',
         type=device_name,
@@ -150,6 +147,24 @@ def add_detection_arguments(parser: argparse.ArgumentParser, voxel: float | None
 
 class TTAConfigError(ValueError):
     """``--tta`` with a config that lacks ``tta_model`` or ``tta_pipeline``."""
+
+
+def parse_model_and_scans(parser: argparse.ArgumentParser, argv: list[str] | None,
+                          scans_help: str, out_help: str,
+                          no_scan: str) -> tuple[argparse.Namespace, list[str]]:
+    """Parse ``[CONFIG CHECKPOINT] SCAN... --out OUT`` and the detection options
+    (``predict.py``, ``eval_scans.py``): the arguments, with ``config`` and ``checkpoint`` None
+    for the shipped model, and the scans; the parser's one-line error ``no_scan`` without one."""
+    parser.add_argument('inputs', nargs='+', metavar='[CONFIG CHECKPOINT] SCAN',
+                        help='a config file (.py, .json, .yaml) and its checkpoint, then '
+                        f'{scans_help}; without a config, the shipped model')
+    parser.add_argument('--out', required=True, help=out_help)
+    add_detection_arguments(parser, voxel=None)
+    args = parser.parse_args(argv)
+    args.config, args.checkpoint, scans = split_model_arguments(args.inputs)
+    if not scans:
+        parser.error(no_scan)
+    return args, scans
 
 
 def tta_settings(cfg: Config) -> tuple[dict, list]:
