@@ -2,7 +2,7 @@
 
 Usage: python tools/adapt.py SCANS_DIR --config configs/tr3d/adapt_selftrain.py
                              --checkpoint CKPT --work DIR --out ADAPTED.pth [--rounds 4]
-                             [--refresh N] [--score-thr 0.5] [--unsure-thr 0.1]
+                             [--refresh N] [--score-thr 0.5] [--unsure-thr 0.3]
                              [--agree-iou 0.5] [--runs 2]
                              [--seed 0] [--device cpu] [--voxel M] [--columns x,y,z,r,g,b]
                              [--cfg-options k=v ...]
@@ -44,9 +44,10 @@ from projects.synthdet.checkpoint import load_checkpoint_file, save_inference_ch
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.inference.detector import load_model
 from projects.synthdet.inference.windows import WindowSpec, inference_settings
-from projects.synthdet.self_training import (
-    UNSURE_THR, PseudoLabelRule, adapt_repeat, check_share, pseudo_boxes, raw_area_dir, round_config,
-    teacher_pseudo_labels, train_round, write_pseudo_room)
+from projects.synthdet.self_training import (UNSURE_THR, PseudoLabelRule, adapt_repeat,
+                                             check_share, pseudo_boxes, raw_area_dir,
+                                             round_config, teacher_pseudo_labels, train_round,
+                                             write_pseudo_room)
 from synthdet.cli import OneLineParser, add_score_option, float_in, int_in
 from synthdet.contracts import write_json_atomic
 from synthdet.outputs import check_output, readable
@@ -95,7 +96,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help='test-time augmented runs, each seeded, that must agree (default 2)')
     parser.add_argument('--seed', type=int_in(0, 2**31 - 1), default=0,
                         help='seed of the point sampling and of training (default 0)')
-    parser.add_argument('--device', default=None, help='cpu, cuda or cuda:N (default: cuda:0 if present)')
+    parser.add_argument('--device', default=None,
+                        help='cpu, cuda or cuda:N (default: cuda:0 if present)')
     parser.add_argument('--voxel', type=float_in(0.0, 10.0, include_low=False),
                         help='keep one point per voxel of this size (m) while reading')
     parser.add_argument('--columns', help='text scans: the columns, e.g. x,y,z,r,g,b')

@@ -6,10 +6,10 @@ Usage: python tools/predict.py [CONFIG CHECKPOINT] POINTS... --out DIR [--score-
 
 Without CONFIG and CHECKPOINT (the first argument is a config when it ends with .py, .json,
 .yaml or .yml) the model is the one that ships with synthdet (``projects/synthdet/weights/``);
-a line says which model ran. POINTS are scans in any format of ``synthdet.scan_io``, read with ``load_scan`` into a local
-float64 frame (every point, or one per ``--voxel`` as ``python -m configurator corners``; the
-voxels are those of the scan's coordinates) and prepared
-with ``synthdet.prepare.prepare_scan`` (outliers, up axis, floor levelling, walls along the
+a line says which model ran. POINTS are scans in any format of ``synthdet.scan_io``, read
+with ``load_scan`` into a local float64 frame (every point, or one per ``--voxel`` as
+``python -m configurator corners``; the voxels are those of the scan's coordinates) and
+prepared with ``synthdet.prepare.prepare_scan`` (outliers, up axis, floor levelling, walls along the
 axes, a denser scan resampled down to the config's training density and one far from it warned
 about: ``density_from_config``), each step reported. A scan larger than the config's
 ``inference_window`` is detected window by window, each window sampled by the config's test

@@ -43,7 +43,7 @@ from projects.synthdet.inference.windows import Detections, WindowSpec
 from synthdet.info_files import RAW_DIR, load_info_pickle
 
 UNSURE_MARGIN = 0.05  # metres around an unsure box whose points are left out of the room
-UNSURE_THR = 0.1  # the default lowest score of an unsure box
+UNSURE_THR = 0.3  # the default lowest score of an unsure box (docs/teach.md: measured 0.1, 0.3)
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ import torch
 
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.inference.windows import Detections
-from projects.synthdet.self_training import agreeing_detections, write_pseudo_room
+from projects.synthdet.self_training import UNSURE_THR, agreeing_detections, write_pseudo_room
 from synthdet.scan_io import read_scan, write_scan
 from tests.checkpoints import initial_checkpoint
 from tests.room_scans import make_room
@@ -164,7 +164,7 @@ def test_pseudo_labels_pass_the_filters_and_become_the_rooms(adapted):
     for round_dir in ('round_1', 'round_2'):
         work = adapted['root'] / 'work' / round_dir
         document = json.loads((work / 'pseudo_labels.json').read_text())
-        rule = {'score_thr': SCORE_THR, 'agree_iou': AGREE_IOU, 'unsure_thr': 0.1,
+        rule = {'score_thr': SCORE_THR, 'agree_iou': AGREE_IOU, 'unsure_thr': UNSURE_THR,
                 'seeds': [0, 1]}
         assert document['rule'] == rule
         assert [item['scan'] for item in document['scans']] == ['hall_1.ply', 'hall_2.ply']
