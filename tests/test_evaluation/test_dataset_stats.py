@@ -35,7 +35,7 @@ def test_counts_from_converted_fixture_match_the_written_objects(tmp_path):
     assert count_instances(tmp_path, areas=[8]) == {8: counts[8]}
 
 
-def _write_infos(root: Path, area: int, labels_per_room: list[list[int]]) -> None:
+def write_infos(root: Path, area: int, labels_per_room: list[list[int]]) -> None:
     data_list = [{
         'sample_idx': i,
         'instances': [{
@@ -49,9 +49,9 @@ def _write_infos(root: Path, area: int, labels_per_room: list[list[int]]) -> Non
 
 def test_table1_rows_and_cli_on_known_counts(tmp_path):
     # label ids: table 0, chair 1, sofa 2, bookcase 3, board 4, yumi 5, 3dprinter 6
-    _write_infos(tmp_path, 2, [[1, 1, 0], [1, 3, 4, -1]])  # 3 chairs, 1 table, bookcase, board
-    _write_infos(tmp_path, 5, [[1]])
-    _write_infos(tmp_path, 9, [[1, 5, 5, 6], [0, 0, 0]])
+    write_infos(tmp_path, 2, [[1, 1, 0], [1, 3, 4, -1]])  # 3 chairs, 1 table, bookcase, board
+    write_infos(tmp_path, 5, [[1]])
+    write_infos(tmp_path, 9, [[1, 5, 5, 6], [0, 0, 0]])
     rows = dict(table1_rows(count_instances(tmp_path)))
     assert list(rows) == [
         'Area 2', 'Area 5', 'Area 9', 'S3DIS (areas 1-6)', 'Synthetic (areas 7+)', 'Total',

@@ -174,7 +174,7 @@ def test_screenshot_whose_freecad_cannot_write_at_all_ends_before_its_timeout(do
 def test_labels_eval_scans_and_dataset_stats_on_a_full_disk_name_the_output(
         document, checkpoint, room, tmp_path):
     """Exit 1, one line naming the file or room that did not fit, nothing half-written."""
-    from tests.test_dataset_stats import _write_infos
+    from tests.test_evaluation.test_dataset_stats import write_infos
     rng = np.random.default_rng(0)
     points = np.column_stack([rng.uniform(0.0, 6.0, (50_000, 2)),
                               rng.uniform(0.0, 2.8, 50_000), np.full((50_000, 3), 128.0)])
@@ -186,7 +186,7 @@ def test_labels_eval_scans_and_dataset_stats_on_a_full_disk_name_the_output(
     labelled.with_name('room.labels.json').write_text(
         '{"format": "synthdet.labels/1", "scan": "room.txt", "boxes": [], '
         '"classes": ["table", "chair", "sofa", "yumi", "3dprinter"]}')
-    _write_infos(tmp_path, 1, [[0, 1], [2]])
+    write_infos(tmp_path, 1, [[0, 1], [2]])
     labels, evaluation = tmp_path / 'labels', tmp_path / 'evaluation'
     cases = [
         (['-m', 'configurator', 'labels', document, '--scan', scan, '--out', labels],
