@@ -3,6 +3,7 @@ rooms for the TLS grid, range noise and mixed pixels, the tablet's range window 
 paper profile's uniform directions; and small real rooms from ``python -m generator`` for the
 per-room mix and determinism."""
 import json
+import resource
 import shutil
 from pathlib import Path
 
@@ -25,6 +26,8 @@ from synthdet.point_text import read_point_file
 from synthdet.voxels import cube_keys
 from tests.test_configurator.test_corners import corner_errors
 from tests.test_generator.test_generator_pipeline import box, same_tree
+from tests.test_repository.test_faults import assert_clean_error
+from tests.test_synthdet.test_output_paths import run, temporaries
 from synthdet.annotation_check import object_fit
 from synthdet.geometry import rotation_z
 from tools.check_annotations import main as check_annotations
@@ -550,6 +553,13 @@ def test_check_annotations_passes_the_rooms_and_catches_points_given_to_an_objec
     assert all(row['objects_with_points_outside'] == 0 for row in rows)
     assert all(row['extent_median'] <= 1.1 for row in rows)  # tablet noise: about 1 cm
     assert all(0.0 < row['coverage_median'] <= 1.0 for row in rows)
+    # an --out that does not fit on the disk: one line naming it, exit 1, nothing half-written
+    report = tmp_path / 'full' / 'report.json'
+    report.parent.mkdir()
+    proc = run('tools/check_annotations.py', work / 'out', '--areas', '7', '--out', report,
+               preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (0, 0)))
+    assert_clean_error(proc, 1, str(report))
+    assert not report.exists() and temporaries(report.parent) == []
     # the labelling before the fix: the TLS room's mixed pixels given to one of its objects
     copy = tmp_path / 'raw'
     shutil.copytree(work / 'out', copy)
