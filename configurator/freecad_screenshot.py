@@ -17,7 +17,7 @@ from typing import Iterator
 
 from configurator.freecad_cli import (FreecadFailed, add_program_options, check_timeout,
                                       run_freecad_process)
-from synthdet.cli import int_in
+from synthdet.cli import add_int_option
 from synthdet.fcstd_guard import check_document
 from synthdet.outputs import check_output_file, check_png, write_bytes
 from synthdet.processes import ends_with_parent, work_folder
@@ -47,10 +47,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Register the ``screenshot`` sub-command's options."""
     parser.add_argument('document', help='FreeCAD document (.FCStd)')
     parser.add_argument('--out', required=True, help='PNG to write')
-    parser.add_argument(
-        '--width', type=int_in(*PIXELS), default=1000, help='pixels, 16 to 8000 (default 1000)')
-    parser.add_argument(
-        '--height', type=int_in(*PIXELS), default=750, help='pixels, 16 to 8000 (default 750)')
+    add_int_option(parser, '--width', *PIXELS, 1000, 'pixels')
+    add_int_option(parser, '--height', *PIXELS, 750, 'pixels')
     add_program_options(parser, 'freecad', 'FreeCAD GUI executable', timeout=300.0)
 
 

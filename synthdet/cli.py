@@ -78,6 +78,14 @@ def float_in(low: float, high: float, include_low: bool = True) -> Callable[[str
     return parse
 
 
+def add_int_option(parser: argparse.ArgumentParser, flag: str, low: int, high: int,
+                   default: int, what: str) -> None:
+    """Add an integer ``flag`` in [``low``, ``high``]; its help is ``what``, the range and the
+    default."""
+    parser.add_argument(flag, type=int_in(low, high), default=default,
+                        help=f'{what}, {low:,} to {high:,} (default {default})')
+
+
 def add_score_option(parser: argparse.ArgumentParser, flag: str, default: float,
                      what: str) -> None:
     """Add a score threshold ``flag`` in [0, 1]; its help is ``what``, the interval and the

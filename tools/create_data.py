@@ -9,7 +9,7 @@ import sys
 
 from projects.synthdet.datasets.s3dis_converter import (
     OutputOverflowError, S3DISLayoutError, convert_s3dis)
-from synthdet.cli import MAX_AREA, OneLineParser, int_in
+from synthdet.cli import MAX_AREA, OneLineParser, add_int_option, int_in
 from synthdet.point_text import PointFileError
 from synthdet.processes import Interrupted, stop_on_signals
 
@@ -30,11 +30,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         type=int_in(1, MAX_AREA),
         nargs='+',
         help=f'area numbers, 1 to {MAX_AREA} (default: all found)')
-    s3dis.add_argument(
-        '--workers',
-        type=int_in(1, MAX_WORKERS),
-        default=1,
-        help=f'parallel processes over rooms, 1 to {MAX_WORKERS} (default 1)')
+    add_int_option(s3dis, '--workers', 1, MAX_WORKERS, 1, 'parallel processes over rooms')
     s3dis.add_argument(
         '--on-error',
         choices=('raise', 'skip'),

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 from generator.assets.library import ASSET_CLASSES, build_library, load_library
-from synthdet.cli import OneLineParser, int_in
+from synthdet.cli import OneLineParser, add_int_option, int_in
 from synthdet.outputs import OutputFailed, OutputRefused, check_output_dir
 
 MAX_INSTANCES = 10_000
@@ -24,11 +24,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument(
         '--out', type=Path, required=True, help='folder for the <class>.blend files')
-    parser.add_argument(
-        '--instances',
-        type=int_in(1, MAX_INSTANCES),
-        default=24,
-        help=f'instances per class, 1 to {MAX_INSTANCES:,} (default 24)')
+    add_int_option(parser, '--instances', 1, MAX_INSTANCES, 24, 'instances per class')
     parser.add_argument(
         '--seed', type=int_in(0, 2**63 - 1), default=0, help='0 to 2^63-1 (default 0)')
     parser.add_argument(

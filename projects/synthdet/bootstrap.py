@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Callable, NoReturn
 from projects.synthdet.config_checks import ConfigValueError, check_config_values
 from projects.synthdet.data_config import ConfigFileError, check_data_config, is_data_config
 from projects.synthdet.shipped_model import split_model_arguments
-from synthdet.cli import add_score_option, float_in, int_in, shown
+from synthdet.cli import add_int_option, add_score_option, float_in, int_in, shown
 
 if TYPE_CHECKING:
     from mmengine.config import Config
@@ -126,11 +126,7 @@ def add_detection_arguments(parser: argparse.ArgumentParser, voxel: float | None
         '--device',
         type=device_name,
         help='cpu or cuda:N (default: cuda:0 when there is a GPU, else cpu)')
-    parser.add_argument(
-        '--seed',
-        type=int_in(*SEED_RANGE),
-        default=0,
-        help=f'seed of the point sampling, {SEED_RANGE[0]} to {SEED_RANGE[1]} (default 0)')
+    add_int_option(parser, '--seed', *SEED_RANGE, 0, 'seed of the point sampling')
     parser.add_argument(
         '--tta',
         action='store_true',
