@@ -35,8 +35,8 @@ import time
 from pathlib import Path
 
 from benchmarks import bench_teach
-from benchmarks.bench_teach import (StepFailed, data_root_options, evaluate_held_out,
-                                    run_measured, run_step, test_area)
+from benchmarks.bench_teach import (StepFailed, data_root_options, measure_model, run_measured,
+                                    run_step)
 from benchmarks.tool_runs import add_fork_tools_option
 from projects.synthdet.evaluation.real_scans import LabelledScan, find_labelled_scans, labels_path
 from projects.synthdet.self_training import UNSURE_THR
@@ -118,15 +118,6 @@ def teach(args: argparse.Namespace, protocol: str, scans: list[LabelledScan]) ->
     }
 
 
-def measure(args: argparse.Namespace, config: Path, checkpoint: Path,
-            scans: list[LabelledScan], work: Path) -> dict:
-    """A model on the labelled scans and on generated area 9."""
-    held = evaluate_held_out(config, checkpoint, scans, work / 'eval', args.score_thr)
-    rows = test_area(config, checkpoint, data_root_options(config, args.data), work / 'area9',
-                     args.fork_tools)
-    return {'held_out': held, 'area9': rows}
-
-
 def adapt(args: argparse.Namespace, scans: list[LabelledScan]) -> dict:
     """The unlabelled protocol: ``tools/adapt.py`` on the whole folder (or its finished run in
     WORK), the model before and after on the labelled scans."""
@@ -152,14 +143,17 @@ def adapt(args: argparse.Namespace, scans: list[LabelledScan]) -> dict:
         record.write_text(json.dumps({'command': command,
                                       'seconds': time.perf_counter() - start}))
     minutes = json.loads(record.read_text(encoding='utf-8'))['seconds'] / 60.0
-    return {
+    row = {
         'train': [path.name for path in sorted(args.scans.iterdir())
                   if path.is_file() and path.suffix.lower() in SCAN_SUFFIXES],
         'test': [item.scan.stem for item in scans],
-        'before': measure(args, args.config, args.checkpoint, scans, work / 'before'),
-        'after': measure(args, args.adapt_config, adapted, scans, work / 'after'),
         'minutes': minutes
     }
+    for name, config, model in (('before', args.config, args.checkpoint),
+                                ('after', args.adapt_config, adapted)):
+        row[name] = measure_model(config, model, scans, args.data, work / name / 'eval',
+                                  work / name / 'area9', args.score_thr, args.fork_tools)
+    return row
 
 
 def goals(protocol: str, row: dict) -> dict[str, bool]:

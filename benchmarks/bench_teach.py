@@ -307,6 +307,15 @@ def test_area(config: Path,
     return json.loads(table.read_text())['rows']
 
 
+def measure_model(config: Path, checkpoint: Path, scans: list[LabelledScan], data_root: Path,
+                  eval_dir: Path, area_dir: Path, score_thr: float, forked: bool) -> dict:
+    """A model on the labelled ``scans`` (figures and pictures in ``eval_dir``) and on
+    generated area 9 of ``data_root`` (``area_dir``): ``held_out`` and ``area9``."""
+    held = evaluate_held_out(config, checkpoint, scans, eval_dir, score_thr)
+    rows = test_area(config, checkpoint, data_root_options(config, data_root), area_dir, forked)
+    return {'held_out': held, 'area9': rows}
+
+
 # --------------------------------------------------------------------------- the report
 
 
@@ -525,11 +534,9 @@ def run(args: argparse.Namespace) -> dict:
     }
     for name, config, model in (('before', args.config, args.checkpoint),
                                 ('after', args.finetune_config, checkpoint)):
-        held = evaluate_held_out(config, model, held_out, args.work / 'eval' / name,
-                                 args.score_thr)
-        rows = test_area(config, model, data_root_options(config, args.data_root),
-                         args.work / 'area9' / name, args.fork_tools)
-        results[name] = {'held_out': held, 'area9': rows}
+        results[name] = measure_model(config, model, held_out, args.data_root,
+                                      args.work / 'eval' / name, args.work / 'area9' / name,
+                                      args.score_thr, args.fork_tools)
     results['goals'] = goals(results)
     return results
 

@@ -113,19 +113,16 @@ def write_pseudo_room(room_dir: Path, points: np.ndarray, boxes: list[dict],
     ``configurator.labels``; floor at z = 0), without the points within ``UNSURE_MARGIN`` of an
     ``unsure`` box that lie in no labelled box. Returns the boxes that hold points (the others
     are dropped) and the number of points left out."""
-    held = [box for box in boxes if holds_points(points[:, :3], box)]
-    labelled = np.zeros(len(points), dtype=bool)
-    for box in held:
-        labelled |= in_reach(points[:, :3], box)
-    doubtful = np.zeros(len(points), dtype=bool)
-    for box in unsure:
-        doubtful |= in_reach(points[:, :3], box, UNSURE_MARGIN)
-    kept = labelled | ~doubtful
-    points = points[kept]
     xyz = points[:, :3]
+    held = [box for box in boxes if holds_points(xyz, box)]
     source = f'pseudo-labels of {room_dir.name}'
     names = instance_names(held, source)
-    owners = point_owners(xyz, held, source)
+    owners = point_owners(xyz, held, source)  # -1: in reach of no labelled box
+    doubtful = np.zeros(len(points), dtype=bool)
+    for box in unsure:
+        doubtful |= in_reach(xyz, box, UNSURE_MARGIN)
+    kept = (owners >= 0) | ~doubtful
+    points, xyz, owners = points[kept], xyz[kept], owners[kept]
     repeated, _ = shadowed_boxes(xyz, held, owners, source)
     elements = np.full(len(points), 'clutter_1', dtype=object)
     elements[np.abs(xyz[:, 2]) <= SURFACE_BAND] = 'floor_1'
