@@ -58,19 +58,20 @@ SCAN_SEED_OFFSET = 1000  # its seed, away from the training areas' seed
 
 @dataclass(frozen=True)
 class Size:
-    """How big the demo is: data, training schedule and how many test rooms get a CAD model."""
-    rooms_per_area: int
-    points: int  # points per generated room
-    scan_points: int  # points of the scan that the shipped model turns into a document
-    num_points: int  # points sampled per room for the detector
-    epochs: int
-    repeats: int  # times the training areas are repeated per epoch
-    batch_size: int
-    loader_workers: int
-    predict_rooms: int  # rooms of area 9 that are predicted, get corners, CAD and pictures
-    workers: int  # generator and converter processes
-    log_interval: int
-    score_thr: float  # detections kept for Table 4, the FreeCAD documents and the pictures
+    """How big the demo is: data, training schedule and how many test rooms get a CAD model.
+    The defaults are `make demo`'s size (about 30 minutes on 2 free cores)."""
+    rooms_per_area: int = 12
+    points: int = 200_000  # points per generated room
+    scan_points: int = 1_000_000  # points of the scan that the shipped model turns into a document
+    num_points: int = 40_000  # points sampled per room for the detector
+    epochs: int = 5
+    repeats: int = 2  # times the training areas are repeated per epoch
+    batch_size: int = 4
+    loader_workers: int = 1
+    predict_rooms: int = 3  # rooms of area 9 that are predicted, get corners, CAD and pictures
+    workers: int = 2  # generator and converter processes
+    log_interval: int = 4
+    score_thr: float = 0.3  # detections kept for Table 4, the FreeCAD documents and the pictures
     # head locations kept before NMS when predicting (the model's test_cfg.nms_pre); None keeps
     # the config's
     predict_candidates: int | None = None
@@ -81,35 +82,10 @@ SIZES = {
     # the 1 % prior of its class bias (0.0100-0.0106 measured), so detections from 0.01 up are
     # kept, from its 10 best locations (about 20 boxes), to exercise the CAD and drawing steps
     'tiny':
-    Size(
-        rooms_per_area=2,
-        points=30_000,
-        scan_points=100_000,
-        num_points=4_000,
-        epochs=1,
-        repeats=1,
-        batch_size=2,
-        loader_workers=0,
-        predict_rooms=1,
-        workers=1,
-        log_interval=1,
-        score_thr=0.01,
-        predict_candidates=10),
-    # make demo: about 30 minutes on 2 free cores
-    'demo':
-    Size(
-        rooms_per_area=12,
-        points=200_000,
-        scan_points=1_000_000,
-        num_points=40_000,
-        epochs=5,
-        repeats=2,
-        batch_size=4,
-        loader_workers=1,
-        predict_rooms=3,
-        workers=2,
-        log_interval=4,
-        score_thr=0.3),
+    Size(rooms_per_area=2, points=30_000, scan_points=100_000, num_points=4_000, epochs=1,
+         repeats=1, batch_size=2, loader_workers=0, predict_rooms=1, workers=1, log_interval=1,
+         score_thr=0.01, predict_candidates=10),
+    'demo': Size(),
 }
 
 
