@@ -52,7 +52,9 @@ class PreparedScan:
         boxes and corners of a y-up scan are seen from above as the contracts require."""
         return _up_rotation(self.up_axis)
 
-    def _to_output(self) -> np.ndarray:
+    def output_matrix(self) -> np.ndarray:
+        """(4, 4): the prepared frame -> the output frame (the scan's coordinates turned by
+        ``up_rotation``), in which predictions and corners are written."""
         matrix = np.eye(4)
         matrix[:3, :3] = self.up_rotation
         return matrix @ self.to_scan
@@ -63,7 +65,7 @@ class PreparedScan:
         points = np.asarray(points, dtype=np.float64)
         flat = points.shape[-1] == 2
         xyz = np.column_stack([points, np.zeros(len(points))]) if flat else points
-        matrix = self._to_output()
+        matrix = self.output_matrix()
         moved = xyz @ matrix[:3, :3].T + matrix[:3, 3]
         return moved[:, :2] if flat else moved
 
@@ -74,7 +76,7 @@ class PreparedScan:
         sizes kept, yaws turned by the scan's yaw (a levelled tilt only moves the centres)."""
         centers = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
         yaws = np.asarray(yaws, dtype=np.float64).reshape(-1)
-        rotation = self._to_output()[:3, :3]
+        rotation = self.output_matrix()[:3, :3]
         directions = np.column_stack([np.cos(yaws), np.sin(yaws), np.zeros(len(yaws))])
         turned = directions @ rotation.T
         new_yaws = np.arctan2(turned[:, 1], turned[:, 0])

@@ -1,6 +1,7 @@
 """The three protocols on real scans (benchmarks/bench_protocols.py): how scans split by room and
 rescan, the goals, and one whole run at a tiny scale (an untrained model, one fine-tune iteration,
-one adaptation round of one iteration) through bench_teach, tools/adapt.py and the evaluations."""
+one adaptation round of one iteration) through bench_teach, tools/predict.py --known,
+tools/adapt.py and the evaluations."""
 from __future__ import annotations
 
 import json
@@ -22,7 +23,8 @@ from tests.test_benchmarks.test_bench_teach import (ONE_REPEAT_FINETUNE, generat
 
 REPO = Path(__file__).resolve().parents[2]
 CLASSES = ['table', 'chair', 'sofa', 'yumi', '3dprinter']
-SUMMARY = re.compile(r'(teach, next scan|teach, new room|adapt, unlabelled): recall \d\.\d\d '
+SUMMARY = re.compile(r'(teach, next scan|known objects, next scan|teach, new room|'
+                     r'adapt, unlabelled): recall \d\.\d\d '
                      r'\(was \d\.\d\d\), \d+\.\d false positives per scan \(was \d+\.\d\), '
                      r'\d+ phantom')
 
@@ -99,11 +101,16 @@ def test_a_whole_run_of_the_three_protocols_prints_their_lines(tmp_path, capsys,
         '--rounds', 1, '--refresh', 1, '--score-thr', 0.511, '--fork-tools'
     ]
     out = run_from_repo(main, command, monkeypatch, capsys)
-    lines = out.strip().splitlines()[-3:]
+    lines = out.strip().splitlines()[-4:]
     assert [SUMMARY.fullmatch(line).group(1) for line in lines] == [
-        'teach, next scan', 'teach, new room', 'adapt, unlabelled'], lines
+        'teach, next scan', 'known objects, next scan', 'teach, new room',
+        'adapt, unlabelled'], lines
     rows = json.loads((work / 'protocols.json').read_text())
     assert rows['next']['train'] == ['office_1'] and rows['next']['test'] == ['office_rescan1']
+    # the rescan is the first scan's points: every labelled object is found again
+    assert rows['known']['train'] == ['office_1'] and rows['known']['test'] == ['office_rescan1']
+    assert rows['known']['after']['held_out']['overall_recall'] == 1.0
+    assert rows['known']['after']['held_out']['false_positives'] == 0
     assert rows['new']['train'] == ['office_1', 'office_rescan1']
     assert rows['new']['test'] == ['lab_1', 'storage_1']
     assert 'hall_unlabelled.ply' in rows['unlabelled']['train']
