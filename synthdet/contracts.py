@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from pathlib import Path
 from typing import NoReturn
 
 from synthdet.classes import SEMANTIC_CLASSES
@@ -30,6 +31,7 @@ ROOM_FORMAT = 'synthdet.room/1'
 PREDICTIONS_FORMAT = 'synthdet.predictions/1'
 CORNERS_FORMAT = 'synthdet.corners/1'
 LABELS_FORMAT = 'synthdet.labels/1'
+LABELS_SUFFIX = '.labels.json'  # a scan's labels file: <scan stem>.labels.json beside it
 # the generator's sensor models, recorded in a room's meta.json as generator.sensor.model
 SENSOR_MODELS = ('paper', 'tls', 'tablet', 'depth_frame', 'reconstruction')
 
@@ -382,6 +384,12 @@ def read_corners(path: str | os.PathLike) -> dict:
 def read_room(path: str | os.PathLike) -> dict:
     """Load and validate a ``synthdet.room/1`` file (a ``meta.json``); returns the document."""
     return validate_room(load_json(path), os.fspath(path))
+
+
+def labels_path(scan: str | os.PathLike) -> Path:
+    """The labels file of a scan: ``<scan stem>.labels.json`` beside it."""
+    scan = Path(scan)
+    return scan.with_name(scan.stem + LABELS_SUFFIX)
 
 
 def read_labels(path: str | os.PathLike) -> dict:

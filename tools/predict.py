@@ -34,18 +34,17 @@ renamed into place. A scan's name is used as the file system gives it (bytes tha
 included) for its output file; inside the JSON, and in messages, such bytes show as U+FFFD.
 """
 import argparse
-from dataclasses import dataclass
 from pathlib import Path
 
 from tqdm import tqdm
 
-from projects.synthdet.bootstrap import (check_device, load_config, parse_model_and_scans,
-                                         run_tool)
+from projects.synthdet.bootstrap import (add_known_option, check_device, load_config,
+                                         parse_model_and_scans, run_tool)
 from projects.synthdet.shipped_model import resolve_model
 from synthdet.cli import OneLineParser
-from synthdet.contracts import read_labels, write_predictions
+from synthdet.contracts import write_predictions
 from synthdet.outputs import check_output_dir, readable
-from synthdet.prepare import PreparedScan, prepare_scan
+from synthdet.prepare import prepare_scan
 from synthdet.scan_io import load_scan
 
 
@@ -62,16 +61,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         'the scans: .e57, .las/.laz, .ply, .pcd, .xyz/.pts/.csv, .txt, .bin',
         'output directory for <scan>.pred.json', 'no scan given')
     return args
-
-
-def add_known_option(parser: argparse.ArgumentParser) -> None:
-    """``--known EARLIER_SCAN``: an earlier, corrected scan of the same room."""
-    parser.add_argument(
-        '--known',
-        type=Path,
-        help='an earlier scan of the same room with its corrected labels beside it '
-        '(<scan stem>.labels.json, from python -m configurator labels): the objects found '
-        'again there replace the detections, and only what changed is detected')
 
 
 def output_path(scan: Path, out_dir: Path) -> Path:
@@ -99,46 +88,6 @@ def check_scans(scans: list[Path], out_dir: Path, voxel: float | None,
     return targets
 
 
-@dataclass
-class KnownScan:
-    """An earlier scan of the room, prepared, and its corrected boxes."""
-
-    path: Path
-    prepared: PreparedScan
-    boxes: list[dict]
-
-
-def read_known(path: Path, args: argparse.Namespace, density: float) -> KnownScan:
-    """Read ``--known``: the scan and the labels beside it (errors name the file)."""
-    from projects.synthdet.evaluation.real_scans import labels_path
-    try:
-        labels = read_labels(labels_path(path))
-        loaded = load_scan(path, voxel=args.voxel, columns=args.columns)
-    except (ValueError, OSError) as error:  # a missing file, SchemaError, ScanFormatError
-        raise BadInput(readable(f'--known: {error}')) from None
-    prepared = prepare_scan(loaded, target_density=density, seed=args.seed)
-    return KnownScan(path, prepared, list(labels['boxes']))
-
-
-def found_again(known: KnownScan, scan: Path, prepared: PreparedScan, predictions: dict) -> str:
-    """Replace ``predictions``' detections by the known objects found again in ``prepared``
-    and the detections of what changed; returns the line saying so."""
-    from projects.synthdet.inference.known_objects import (RegistrationError, scan_to_scan,
-                                                           with_known_objects)
-    try:
-        to_later, fitness = scan_to_scan(known.prepared, prepared)
-    except RegistrationError as error:
-        raise BadInput(readable(f'{scan} and --known {known.path}: {error}')) from None
-    boxes = [box for box in known.boxes if box['class'] in predictions['classes']]
-    predictions['detections'], counts = with_known_objects(
-        predictions['detections'], boxes, prepared.points_to_scan(prepared.points[:, :3]),
-        known.prepared.points_to_scan(known.prepared.points[:, :3]), to_later)
-    return (f'{scan.name}: registered on {known.path.name} ({fitness:.0%} of its points fit); '
-            f'{counts["found_again"]} of its {counts["known"]} objects found again, '
-            f'{counts["detections_kept"]} of {counts["detections"]} detections where the room '
-            'changed')
-
-
 def main(argv: list[str] | None = None) -> list[Path]:
     """Predict every scan and write its JSON; returns the written paths."""
     args = parse_args(argv)  # before the heavy imports: bad options are refused at once
@@ -148,13 +97,19 @@ def main(argv: list[str] | None = None) -> list[Path]:
         config, checkpoint, model_line = resolve_model(args.config, args.checkpoint)
         cfg = load_config(config, args.cfg_options)
         from projects.synthdet.inference.detector import ModelDetector, load_model
+        from projects.synthdet.inference.known_objects import (KnownScanError, apply_known_scan,
+                                                               read_known_scan)
         from projects.synthdet.inference.windows import inference_settings
         spec, density = inference_settings(cfg, config)
         device = check_device(args.device)
     except ValueError as error:  # OutputRefused, ConfigFileError, DeviceError
         raise BadInput(str(error)) from None
     targets = check_scans([Path(p) for p in args.points], out_dir, args.voxel, args.columns)
-    known = read_known(args.known, args, density) if args.known else None
+    try:
+        known = read_known_scan(args.known, voxel=args.voxel, columns=args.columns,
+                                density=density, seed=args.seed) if args.known else None
+    except KnownScanError as error:
+        raise BadInput(str(error)) from None
     try:
         model = load_model(cfg, checkpoint, device, args.tta)
     except ValueError as error:  # CheckpointError
@@ -176,7 +131,10 @@ def main(argv: list[str] | None = None) -> list[Path]:
         except ValueError as error:
             raise RuntimeError(readable(f'{scan}: {error}')) from None
         if known is not None:
-            tqdm.write(found_again(known, scan, prepared, predictions))
+            try:
+                tqdm.write(apply_known_scan(known, scan, prepared, predictions))
+            except KnownScanError as error:
+                raise BadInput(str(error)) from None
         write_predictions(target, predictions)  # the contract makes names valid UTF-8
         written.append(target)
     return written

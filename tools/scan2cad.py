@@ -3,6 +3,7 @@
 Usage: python tools/scan2cad.py SCAN --out hall.FCStd [--config CFG --checkpoint CKPT]
                                 [--score-thr 0.3] [--device cpu] [--seed 0] [--voxel 0.02]
                                 [--columns x,y,z,r,g,b] [--library DIR] [--wall-thickness 0.1]
+                                [--known EARLIER_SCAN]
 
 Without ``--config`` and ``--checkpoint`` the detector is the model that ships with synthdet
 (``projects/synthdet/weights/``, its model card beside it); the first line says which model
@@ -13,6 +14,9 @@ ran. The stages are the ones a user runs one by one, on the same prepared scan:
    ``density_from_config``, while the corners use every point);
 2. detection by windows sized from the training rooms (``ModelDetector.predictions``, as
    ``tools/predict.py --voxel`` with the same voxel) -> ``<out stem>.pred.json`` beside it;
+   with ``--known EARLIER_SCAN``, an earlier scan of the room with its corrected labels beside
+   it, the objects found again there and the detections where the room changed, as
+   ``tools/predict.py --known``;
 3. the room corners on the prepared points, written in the scan's coordinates
    (``configurator.corners.outline_in_scan``, as ``python -m configurator corners
    --approximate``) -> ``<out stem>.corners.json``; when no outline can be traced, an
@@ -34,7 +38,8 @@ from configurator.corners import SCAN_VOXEL, CornerDetectionError, room_outline
 from configurator.corners import outline_in_scan, outline_to_dict
 from configurator.freecad_cli import (FreecadFailed, build_document, check_input_scan,
                                       wall_thickness_option)
-from projects.synthdet.bootstrap import add_detection_arguments, check_device, load_config
+from projects.synthdet.bootstrap import (add_detection_arguments, add_known_option, check_device,
+                                         load_config)
 from projects.synthdet.shipped_model import resolve_model
 from synthdet.cli import OneLineParser
 from synthdet.contracts import write_corners, write_predictions
@@ -60,6 +65,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help='metres, up to 2 (default 0.1)')
     parser.add_argument('--freecadcmd', default='freecadcmd', help='FreeCAD command line')
     add_detection_arguments(parser, voxel=SCAN_VOXEL)
+    add_known_option(parser)
     return parser.parse_args(argv)
 
 
@@ -76,18 +82,21 @@ def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
         raise ValueError(f'{out}: the output must end with .FCStd')
     predictions_path, corners_path = output_paths(out)
     check_input_scan(scan)
-    inputs = [scan, args.config, args.checkpoint, args.library]
+    inputs = [scan, args.config, args.checkpoint, args.library, args.known]
     for path in (out, predictions_path, corners_path):  # the arguments before any work
         check_output_file(path, inputs=inputs)
     config, checkpoint, model_line = resolve_model(args.config, args.checkpoint)
     report(model_line)
     cfg = load_config(config, args.cfg_options)
     from projects.synthdet.inference.detector import ModelDetector, load_model
+    from projects.synthdet.inference.known_objects import apply_known_scan, read_known_scan
     from projects.synthdet.inference.windows import inference_settings
     spec, density = inference_settings(cfg, config)
     device = check_device(args.device)
     start = time.perf_counter()
     loaded = load_scan(scan, voxel=args.voxel, columns=args.columns)
+    known = read_known_scan(args.known, voxel=args.voxel, columns=args.columns, density=density,
+                            seed=args.seed) if args.known else None
     # the corners, as `configurator corners`, use every point; detection the resampled ones
     outlined = align_scan(loaded)
     prepared = resample_to_density(outlined, density, args.seed)
@@ -99,6 +108,8 @@ def scan_to_cad(args: argparse.Namespace, report=print) -> dict:
         # the document's label is its file's stem, as when FreeCAD saves it where it belongs
         staged = [work / 'room.pred.json', work / 'room.corners.json', work / readable(out.name)]
         predictions = detector.predictions(prepared, spec, Path(config).stem)
+        if known is not None:
+            report(f'known objects: {apply_known_scan(known, scan, prepared, predictions)}')
         write_predictions(staged[0], predictions)
         report(f'detect: {len(predictions["detections"])} objects -> {predictions_path}')
         outline = outline_in_scan(room_outline(outlined.points), outlined)

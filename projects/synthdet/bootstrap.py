@@ -141,6 +141,17 @@ def add_detection_arguments(parser: argparse.ArgumentParser, voxel: float | None
     add_cfg_options(parser)
 
 
+def add_known_option(parser: argparse.ArgumentParser) -> None:
+    """``--known EARLIER_SCAN`` (``predict.py``, ``scan2cad.py``): an earlier, corrected scan
+    of the same room (``projects/synthdet/inference/known_objects.py``)."""
+    parser.add_argument(
+        '--known',
+        type=Path,
+        help='an earlier scan of the same room with its corrected labels beside it '
+        '(<scan stem>.labels.json, from python -m configurator labels): the objects found '
+        'again there replace the detections, and only what changed is detected')
+
+
 class TTAConfigError(ValueError):
     """``--tta`` with a config that lacks ``tta_model`` or ``tta_pipeline``."""
 

@@ -1,6 +1,7 @@
-"""``tools/predict.py --known``: a later scan of a room predicted with an earlier scan's corrected
-labels (an untrained model, so what comes out is what the known objects give), and its one-line
-refusals: a missing labels file, a scan of another room."""
+"""``tools/predict.py --known`` and ``tools/scan2cad.py --known``: a later scan of a room detected
+with an earlier scan's corrected labels (an untrained model, so what comes out is what the known
+objects give), and the one-line refusals of a missing labels file and of a scan of another
+room."""
 from __future__ import annotations
 
 import json
@@ -64,3 +65,17 @@ def test_a_scan_of_another_room_is_refused(rooms, tmp_path):
                root / 'earlier.ply', '--out', tmp_path)
     assert_clean_error(proc, 2, 'not two scans of the same room')
     assert str(scan) in proc.stderr and not list(tmp_path.iterdir())
+
+
+def test_scan2cad_builds_the_later_scan_from_the_known_objects(rooms, tmp_path):
+    root = rooms['root']
+    out = tmp_path / 'later.FCStd'
+    proc = run('tools/scan2cad.py', root / 'later.ply', '--config', TINY, '--checkpoint',
+               rooms['checkpoint'], '--known', root / 'earlier.ply', '--out', out,
+               '--score-thr', '0.99')
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert 'known objects: later.ply: registered on earlier.ply' in proc.stdout
+    detections = json.loads(out.with_suffix('.pred.json').read_text())['detections']
+    assert [box['class'] for box in detections] == ['table']
+    np.testing.assert_allclose(detections[0]['center'], rooms['table_later'], atol=0.03)
+    assert out.is_file()

@@ -40,14 +40,13 @@ from mmengine.config import Config
 from projects.synthdet.core.rotated_iou import rotated_iou_3d as rotated_iou_tensor
 from projects.synthdet.inference.detector import ModelDetector, load_model
 from projects.synthdet.inference.windows import inference_settings
-from synthdet.contracts import (read_labels, write_json_atomic, write_predictions,
-                                write_text_atomic)
+from synthdet.contracts import (LABELS_SUFFIX, labels_path, read_labels, write_json_atomic,
+                                write_predictions, write_text_atomic)
 from synthdet.prepare import PreparedScan, prepare_scan
 from synthdet.room_data import Box, Scan
 from synthdet.scan_io import SCAN_SUFFIXES, load_scan
 
 REAL_SCANS_FORMAT = 'synthdet.real_scans/1'
-LABELS_SUFFIX = '.labels.json'
 IOU_THR = 0.25
 MAP_IOU_THRS = (0.25, 0.5)
 # classes that are always shown; their false detections are the phantoms
@@ -64,12 +63,6 @@ class LabelledScan:
 
     scan: Path
     labels: dict
-
-
-def labels_path(scan: str | os.PathLike) -> Path:
-    """The labels file of a scan: ``<scan stem>.labels.json`` beside it."""
-    scan = Path(scan)
-    return scan.with_name(scan.stem + LABELS_SUFFIX)
 
 
 def _labelled(scan: Path) -> LabelledScan:

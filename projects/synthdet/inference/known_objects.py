@@ -17,7 +17,9 @@ detections is what changed: moved or new objects.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -27,7 +29,10 @@ from scipy.signal import fftconvolve
 from scipy.spatial import cKDTree
 
 from projects.synthdet.core.rotated_iou import rotated_iou_3d
-from synthdet.prepare import PreparedScan
+from synthdet.contracts import labels_path, read_labels
+from synthdet.outputs import readable
+from synthdet.prepare import PreparedScan, prepare_scan
+from synthdet.scan_io import load_scan
 
 CELL = 0.05  # m: occupancy cells of the floor plans and of the support
 ICP_VOXEL = 0.03  # m: the points ICP fits, one per voxel
@@ -40,7 +45,12 @@ MIN_BOX_CELLS = 8  # a box with fewer occupied cells in the earlier scan is not 
 OVERLAP_IOU = 0.1  # a detection overlapping a box found again at this 3D IoU is dropped
 
 
-class RegistrationError(ValueError):
+class KnownScanError(ValueError):
+    """A known scan that cannot be used (unreadable, no labels, not the same room); the message
+    names the files."""
+
+
+class RegistrationError(KnownScanError):
     """Two scans that do not register: not the same room, or too little of it in common."""
 
 
@@ -211,3 +221,45 @@ def with_known_objects(detections: Sequence[dict], known: Sequence[dict], later:
     counts = {'known': len(known), 'found_again': len(found_again),
               'detections': len(detections), 'detections_kept': len(kept)}
     return found_again + kept, counts
+
+
+@dataclass
+class KnownScan:
+    """An earlier scan of a room, prepared, and its corrected boxes."""
+
+    path: Path
+    prepared: PreparedScan
+    boxes: list[dict]
+
+
+def read_known_scan(path: str | os.PathLike, *, voxel: float | None, columns: str | None,
+                    density: float | None, seed: int) -> KnownScan:
+    """Read an earlier scan (as the later ones are read and prepared) and the labels beside it
+    (``<stem>.labels.json``); ``KnownScanError`` names the file that cannot be used."""
+    path = Path(path)
+    try:
+        labels = read_labels(labels_path(path))
+        loaded = load_scan(path, voxel=voxel, columns=columns)
+    except (ValueError, OSError) as error:  # a missing file, SchemaError, ScanFormatError
+        raise KnownScanError(readable(f'--known: {error}')) from None
+    return KnownScan(path, prepare_scan(loaded, target_density=density, seed=seed),
+                     list(labels['boxes']))
+
+
+def apply_known_scan(known: KnownScan, scan: Path, prepared: PreparedScan,
+                     predictions: dict) -> str:
+    """Replace ``predictions``' detections (a ``synthdet.predictions/1`` document of the later
+    scan ``scan``) by the known objects found again and the detections of what changed;
+    returns the line saying so. ``RegistrationError`` names both scans."""
+    try:
+        to_later, fitness = scan_to_scan(known.prepared, prepared)
+    except RegistrationError as error:
+        raise RegistrationError(readable(f'{scan} and --known {known.path}: {error}')) from None
+    boxes = [box for box in known.boxes if box['class'] in predictions['classes']]
+    predictions['detections'], counts = with_known_objects(
+        predictions['detections'], boxes, prepared.points_to_scan(prepared.points[:, :3]),
+        known.prepared.points_to_scan(known.prepared.points[:, :3]), to_later)
+    return (f'{scan.name}: registered on {known.path.name} ({fitness:.0%} of its points fit); '
+            f'{counts["found_again"]} of its {counts["known"]} objects found again, '
+            f'{counts["detections_kept"]} of {counts["detections"]} detections where the room '
+            'changed')
