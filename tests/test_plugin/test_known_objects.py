@@ -55,7 +55,7 @@ def test_two_scans_of_one_room_register_across_a_quarter_turn(turns, shift):
     earlier = scene(list(room_boxes(empty)), seed=1)
     later, truth = turned(scene(list(room_boxes(empty)), seed=2), turns, shift)
     registration = register(earlier, later)
-    assert registration.fitness > 0.8
+    assert registration.overlap > 0.8
     np.testing.assert_allclose(registration.transform[:3, :3], truth[:3, :3], atol=0.02)
     np.testing.assert_allclose(registration.transform[:3, 3], truth[:3, 3], atol=0.03)
 

@@ -5,8 +5,8 @@ document turned into labels by ``python -m configurator labels``), a later scan 
 room starts from them. Both scans are prepared (z up, floor at z = 0, walls along the axes), so
 they differ by a quarter turn about z and a shift: each quarter turn is tried, the shift taken
 where the two floor plans' occupancy grids overlap most (one FFT correlation), refined by
-point-to-plane ICP (Open3D), and the turn that fits most of the earlier scan's points above the
-floor (within 5 cm of the later scan's) kept.
+point-to-plane ICP (Open3D), and the turn under which the two scans overlap most kept (the
+smaller of the shares of each scan's points above the floor within 5 cm of the other's).
 
 A corrected box is *found again* when most of the earlier scan's occupied cells inside it are
 occupied in the new scan too (``support``): an object moved away leaves its cells empty. A
@@ -39,7 +39,9 @@ ICP_VOXEL = 0.03  # m: the points ICP fits, one per voxel
 ICP_REACH = (0.1, 0.05)  # m: ICP's correspondence distance, coarse then fine
 MAX_PLAN_CELLS = 4096  # cells per side of the floor-plan grid; larger plans get larger cells
 FLOOR_SLAB = 0.1  # m: the floor's points fit anywhere on a floor; the fit counts those above
-MIN_FITNESS = 0.3  # share of the earlier scan's points above the floor that must fit
+# the overlap two scans need: on the development scans two scans of one room share 0.40-0.76,
+# two rooms at most 0.09
+MIN_OVERLAP = 0.2
 MIN_SUPPORT = 0.5  # share of a box's occupied cells found again
 MIN_BOX_CELLS = 8  # a box with fewer occupied cells in the earlier scan is not carried over
 OVERLAP_IOU = 0.1  # a detection overlapping a box found again at this 3D IoU is dropped
@@ -56,10 +58,10 @@ class RegistrationError(KnownScanError):
 
 @dataclass(frozen=True)
 class Registration:
-    """The earlier scan's prepared frame -> the new scan's, and the share of points it fits."""
+    """The earlier scan's prepared frame -> the new scan's, and how much the two overlap."""
 
     transform: np.ndarray  # (4, 4)
-    fitness: float
+    overlap: float
 
 
 def _cloud(xyz: np.ndarray) -> o3d.geometry.PointCloud:
@@ -94,25 +96,33 @@ def plan_shift(earlier: np.ndarray, later: np.ndarray, cell: float = CELL) -> np
     return (np.array(peak) - (np.array(shape) - 1) // 2) * cell
 
 
-def _fitness(points: np.ndarray, target: cKDTree, transform: np.ndarray) -> float:
-    """The share of ``points`` moved by ``transform`` that have a target point within the
-    fine ICP reach."""
-    if not len(points):
+def _near_share(points: np.ndarray, other: np.ndarray) -> float:
+    """The share of ``points`` above the floor with a point of ``other`` within the fine ICP
+    reach."""
+    points = points[points[:, 2] > FLOOR_SLAB]
+    if not len(points) or not len(other):
         return 0.0
-    distances, _ = target.query(points @ transform[:3, :3].T + transform[:3, 3],
-                                distance_upper_bound=ICP_REACH[-1])
+    distances, _ = cKDTree(other).query(points, distance_upper_bound=ICP_REACH[-1])
     return float(np.isfinite(distances).mean())
+
+
+def overlap(earlier: np.ndarray, later: np.ndarray, transform: np.ndarray) -> float:
+    """How much two scans of one room share under ``transform`` (earlier -> later): the smaller
+    of the two shares of each scan's points above the floor that lie within 5 cm of the other
+    scan's. The smaller one, so that a small room laid inside a large one does not count."""
+    moved = earlier @ transform[:3, :3].T + transform[:3, 3]
+    return min(_near_share(moved, later), _near_share(later, moved))
 
 
 def register(earlier: np.ndarray, later: np.ndarray) -> Registration:
     """Register two prepared scans' points ``(N, 3)``, ``(M, 3)`` of one room (module doc).
-    Raises ``RegistrationError`` when no quarter turn fits ``MIN_FITNESS`` of the points."""
+    Raises ``RegistrationError`` when no quarter turn reaches an :func:`overlap` of
+    ``MIN_OVERLAP``."""
     source = _cloud(earlier).voxel_down_sample(ICP_VOXEL)
     target = _cloud(later).voxel_down_sample(ICP_VOXEL)
     target.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=4 * ICP_VOXEL, max_nn=30))
     plane = o3d.pipelines.registration.TransformationEstimationPointToPlane()
-    source_points, target_points = np.asarray(source.points), cKDTree(np.asarray(target.points))
-    above_floor = source_points[source_points[:, 2] > FLOOR_SLAB]
+    source_points, target_points = np.asarray(source.points), np.asarray(target.points)
     best = Registration(np.eye(4), -1.0)
     for turns in range(4):
         start = np.eye(4)
@@ -123,13 +133,13 @@ def register(earlier: np.ndarray, later: np.ndarray) -> Registration:
             fit = o3d.pipelines.registration.registration_icp(source, target, reach, transform,
                                                               plane)
             transform = np.asarray(fit.transformation)
-        fitness = _fitness(above_floor, target_points, transform)
-        if fitness > best.fitness:
-            best = Registration(transform, fitness)
-    if best.fitness < MIN_FITNESS:
+        shared = overlap(source_points, target_points, transform)
+        if shared > best.overlap:
+            best = Registration(transform, shared)
+    if best.overlap < MIN_OVERLAP:
         raise RegistrationError(
-            f'the scans share {best.fitness:.0%} of their points at the best fit (at least '
-            f'{MIN_FITNESS:.0%} needed): not two scans of the same room')
+            f'the scans overlap by {best.overlap:.0%} at the best fit (at least '
+            f'{MIN_OVERLAP:.0%} needed): not two scans of the same room')
     return best
 
 
@@ -189,12 +199,13 @@ def _overlaps(boxes: Sequence[dict], others: Sequence[dict]) -> np.ndarray:
 
 
 def scan_to_scan(earlier: PreparedScan, later: PreparedScan) -> tuple[np.ndarray, float]:
-    """Register two prepared scans of one room (:func:`register`); returns the (4, 4) matrix from
-    the earlier scan's output coordinates (those of its labels) to the later's, and the fit."""
+    """Register two prepared scans of one room (:func:`register`); returns the (4, 4) matrix
+    from the earlier scan's output coordinates (those of its labels) to the later's, and their
+    overlap."""
     registration = register(earlier.points[:, :3], later.points[:, :3])
     matrix = later.output_matrix() @ registration.transform @ np.linalg.inv(
         earlier.output_matrix())
-    return matrix, registration.fitness
+    return matrix, registration.overlap
 
 
 def with_known_objects(detections: Sequence[dict], known: Sequence[dict], later: np.ndarray,
@@ -252,14 +263,14 @@ def apply_known_scan(known: KnownScan, scan: Path, prepared: PreparedScan,
     scan ``scan``) by the known objects found again and the detections of what changed;
     returns the line saying so. ``RegistrationError`` names both scans."""
     try:
-        to_later, fitness = scan_to_scan(known.prepared, prepared)
+        to_later, shared = scan_to_scan(known.prepared, prepared)
     except RegistrationError as error:
         raise RegistrationError(readable(f'{scan} and --known {known.path}: {error}')) from None
     boxes = [box for box in known.boxes if box['class'] in predictions['classes']]
     predictions['detections'], counts = with_known_objects(
         predictions['detections'], boxes, prepared.points_to_scan(prepared.points[:, :3]),
         known.prepared.points_to_scan(known.prepared.points[:, :3]), to_later)
-    return (f'{scan.name}: registered on {known.path.name} ({fitness:.0%} of its points fit); '
+    return (f'{scan.name}: registered on {known.path.name} (overlap {shared:.0%}); '
             f'{counts["found_again"]} of its {counts["known"]} objects found again, '
             f'{counts["detections_kept"]} of {counts["detections"]} detections where the room '
             'changed')
