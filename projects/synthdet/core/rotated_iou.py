@@ -10,6 +10,8 @@ of turned boxes whose long edges lie on one line (a box and its copy moved along
 0.18 instead of 0.43 for a 2 x 0.4 m box turned by 0.5 rad and moved by 0.8 m); clipping keeps
 points on an edge as inside and has no such case.
 """
+from typing import Sequence
+
 import torch
 from torch import Tensor
 
@@ -18,6 +20,13 @@ _UNIT_CORNERS = ((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5))
 # a convex quadrilateral clipped by four lines has at most 8 corners; points on a clipping line
 # may repeat, so a few more places are kept
 _MAX_VERTICES = 16
+
+
+def box_tensor(items: Sequence[dict]) -> Tensor:
+    """``(K, 7)`` float64 boxes of contract box dicts (``center``, ``size``, ``yaw``, which
+    defaults to 0)."""
+    rows = [[*item['center'], *item['size'], item.get('yaw', 0.0)] for item in items]
+    return torch.tensor(rows, dtype=torch.float64).reshape(-1, 7)
 
 
 def box_footprints(boxes: Tensor) -> Tensor:

@@ -37,6 +37,7 @@ import torch
 from mmdet3d.evaluation.functional.indoor_eval import average_precision
 from mmengine.config import Config
 
+from projects.synthdet.core.rotated_iou import box_tensor
 from projects.synthdet.core.rotated_iou import rotated_iou_3d as rotated_iou_tensor
 from projects.synthdet.inference.detector import ModelDetector, load_model
 from projects.synthdet.inference.windows import inference_settings
@@ -121,8 +122,7 @@ def find_labelled_scans(paths: Iterable[str | os.PathLike]) -> tuple[list[Labell
 
 def box_array(items: Sequence[dict]) -> np.ndarray:
     """``(K, 7)`` boxes ``x y z dx dy dz yaw`` (gravity centres) of contract box dicts."""
-    rows = [[*item['center'], *item['size'], item.get('yaw', 0.0)] for item in items]
-    return np.asarray(rows, dtype=np.float64).reshape(-1, 7)
+    return box_tensor(items).numpy()
 
 
 def rotated_iou_3d(boxes_a: np.ndarray,

@@ -19,16 +19,16 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 import open3d as o3d
-import torch
 from scipy.signal import fftconvolve
 from scipy.spatial import cKDTree
 
-from projects.synthdet.core.rotated_iou import rotated_iou_3d
+from projects.synthdet.core.rotated_iou import box_tensor, rotated_iou_3d
 from synthdet.contracts import labels_path, read_labels
 from synthdet.outputs import readable
 from synthdet.prepare import PreparedScan, prepare_scan
@@ -127,7 +127,7 @@ def register(earlier: np.ndarray, later: np.ndarray) -> Registration:
     for turns in range(4):
         start = np.eye(4)
         start[:3, :3] = quarter_turn(turns)
-        start[:2, 3] = plan_shift(earlier @ start[:3, :3].T, later)
+        start[:2, 3] = plan_shift(source_points @ start[:3, :3].T, target_points)
         transform = start
         for reach in ICP_REACH:
             fit = o3d.pipelines.registration.registration_icp(source, target, reach, transform,
@@ -193,9 +193,8 @@ def _overlaps(boxes: Sequence[dict], others: Sequence[dict]) -> np.ndarray:
     """For each of ``boxes``, whether it overlaps any of ``others`` at ``OVERLAP_IOU``."""
     if not boxes or not others:
         return np.zeros(len(boxes), dtype=bool)
-    as_tensor = [torch.tensor([[*b['center'], *b['size'], b.get('yaw', 0.0)] for b in items],
-                              dtype=torch.float64) for items in (boxes, others)]
-    return (rotated_iou_3d(*as_tensor) >= OVERLAP_IOU).any(dim=1).numpy()
+    ious = rotated_iou_3d(box_tensor(boxes), box_tensor(others))
+    return (ious >= OVERLAP_IOU).any(dim=1).numpy()
 
 
 def scan_to_scan(earlier: PreparedScan, later: PreparedScan) -> tuple[np.ndarray, float]:
@@ -242,6 +241,12 @@ class KnownScan:
     prepared: PreparedScan
     boxes: list[dict]
 
+    @cached_property
+    def points(self) -> np.ndarray:
+        """``(N, 3)`` its points in its output coordinates (those of its labels), computed once
+        for all the later scans."""
+        return self.prepared.points_to_scan(self.prepared.points[:, :3])
+
 
 def read_known_scan(path: str | os.PathLike, *, voxel: float | None, columns: str | None,
                     density: float | None, seed: int) -> KnownScan:
@@ -269,7 +274,7 @@ def apply_known_scan(known: KnownScan, scan: Path, prepared: PreparedScan,
     boxes = [box for box in known.boxes if box['class'] in predictions['classes']]
     predictions['detections'], counts = with_known_objects(
         predictions['detections'], boxes, prepared.points_to_scan(prepared.points[:, :3]),
-        known.prepared.points_to_scan(known.prepared.points[:, :3]), to_later)
+        known.points, to_later)
     return (f'{scan.name}: registered on {known.path.name} (overlap {shared:.0%}); '
             f'{counts["found_again"]} of its {counts["known"]} objects found again, '
             f'{counts["detections_kept"]} of {counts["detections"]} detections where the room '
