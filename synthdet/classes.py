@@ -27,6 +27,11 @@ GENERATED_STRUCTURE_CLASSES = ('ceiling', 'floor', 'wall', 'door', 'window', 'cl
 # Semantic id of each detection class, in DETECTION_CLASSES order: (7, 8, 9, 10, 11, 13, 14).
 DETECTION_SEMANTIC_IDS = tuple(SEMANTIC_CLASSES.index(name) for name in DETECTION_CLASSES)
 
+# The label of an ignored region in a training room's boxes (a region whose locations the
+# detector's class loss leaves out unless a true box claims them; tools/adapt.py's unsure boxes).
+# mmdet3d's -1 ("don't care") boxes are dropped when the annotations are read; these are kept.
+IGNORED_REGION_LABEL = -2
+
 # Annotation files of any other class (the real S3DIS has e.g. ``stairs``) become this class.
 FALLBACK_CLASS = 'clutter'
 

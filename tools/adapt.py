@@ -13,8 +13,8 @@ SCANS_DIR holds the scans (every file of a format ``synthdet.scan_io`` reads, as
 1. the teacher detects every scan with test-time augmentation, once per seed (``--runs``
    seeds from ``--seed``); the pseudo-labels are the boxes scoring at least ``--score-thr``
    that every run finds (same class, axis-aligned 3D IoU >= ``--agree-iou``)
-   (``projects/synthdet/self_training.py``); the points of the other boxes scoring at least
-   ``--unsure-thr`` are left out of training;
+   (``projects/synthdet/self_training.py``); the other boxes scoring at least
+   ``--unsure-thr`` become ignored regions, left out of the class loss;
 2. the scans become S3DIS rooms of the config's ``adapt_area`` labelled by them (the rules of
    ``python -m configurator labels``), converted as ``tools/create_data.py`` does;
 3. mmengine's Runner trains ``--refresh`` iterations (default: the config's
@@ -44,8 +44,10 @@ from projects.synthdet.checkpoint import load_checkpoint_file, save_inference_ch
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.inference.detector import load_model
 from projects.synthdet.inference.windows import WindowSpec, inference_settings
-from projects.synthdet.self_training import (UNSURE_THR, PseudoLabelRule, adapt_repeat,
-                                             check_share, pseudo_boxes, raw_area_dir,
+from projects.synthdet.config_helpers import area_info_file
+from projects.synthdet.self_training import (UNSURE_THR, PseudoLabelRule, add_ignored_regions,
+                                             adapt_repeat, check_share, ignored_regions,
+                                             pseudo_boxes, raw_area_dir, room_offset,
                                              round_config, teacher_pseudo_labels, train_round,
                                              write_pseudo_room)
 from synthdet.cli import OneLineParser, add_score_option, float_in, int_in
@@ -88,8 +90,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('--refresh', type=int_in(1, 10**6),
                         help="iterations per round (default: the config's refresh_iters)")
     add_score_option(parser, '--score-thr', 0.5, 'lowest fused score of a pseudo-label')
-    add_score_option(parser, '--unsure-thr', UNSURE_THR, 'lowest score of a box whose points '
-                     'are left out of training when it is no pseudo-label (at most --score-thr)')
+    add_score_option(parser, '--unsure-thr', UNSURE_THR, 'lowest score of a box that is an '
+                     'ignored region when it is no pseudo-label (at most --score-thr)')
     parser.add_argument('--agree-iou', type=float_in(0.0, 1.0, include_low=False), default=0.5,
                         help='3D IoU at which the runs agree on a box (default 0.5)')
     parser.add_argument('--runs', type=int_in(1, 16), default=2,
@@ -188,19 +190,20 @@ def pseudo_label_round(setup: Setup, teacher, points: list[np.ndarray], round_di
     area = setup.cfg.adapt_area
     area_dir = raw_area_dir(round_dir / 'raw', area)
     area_dir.mkdir(parents=True, exist_ok=True)
-    scans = []
+    scans, regions = [], {}
     for index, (scan, scan_points) in enumerate(
             tqdm(list(zip(setup.scans, points)), desc=f'{round_dir.name}: pseudo-labels',
                  unit='scan')):
         found, unsure = teacher_pseudo_labels(teacher, scan_points, setup.spec, setup.rule)
         room = f'scan_{index + 1}'
-        boxes, left_out = write_pseudo_room(area_dir / room, scan_points,
-                                            pseudo_boxes(found, setup.classes),
-                                            pseudo_boxes(unsure, setup.classes))
+        boxes = write_pseudo_room(area_dir / room, scan_points, pseudo_boxes(found, setup.classes))
+        ignored = ignored_regions(unsure, found, setup.rule.agree_iou)
+        regions[f'Area_{area}_{room}.bin'] = ignored - np.r_[room_offset(scan_points), 0, 0, 0]
         scans.append({'scan': scan.name, 'room': room, 'boxes': boxes,
-                      'unsure_boxes': len(unsure.scores), 'points_left_out': left_out,
+                      'ignored_regions': [[round(float(v), 4) for v in box] for box in ignored],
                       'points': len(scan_points)})
     convert_s3dis(round_dir / 'raw', round_dir / 'data', areas=[area])
+    add_ignored_regions(round_dir / 'data' / area_info_file(area), regions)
     document = {
         'format': PSEUDO_LABELS_FORMAT,
         'frame': 'prepared (floor at z = 0, walls along the axes)',

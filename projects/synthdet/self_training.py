@@ -12,11 +12,14 @@ agrees on, written as S3DIS rooms, and the training runs between two refreshes o
   to the smallest pseudo-box it lies in, else to the nearest within 5 mm; ``floor_1`` are the
   other points within 5 cm of the floor, the rest ``clutter_1``. A pseudo-box without a point
   is dropped.
-- What the teacher is unsure of is left out of the room: the points within ``UNSURE_MARGIN``
-  of a box that some run found scoring at least ``unsure_thr`` but that is no pseudo-label
-  (too low a score, or the runs disagree). An object the teacher half-sees is then neither a
-  label nor background: without the cut, it would be trained as background and the model
-  would learn to stop finding it.
+- What the teacher is unsure of is ignored, not trained as background: every box that some run
+  found scoring at least ``unsure_thr`` and that is no pseudo-label (too low a score, or the
+  runs disagree), grown by ``UNSURE_MARGIN``, becomes an ignored region of the room's info
+  (``ignored_regions``, read by
+  :class:`~projects.synthdet.datasets.synthdet_s3dis.SynthdetS3DISDataset`): the
+  detector's class loss leaves the locations inside it out. The points stay, so the scan keeps
+  its shape. An object the teacher half-sees is then neither a label nor background: as
+  background, the model would learn to stop finding it.
 - A training run continues from the previous one's checkpoint: the student from its own
   weights, the teacher (``MeanTeacherEMAHook``, an exponential moving average of the
   student's weights) from its average. The pseudo-labelled area is mixed with the config's
@@ -26,6 +29,7 @@ from __future__ import annotations
 
 import copy
 import math
+import pickle
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,15 +38,16 @@ import numpy as np
 import torch
 from mmengine.config import Config
 
-from configurator.labels import (SURFACE_BAND, holds_points, in_reach, instance_names,
-                                 point_owners, shadowed_boxes, write_s3dis_room)
+from configurator.labels import (SURFACE_BAND, holds_points, instance_names, point_owners,
+                                 shadowed_boxes, write_s3dis_room)
 from projects.synthdet.config_helpers import area_info_file
 from projects.synthdet.core.box_ops import pairwise_iou_3d
 from projects.synthdet.inference.detector import ModelDetector
 from projects.synthdet.inference.windows import Detections, WindowSpec
 from synthdet.info_files import RAW_DIR, load_info_pickle
+from synthdet.outputs import replaced_paths
 
-UNSURE_MARGIN = 0.05  # metres around an unsure box whose points are left out of the room
+UNSURE_MARGIN = 0.05  # metres an unsure box grows on every side to an ignored region
 UNSURE_THR = 0.3  # the default lowest score of an unsure box (docs/teach.md: measured 0.1, 0.3)
 
 
@@ -107,22 +112,15 @@ def pseudo_boxes(detections: Detections, classes: list[str]) -> list[dict]:
     return boxes
 
 
-def write_pseudo_room(room_dir: Path, points: np.ndarray, boxes: list[dict],
-                      unsure: list[dict]) -> tuple[list[dict], int]:
+def write_pseudo_room(room_dir: Path, points: np.ndarray, boxes: list[dict]) -> list[dict]:
     """Write the prepared scan ``points`` as an S3DIS room labelled by ``boxes`` (the rules of
-    ``configurator.labels``; floor at z = 0), without the points within ``UNSURE_MARGIN`` of an
-    ``unsure`` box that lie in no labelled box. Returns the boxes that hold points (the others
-    are dropped) and the number of points left out."""
+    ``configurator.labels``; floor at z = 0). Returns the boxes that hold points (the others
+    are dropped)."""
     xyz = points[:, :3]
     held = [box for box in boxes if holds_points(xyz, box)]
     source = f'pseudo-labels of {room_dir.name}'
     names = instance_names(held, source)
     owners = point_owners(xyz, held, source)  # -1: in reach of no labelled box
-    doubtful = np.zeros(len(points), dtype=bool)
-    for box in unsure:
-        doubtful |= in_reach(xyz, box, UNSURE_MARGIN)
-    kept = (owners >= 0) | ~doubtful
-    points, xyz, owners = points[kept], xyz[kept], owners[kept]
     repeated, _ = shadowed_boxes(xyz, held, owners, source)
     elements = np.full(len(points), 'clutter_1', dtype=object)
     elements[np.abs(xyz[:, 2]) <= SURFACE_BAND] = 'floor_1'
@@ -130,7 +128,38 @@ def write_pseudo_room(room_dir: Path, points: np.ndarray, boxes: list[dict],
         elements[owners == index] = name
     write_s3dis_room(room_dir, points, elements,
                      {names[index]: chunk for index, chunk in repeated.items()})
-    return held, int(np.count_nonzero(~kept))
+    return held
+
+
+def ignored_regions(unsure: Detections, labels: Detections, agree_iou: float) -> np.ndarray:
+    """``(K, 6)`` axis-aligned regions ``x y z dx dy dz`` (gravity centres) of the ``unsure``
+    boxes that are no pseudo-label (no box of ``labels`` overlaps them with 3D IoU of at least
+    ``agree_iou``), each grown by ``UNSURE_MARGIN`` on every side."""
+    keep = np.ones(len(unsure.scores), dtype=bool)
+    if len(unsure.scores) and len(labels.scores):
+        overlaps = pairwise_iou_3d(torch.from_numpy(unsure.boxes), torch.from_numpy(labels.boxes))
+        keep = overlaps.numpy().max(axis=1) < agree_iou
+    regions = unsure.boxes[keep, :6].astype(np.float64)
+    regions[:, 3:6] += 2 * UNSURE_MARGIN
+    return regions
+
+
+def room_offset(points: np.ndarray) -> np.ndarray:
+    """The xyz the converter subtracts from a room written from ``points``: their per-axis
+    minimum at the millimetres the room's text files keep."""
+    return np.round(points[:, :3].astype(np.float64), 3).min(axis=0)
+
+
+def add_ignored_regions(info_file: Path, regions: dict[str, np.ndarray]) -> None:
+    """Add to each room's info in ``info_file`` its ``ignored_regions``: ``regions`` maps the
+    room's points file name (``Area_11_scan_1.bin``) to ``(K, 6)`` boxes in the converted
+    room's frame. The file is replaced atomically."""
+    document = load_info_pickle(info_file)
+    for info in document['data_list']:
+        boxes = regions.get(info['lidar_points']['lidar_path'], np.zeros((0, 6)))
+        info['ignored_regions'] = [{'bbox_3d': [float(v) for v in box]} for box in boxes]
+    with replaced_paths([info_file]) as (partial, ):
+        partial.write_bytes(pickle.dumps(document, protocol=pickle.HIGHEST_PROTOCOL))
 
 
 def raw_area_dir(root: Path, area: int) -> Path:

@@ -14,6 +14,7 @@ from mmengine.structures import InstanceData
 
 from projects.synthdet.models import TR3DDetector, tr3d_assign
 from projects.synthdet.models.tr3d_neck import voxel_keys
+from synthdet.classes import IGNORED_REGION_LABEL
 from tests.s3dis_fixtures import read_room_scene, write_synthetic_area
 
 REPO = Path(__file__).resolve().parents[2]
@@ -501,10 +502,18 @@ def test_axis_aligned_iou_loss_reductions_match_numpy():
             rtol=1e-5)
 
 
-def test_head_loss_matches_a_hand_computed_batch():
+# ignored regions (centre, size) per scene: scene 0's covers the negatives at x = 2.0 and 2.5 m
+# of level 0 and at 2.0 m of level 1; scene 1's covers a positive of its level 1 (x = 2.0 m)
+IGNORED = [[((2.25, 0.0, 0.0), (1.0, 1.0, 1.0))], [((2.0, 0.0, 0.0), (0.4, 1.0, 1.0))]]
+
+
+@pytest.mark.parametrize('ignored', [[[], []], IGNORED], ids=['plain', 'ignored_regions'])
+def test_head_loss_matches_a_hand_computed_batch(ignored):
     """Two scenes on two levels through the real head (MinkowskiEngine 1x1x1 convolutions with
     set weights): the focal loss summed over every location and class and divided by the
-    positives of the whole batch, the DIoU loss averaged over all positives of the batch."""
+    positives of the whole batch, the DIoU loss averaged over all positives of the batch. A
+    location in an ignored region (a box labelled ``IGNORED_REGION_LABEL``) has no class loss
+    unless it is a positive."""
     import MinkowskiEngine as ME
     voxel = 0.5
     head = MODELS.build(
@@ -541,25 +550,29 @@ def test_head_loss_matches_a_hand_computed_batch():
                 features=torch.tensor(features, dtype=torch.float32),
                 coordinates=torch.tensor(coordinates, dtype=torch.int32)))
     samples = []
-    for boxes in truth:
+    for boxes, regions in zip(truth, ignored):
+        rows = [centre + size for centre, size, _ in boxes] + [c + s for c, s in regions]
         sample = Det3DDataSample(metainfo=dict(box_type_3d=DepthInstance3DBoxes))
         sample.gt_instances_3d = InstanceData(
             bboxes_3d=DepthInstance3DBoxes(
-                torch.tensor([centre + size for centre, size, _ in boxes]),
-                box_dim=6,
-                with_yaw=False,
-                origin=(0.5, 0.5, 0.5)),
-            labels_3d=torch.tensor([label for _, _, label in boxes]))
+                torch.tensor(rows), box_dim=6, with_yaw=False, origin=(0.5, 0.5, 0.5)),
+            labels_3d=torch.tensor([label for _, _, label in boxes] +
+                                   [IGNORED_REGION_LABEL] * len(regions)))
         samples.append(sample)
     losses = head.loss(inputs, samples)
 
-    focal_sum, box_losses = 0.0, []
+    focal_sum, box_losses, skipped = 0.0, [], 0
     for scene, boxes in enumerate(truth):
         for level, per_scene in enumerate(levels):
             for x in per_scene[scene]:
                 f = feature[x]
                 location = np.array([x * voxel, 0.0, 0.0])
                 label = positives[scene].get((level, x * voxel), 2)
+                if label == 2 and any(
+                        np.all(np.abs(location - centre) <= np.array(size) / 2)
+                        for centre, size in ignored[scene]):
+                    skipped += 1
+                    continue
                 focal_sum += np_sigmoid_focal((f * w_cls + b_cls)[None], np.array([label]),
                                               2).sum()
                 if label == 2:
@@ -571,5 +584,7 @@ def test_head_loss_matches_a_hand_computed_batch():
                     np_corners(pred[None]), np_corners(np.array([centre + size])))
                 box_losses.append(1 - diou[0])
     assert len(box_losses) == 6
+    if ignored == IGNORED:  # the three negatives left out
+        assert skipped == 3
     assert losses['cls_loss'].item() == pytest.approx(focal_sum / 6, rel=1e-5)
     assert losses['bbox_loss'].item() == pytest.approx(np.mean(box_losses), rel=1e-5)

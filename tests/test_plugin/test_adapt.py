@@ -16,7 +16,11 @@ import torch
 
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.inference.windows import Detections
-from projects.synthdet.self_training import UNSURE_THR, agreeing_detections, write_pseudo_room
+from projects.synthdet.datasets.synthdet_s3dis import SynthdetS3DISDataset
+from projects.synthdet.self_training import (UNSURE_THR, add_ignored_regions, agreeing_detections,
+                                             ignored_regions, room_offset, write_pseudo_room)
+from synthdet.classes import IGNORED_REGION_LABEL
+from synthdet.info_files import load_info_pickle
 from synthdet.scan_io import read_scan, write_scan
 from tests.checkpoints import initial_checkpoint
 from tests.room_scans import make_room
@@ -75,8 +79,7 @@ def test_a_pseudo_labelled_room_has_its_boxes_floor_and_clutter(tmp_path):
              {'class': 'table', 'label': 'table 1', 'center': [2.5, 0.5, 2.0],
               'size': [0.5, 0.5, 0.5], 'yaw': 0.0, 'score': 0.7}]  # holds no point: dropped
     room = tmp_path / 'Area_11' / 'scan_1'
-    kept, left_out = write_pseudo_room(room, points, boxes, unsure=[])
-    assert kept == boxes[:1] and left_out == 0
+    assert write_pseudo_room(room, points, boxes) == boxes[:1]
     annotations = room / 'Annotations'
     assert sorted(path.stem for path in annotations.glob('*.txt')) == [
         'chair_1', 'clutter_1', 'floor_1']
@@ -85,27 +88,46 @@ def test_a_pseudo_labelled_room_has_its_boxes_floor_and_clutter(tmp_path):
     assert len(read_scan(annotations / 'clutter_1.txt')) == 50
 
 
-def test_an_unsure_box_is_left_out_of_the_room_not_trained_as_background(tmp_path):
+def test_an_unsure_box_becomes_an_ignored_region_of_the_converted_room(tmp_path):
+    """The teacher's unsure sofa is neither a label nor background: its box, grown by the
+    margin, is an ignored region of the room's info, in the converted room's frame, and the
+    dataset hands it to the head labelled ``IGNORED_REGION_LABEL`` beside the pseudo-label."""
     rng = np.random.default_rng(1)
-    floor = np.column_stack([rng.uniform(0, 4, (400, 2)), rng.uniform(-0.01, 0.0, 400)])
-    chair = rng.uniform([1.0, 1.0, 0.1], [1.5, 1.5, 0.9], (200, 3))
-    sofa = rng.uniform([2.5, 2.5, 0.12], [3.5, 3.2, 0.8], (300, 3))  # the teacher is unsure of it
-    lamp = rng.uniform([0.2, 3.5, 1.5], [0.4, 3.7, 2.0], (40, 3))
-    xyz = np.concatenate([floor, chair, sofa, lamp])
+    floor = np.column_stack([rng.uniform(-2, 2, (400, 2)), rng.uniform(-0.01, 0.0, 400)])
+    chair = rng.uniform([-1.0, -1.0, 0.1], [-0.5, -0.5, 0.9], (200, 3))
+    sofa = rng.uniform([0.5, 0.5, 0.12], [1.5, 1.2, 0.8], (300, 3))
+    xyz = np.concatenate([floor, chair, sofa])
     points = np.column_stack([xyz, np.full((len(xyz), 3), 128.0)])
-    chair_box = {'class': 'chair', 'label': 'chair 1', 'center': [1.25, 1.25, 0.45],
-                 'size': [0.6, 0.6, 0.9], 'yaw': 0.0, 'score': 0.8}
-    unsure = [dict(chair_box, score=0.8),  # a label is never cut
-              {'class': 'sofa', 'label': 'sofa 1', 'center': [3.0, 2.85, 0.45],
-               'size': [0.9, 0.6, 0.7], 'yaw': 0.0, 'score': 0.3}]  # a bit short of the sofa
-    room = tmp_path / 'Area_11' / 'scan_1'
-    kept, left_out = write_pseudo_room(room, points, [chair_box], unsure)
-    assert kept == [chair_box] and left_out == 300  # its margin reaches the sofa's edges
-    annotations = room / 'Annotations'
-    assert len(read_scan(annotations / 'chair_1.txt')) == 200
-    assert len(read_scan(annotations / 'floor_1.txt')) == 400  # the floor under it stays
-    assert len(read_scan(annotations / 'clutter_1.txt')) == 40
-    assert len(read_scan(room / 'scan_1.txt')) == len(xyz) - 300
+    chair_box = [-0.75, -0.75, 0.5, 0.6, 0.6, 0.9, 0.0]
+    labels = Detections(np.array([chair_box]), np.array([0.8]), np.array([1]))
+    unsure = Detections(np.array([chair_box,  # the label itself, found by every run: no region
+                                  [1.0, 0.85, 0.45, 0.9, 0.6, 0.7, 0.0]]),
+                        np.array([0.8, 0.3]), np.array([1, 2]))
+    regions = ignored_regions(unsure, labels, agree_iou=0.5)
+    assert np.allclose(regions, [[1.0, 0.85, 0.45, 1.0, 0.7, 0.8]])  # grown 5 cm a side
+    raw = tmp_path / 'raw' / 'Stanford3dDataset_v1.2_Aligned_Version'
+    held = write_pseudo_room(raw / 'Area_11' / 'scan_1', points,
+                             [{'class': 'chair', 'label': 'chair 1', 'center': chair_box[:3],
+                               'size': chair_box[3:6], 'yaw': 0.0, 'score': 0.8}])
+    assert len(held) == 1
+    assert len(read_scan(raw / 'Area_11' / 'scan_1' / 'scan_1.txt')) == len(xyz)  # none cut
+    convert_s3dis(tmp_path / 'raw', tmp_path / 'data', areas=[11])
+    info_file = tmp_path / 'data' / 's3dis_infos_Area_11.pkl'
+    offset = room_offset(points)
+    add_ignored_regions(info_file, {'Area_11_scan_1.bin': regions - np.r_[offset, 0, 0, 0]})
+    dataset = SynthdetS3DISDataset(data_root=str(tmp_path / 'data'), ann_file=info_file.name,
+                                   metainfo=dict(classes=CLASSES), pipeline=[],
+                                   test_mode=False)
+    ann = dataset.get_data_info(0)['ann_info']
+    assert ann['gt_labels_3d'].tolist() == [1, IGNORED_REGION_LABEL]
+    boxes = ann['gt_bboxes_3d']
+    # the converted room's frame: the chair's instance box and the region keep their places
+    sofa_region = np.concatenate([boxes.gravity_center[1].numpy() + offset, boxes.dims[1]])
+    assert np.allclose(sofa_region, regions[0], atol=1e-3)
+    chair_points = chair - offset
+    assert np.allclose(boxes.gravity_center[0].numpy(),
+                       (chair_points.min(0) + chair_points.max(0)) / 2, atol=1e-3)
+
 
 
 @pytest.fixture(scope='module')
@@ -176,9 +198,13 @@ def test_pseudo_labels_pass_the_filters_and_become_the_rooms(adapted):
             names = {path.stem for path in annotations.glob('*.txt')}
             assert {box['label'].replace(' ', '_') for box in item['boxes']} <= names
             room_points = len(read_scan(annotations.parent / f'{item["room"]}.txt'))
-            assert item['unsure_boxes'] >= len(item['boxes'])  # the labels are among them
-            assert room_points == item['points'] - item['points_left_out']
-        assert (work / 'data' / 's3dis_infos_Area_11.pkl').is_file()
+            assert room_points == item['points']  # every point kept
+        infos = load_info_pickle(work / 'data' / 's3dis_infos_Area_11.pkl')['data_list']
+        for item, info in zip(document['scans'], infos):  # the regions, in the room's frame
+            assert info['lidar_points']['lidar_path'] == f'Area_11_{item["room"]}.bin'
+            assert len(info['ignored_regions']) == len(item['ignored_regions'])
+            sizes = [region['bbox_3d'][3:] for region in info['ignored_regions']]
+            assert np.allclose(sizes, [box[3:] for box in item['ignored_regions']], atol=1e-4)
 
 
 def test_a_rerun_continues_after_the_last_finished_round(adapted):

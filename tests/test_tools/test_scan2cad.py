@@ -26,8 +26,9 @@ from projects.synthdet.bootstrap import load_config
 from projects.synthdet.core.box_ops import pairwise_bev_iou
 from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.inference.detector import ModelDetector, load_model
-from projects.synthdet.inference.windows import (density_from_config, detect_in_windows,
-                                                 window_spec_from_config)
+from projects.synthdet.inference.fragments import fragment_rule_from_config, merge_fragments
+from projects.synthdet.inference.windows import (Detections, density_from_config,
+                                                 detect_in_windows, window_spec_from_config)
 from synthdet.contracts import read_corners, read_predictions
 from synthdet.geometry import rotation_z
 from synthdet.prepare import floor_density, prepare_scan
@@ -85,18 +86,23 @@ def test_room_sized_scan_is_one_window_as_before(tiny, tmp_path):
     result, _ = inference_detector(model, shifted)
     pred = result.pred_instances_3d
     keep = pred.scores_3d >= float(SCORE)
-    order = torch.argsort(pred.scores_3d[keep], descending=True, stable=True).numpy()
     boxes = pred.bboxes_3d[keep]
-    centres, sizes, yaws = prepared.boxes_to_scan(
-        boxes.gravity_center.numpy().astype(np.float64)[order] + shift,
-        boxes.dims.numpy()[order],
-        boxes.yaw.numpy()[order])
+    single = Detections(
+        np.hstack([boxes.gravity_center.numpy().astype(np.float64) + shift,
+                   boxes.dims.numpy().astype(np.float64),
+                   boxes.yaw.numpy().astype(np.float64)[:, None]]),
+        pred.scores_3d[keep].numpy().astype(np.float64), pred.labels_3d[keep].numpy())
+    # then the fragments of one object merged, as the config says
+    single = merge_fragments(single, detector.classes, fragment_rule_from_config(cfg),
+                             float(SCORE))
+    centres, sizes, yaws = prepared.boxes_to_scan(single.boxes[:, :3], single.boxes[:, 3:6],
+                                                  single.boxes[:, 6])
     found = document['detections']
-    assert len(found) == len(order)
+    assert len(found) == len(single.scores)
     assert np.allclose([d['center'] for d in found], centres, atol=2e-6)
     assert np.allclose([d['size'] for d in found], sizes, atol=2e-6)
     assert np.allclose([d['yaw'] for d in found], yaws, atol=2e-6)
-    assert np.allclose([d['score'] for d in found], pred.scores_3d[keep].numpy()[order], atol=2e-6)
+    assert np.allclose([d['score'] for d in found], single.scores, atol=2e-6)
 
 
 def test_scan_density_is_brought_to_the_training_density(tiny, tmp_path, capsys):

@@ -102,3 +102,8 @@ inference_window = dict(size=8.0, overlap=2.6)
 # over this median training floor area (density_from_config in windows.py); tools/predict.py and
 # tools/scan2cad.py resample denser scans down to it.
 inference_density = dict(floor_area=59.0)
+# One box for an object detected as several overlapping boxes of its class (an L-shaped sofa as
+# three sofas), among the detections a user gets (projects/synthdet/inference/fragments.py): a
+# box overlapping a higher-scoring one by 30 % of the smaller one's volume is merged into it.
+# Tables and sofas only: chairs stand close together.
+fragment_merge = dict(classes=('table', 'sofa'), min_share=0.3)

@@ -8,10 +8,11 @@ import numpy as np
 import torch
 from mmdet3d.datasets import S3DISDataset
 from mmdet3d.registry import DATASETS
+from mmdet3d.structures import DepthInstance3DBoxes
 
 from projects.synthdet.datasets import transforms  # noqa: F401  (registers the augmentations)
 from synthdet.classes import (CLASS_COLORS, DETECTION_CLASSES, DETECTION_SEMANTIC_IDS,
-                              SEMANTIC_CLASSES)
+                              IGNORED_REGION_LABEL, SEMANTIC_CLASSES)
 from synthdet.info_files import InfoFileError, load_info_pickle
 
 
@@ -86,9 +87,22 @@ class SynthdetS3DISDataset(S3DISDataset):
         return info
 
     def parse_ann_info(self, info: dict) -> dict:
-        """Annotations with labels in the selected classes only."""
+        """Annotations with labels in the selected classes only, then the info's
+        ``ignored_regions`` (``[{'bbox_3d': [x, y, z, dx, dy, dz]}]``, gravity centres, as the
+        instances) labelled ``IGNORED_REGION_LABEL``: they go through the pipeline's transforms
+        with the true boxes, and the head leaves the locations inside them out of its class
+        loss."""
         ann_info = super().parse_ann_info(info)
         keep = ann_info['gt_labels_3d'] > -1
-        ann_info['gt_bboxes_3d'] = ann_info['gt_bboxes_3d'][torch.from_numpy(keep)]
-        ann_info['gt_labels_3d'] = ann_info['gt_labels_3d'][keep]
+        boxes = ann_info['gt_bboxes_3d'][torch.from_numpy(keep)]
+        labels = ann_info['gt_labels_3d'][keep]
+        regions = info.get('ignored_regions') or []
+        if regions:
+            ignored = DepthInstance3DBoxes(
+                np.array([region['bbox_3d'] for region in regions], dtype=np.float32),
+                box_dim=6, with_yaw=False, origin=(0.5, 0.5, 0.5))
+            boxes = DepthInstance3DBoxes.cat([boxes, ignored])
+            labels = np.concatenate(
+                [labels, np.full(len(regions), IGNORED_REGION_LABEL, dtype=labels.dtype)])
+        ann_info['gt_bboxes_3d'], ann_info['gt_labels_3d'] = boxes, labels
         return ann_info

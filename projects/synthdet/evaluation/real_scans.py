@@ -373,7 +373,8 @@ def evaluate_scans(cfg: Config,
     if isinstance(model, (str, os.PathLike)):
         model = load_model(cfg, os.fspath(model), device, tta)
     model_name = model_name or Path(config).stem
-    detector = ModelDetector(model, 0.0, seed)  # every box the model keeps: the APs need them
+    # every box the model keeps (the APs need them); fragments merged among those counted
+    detector = ModelDetector(model, 0.0, seed, fragment_thr=score_thr)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     entries = []

@@ -17,6 +17,7 @@ from mmengine.runner import set_random_seed
 
 from projects.synthdet.bootstrap import tta_settings
 from projects.synthdet.checkpoint import CheckpointError, load_model_weights
+from projects.synthdet.inference.fragments import fragment_rule_from_config, merge_fragments
 from projects.synthdet.inference.windows import Detections, WindowSpec, detect_in_windows
 from synthdet.contracts import PREDICTIONS_FORMAT, SchemaError, class_names
 from synthdet.prepare import PreparedScan
@@ -70,12 +71,21 @@ class ModelDetector:
 
     Every call reseeds the point sampling with ``seed``, so a scan (or a window) gives the same
     detections whatever was detected before it. Boxes scoring below ``score_thr`` are dropped.
+    :meth:`detect` merges the fragments of one object (the config's ``fragment_merge``,
+    ``inference/fragments.py``) among the boxes scoring at least ``fragment_thr`` (default
+    ``score_thr``: the boxes the user gets).
     """
 
-    def __init__(self, model: torch.nn.Module, score_thr: float, seed: int = 0):
+    def __init__(self,
+                 model: torch.nn.Module,
+                 score_thr: float,
+                 seed: int = 0,
+                 fragment_thr: float | None = None):
         self.model = model
         self.score_thr = score_thr
         self.seed = seed
+        self.fragment_thr = score_thr if fragment_thr is None else fragment_thr
+        self.fragment_rule = fragment_rule_from_config(model.cfg)
 
     @property
     def classes(self) -> list[str]:
@@ -104,9 +114,12 @@ class ModelDetector:
         return Detections(np.hstack([centres, dims, yaws])[order], scores[order], labels[order])
 
     def detect(self, points: np.ndarray, spec: WindowSpec, progress: bool = True) -> Detections:
-        """Detect in ``points`` by windows of ``spec`` (one window for a room-sized scan)."""
+        """Detect in ``points`` by windows of ``spec`` (one window for a room-sized scan), with
+        the fragments of one object merged."""
         detections, _ = detect_in_windows(points, self, spec, self.iou_thr, progress)
-        return detections
+        if self.fragment_rule is None:
+            return detections
+        return merge_fragments(detections, self.classes, self.fragment_rule, self.fragment_thr)
 
     def predictions(self,
                     prepared: PreparedScan,

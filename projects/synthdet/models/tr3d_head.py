@@ -10,6 +10,8 @@ from mmengine.model import bias_init_with_prob
 from mmengine.structures import InstanceData
 from torch import Tensor, nn
 
+from synthdet.classes import IGNORED_REGION_LABEL
+
 from ..core.box_ops import center_size_to_corners
 from ..core.nms import multiclass_axis_aligned_nms3d
 from .tr3d_assigner import tr3d_assign
@@ -20,6 +22,17 @@ PerLevelPerScene = list[list[Tensor]]
 def _scene(per_level: PerLevelPerScene, index: int) -> list[Tensor]:
     """The tensors of scene ``index`` from per-level, per-scene lists."""
     return [level[index] for level in per_level]
+
+
+def inside_boxes(points: Tensor, boxes: BaseInstance3DBoxes) -> Tensor:
+    """(N,) whether each of ``points`` (N, 3) lies in one of the axis-aligned ``boxes``
+    (their yaw is not used: the boxes of these rooms are axis-aligned)."""
+    if len(boxes) == 0:
+        return torch.zeros(len(points), dtype=torch.bool, device=points.device)
+    centers = boxes.gravity_center.to(points)
+    half = boxes.dims.to(points) / 2
+    offsets = (points[:, None, :] - centers[None, :, :]).abs()
+    return (offsets <= half[None, :, :]).all(dim=-1).any(dim=1)
 
 
 @MODELS.register_module()
@@ -138,15 +151,22 @@ class TR3DHead(Base3DDenseHead):
                      batch_input_metas: list[dict],
                      batch_gt_instances_ignore: Optional[list] = None,
                      **kwargs) -> dict[str, Tensor]:
-        """Focal class loss over all locations and box loss over positive locations."""
+        """Focal class loss over all locations and box loss over positive locations.
+
+        Boxes labelled ``IGNORED_REGION_LABEL`` are no objects: a location inside one is left
+        out of the class loss unless it is a positive of a true box."""
         bbox_losses, cls_losses, num_positive = [], [], 0
         for i, gt_instances in enumerate(batch_gt_instances_3d):
             scene_points = _scene(points, i)
-            bbox_targets, cls_targets = self.get_targets(scene_points, gt_instances.bboxes_3d,
-                                                         gt_instances.labels_3d)
-            scene_cls = torch.cat(_scene(cls_preds, i))
-            cls_losses.append(self.cls_loss(scene_cls, cls_targets).sum())
+            ignored = gt_instances.labels_3d == IGNORED_REGION_LABEL
+            bbox_targets, cls_targets = self.get_targets(scene_points,
+                                                         gt_instances.bboxes_3d[~ignored],
+                                                         gt_instances.labels_3d[~ignored])
             positive = cls_targets < self.num_classes
+            counted = positive | ~inside_boxes(torch.cat(scene_points),
+                                               gt_instances.bboxes_3d[ignored])
+            scene_cls = torch.cat(_scene(cls_preds, i))
+            cls_losses.append(self.cls_loss(scene_cls[counted], cls_targets[counted]).sum())
             num_positive += int(positive.sum())
             if positive.any():
                 scene_bbox = torch.cat(_scene(bbox_preds, i))[positive]
