@@ -52,9 +52,9 @@ def _corners(boxes: np.ndarray) -> np.ndarray:
 def _merge_class(corners: np.ndarray,
                  min_share: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Merge the fragments among ``corners`` (K, 2, 3) in descending score order; returns for
-    each box whether it is kept, how many fragments it took and its grown corners."""
+    each box whether it is kept, whether it took a fragment and its grown corners."""
     alive = np.ones(len(corners), dtype=bool)
-    absorbed_count = np.zeros(len(corners), dtype=np.int64)
+    grew = np.zeros(len(corners), dtype=bool)
     grown = corners.copy()
     for leader in range(len(corners)):
         if not alive[leader]:
@@ -72,9 +72,9 @@ def _merge_class(corners: np.ndarray,
                     grown[leader, 0] = np.minimum(grown[leader, 0], grown[other, 0])
                     grown[leader, 1] = np.maximum(grown[leader, 1], grown[other, 1])
                     alive[other] = False
-                    absorbed_count[leader] += 1
+                    grew[leader] = True
                     absorbed = True
-    return alive, absorbed_count, grown
+    return alive, grew, grown
 
 
 def merge_fragments(detections: Detections, class_names: Sequence[str], rule: FragmentRule,
@@ -91,9 +91,8 @@ def merge_fragments(detections: Detections, class_names: Sequence[str], rule: Fr
         rows = rows[np.argsort(-detections.scores[rows], kind='stable')]
         if len(rows) < 2:
             continue
-        alive, taken, grown = _merge_class(_corners(boxes[rows]), rule.min_share)
-        for row, low_high in zip(rows[taken > 0], grown[taken > 0]):
-            low, high = low_high
+        alive, grew, grown = _merge_class(_corners(boxes[rows]), rule.min_share)
+        for row, (low, high) in zip(rows[grew], grown[grew]):
             boxes[row] = np.concatenate([(low + high) / 2, high - low, [0.0]])
         keep[rows[~alive]] = False
     result = Detections(boxes, detections.scores, detections.labels).select(keep)
