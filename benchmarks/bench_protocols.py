@@ -168,7 +168,8 @@ def adapt(args: argparse.Namespace, scans: list[LabelledScan]) -> dict:
     ]
     command += [f'--{key}={value}' for key, value in (('rounds', args.rounds),
                                                        ('refresh', args.refresh),
-                                                       ('unsure-thr', args.unsure_thr))
+                                                       ('unsure-thr', args.unsure_thr),
+                                                       ('score-thr', args.pseudo_thr))
                 if value is not None]  # --unsure-thr always: a default that changes reruns
     command += ['--cfg-options', *data_root_options(args.adapt_config, args.data)]
     done = json.loads(record.read_text(encoding='utf-8')) if record.is_file() else {}
@@ -261,17 +262,24 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('--data', type=Path, required=True,
                         help='generated data root with areas 7, 8, 9 (read only)')
     parser.add_argument('--work', type=Path, required=True, help='output folder')
-    parser.add_argument('--protocols', nargs='+', choices=PROTOCOLS, default=list(PROTOCOLS))
+    parser.add_argument('--protocols', nargs='+', choices=PROTOCOLS, default=list(PROTOCOLS),
+                        help='the protocols to run (default: all)')
     parser.add_argument('--new-rooms', nargs='+', default=['scannet0000', 'scannet0001'],
                         help='the rooms a new-room protocol teaches on')
-    parser.add_argument('--finetune-config', type=Path, default=CONFIGS / 'teach_finetune.py')
-    parser.add_argument('--adapt-config', type=Path, default=CONFIGS / 'adapt_selftrain.py')
-    parser.add_argument('--score-thr', type=float, default=0.3)
+    parser.add_argument('--finetune-config', type=Path, default=CONFIGS / 'teach_finetune.py',
+                        help='the next-scan and new-room fine-tune config '
+                        '(default configs/tr3d/teach_finetune.py)')
+    parser.add_argument('--adapt-config', type=Path, default=CONFIGS / 'adapt_selftrain.py',
+                        help='the self-training config (default configs/tr3d/adapt_selftrain.py)')
+    parser.add_argument('--score-thr', type=float, default=0.3,
+                        help='lowest score of a detection counted (default 0.3)')
     parser.add_argument('--iters', type=int, help='fine-tune iterations instead of the epochs')
     parser.add_argument('--rounds', type=int, help="adaptation rounds (tools/adapt.py's default)")
     parser.add_argument('--refresh', type=int, help='adaptation iterations per round')
     parser.add_argument('--unsure-thr', type=float, default=UNSURE_THR,
                         help=f"the adaptation's --unsure-thr (default {UNSURE_THR})")
+    parser.add_argument('--pseudo-thr', type=float,
+                        help="the adaptation's --score-thr (default: tools/adapt.py's)")
     add_fork_tools_option(parser)
     return parser.parse_args(argv)
 

@@ -6,11 +6,12 @@
                                                       [--profile-iters 8] [--seed 0]
                                                       [--workers 2] [--fork-tools]
 
-The previous recipe is the same config with three ``--cfg-options``: TR3D's neck keeping every
+The previous recipe is the same config with four ``--cfg-options``: TR3D's neck keeping every
 voxel its generative upsampling creates (``model.neck.generated_reach=None``), the training
 loader finding each room's floor, ceiling and walls anew in every epoch
-(``ThinRoomStructure(cached_rooms=0)``) and a validation after every epoch
-(``train_cfg.val_interval=1``).
+(``ThinRoomStructure(cached_rooms=0)``), a validation after every epoch
+(``train_cfg.val_interval=1``) and AdamW's loop over the weights instead of its fused step
+(``optim_wrapper.optimizer.fused=False``).
 
 The generator writes ``--rooms-per-area`` rooms of ``--points`` points into areas 7, 8 and 9 of
 a temporary folder and ``tools/create_data.py`` converts them. Then, for each recipe:
@@ -57,7 +58,8 @@ def previous_recipe(cfg) -> dict[str, object]:
     previous recipe."""
     options: dict[str, object] = {
         'model.neck.generated_reach': None,
-        'train_cfg.val_interval': 1
+        'train_cfg.val_interval': 1,
+        'optim_wrapper.optimizer.fused': False
     }
     for index, dataset in enumerate(cfg.train_dataloader.dataset.dataset.datasets):
         for step, transform in enumerate(dataset.pipeline):

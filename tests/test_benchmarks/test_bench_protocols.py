@@ -98,7 +98,7 @@ def test_a_whole_run_of_the_three_protocols_prints_their_lines(tmp_path, capsys,
     command = [
         scans, '--config', 'configs/tr3d/exp2_cpu.py', '--checkpoint', checkpoint, '--data', data,
         '--work', work, '--new-rooms', 'office', '--finetune-config', finetune, '--iters', 1,
-        '--rounds', 1, '--refresh', 1, '--score-thr', 0.511, '--fork-tools'
+        '--rounds', 1, '--refresh', 1, '--score-thr', 0.511, '--pseudo-thr', 0.6, '--fork-tools'
     ]
     out = run_from_repo(main, command, monkeypatch, capsys)
     lines = out.strip().splitlines()[-4:]
@@ -119,7 +119,9 @@ def test_a_whole_run_of_the_three_protocols_prints_their_lines(tmp_path, capsys,
         assert row['minutes'] > 0 and set(row['before']) == set(row['after']) == {
             'held_out', 'area9'}
     # the protocols' work stays in WORK; the generated data is only read
-    assert (work / 'unlabelled' / 'adapt' / 'round_1' / 'pseudo_labels.json').is_file()
+    pseudo_labels = json.loads(
+        (work / 'unlabelled' / 'adapt' / 'round_1' / 'pseudo_labels.json').read_text())
+    assert pseudo_labels['rule']['score_thr'] == 0.6  # --pseudo-thr is the adaptation's
     assert not any(path.name.startswith('s3dis_infos_Area_1') for path in data.iterdir())
     # the same command again reuses the adaptation; other options are refused by tools/adapt.py
     record = work / 'unlabelled' / 'adapt_time.json'

@@ -3,10 +3,13 @@
 The configs derive from ``_base_`` (``projects/synthdet/config_helpers.py``); these are the
 values they were written out with before, so a change of the derivation cannot change them.
 """
+import copy
 from pathlib import Path
 
 import pytest
+import torch
 from mmengine.config import Config
+from mmengine.optim import build_optim_wrapper
 
 from projects.synthdet.config_helpers import (PRE_SAMPLING_STEPS, area_datasets, with_num_points,
                                               with_structure_thinning, with_test_time_augmentation,
@@ -230,3 +233,29 @@ def test_domain_shift_configs_are_exp2_at_cpu_scale_by_iterations(name, train_ar
     assert cfg.train_cfg == dict(type='IterBasedTrainLoop', max_iters=cfg.max_iters)
     assert cfg.param_scheduler.milestones == [cfg.max_iters * 4 // 5]
     assert cfg.default_hooks.checkpoint.save_best is None
+
+
+
+def seeded_weights_and_model() -> tuple[torch.Tensor, torch.nn.Module]:
+    """A small seeded network and its initial weights, flat."""
+    torch.manual_seed(0)
+    model = torch.nn.Sequential(torch.nn.Linear(6, 8), torch.nn.ReLU(), torch.nn.Linear(8, 2))
+    return torch.cat([p.detach().flatten() for p in model.parameters()]), model
+
+
+def test_exp2_cpu_steps_exp2s_adamw_fused_to_the_same_weights():
+    """exp2_cpu's optimiser is exp2's AdamW in torch's fused implementation: built by mmengine
+    from the config, three steps leave the weights where the unfused loop leaves them."""
+    exp2, cpu = load('exp2'), load('exp2_cpu')
+    assert cpu.optim_wrapper.optimizer == dict(exp2.optim_wrapper.optimizer, fused=True)
+    weights = {}
+    for name, config in (('fused', cpu.optim_wrapper), ('loop', exp2.optim_wrapper)):
+        initial, model = seeded_weights_and_model()
+        wrapper = build_optim_wrapper(model, copy.deepcopy(config))
+        assert bool(wrapper.optimizer.defaults.get('fused')) is (name == 'fused')
+        for step in range(3):
+            inputs = torch.linspace(-1, 1, 24).reshape(4, 6) * (step + 1)
+            wrapper.update_params(model(inputs).square().mean())
+        weights[name] = torch.cat([p.detach().flatten() for p in model.parameters()])
+    assert not torch.allclose(weights['loop'], initial, atol=1e-4)  # the steps moved them
+    assert torch.allclose(weights['fused'], weights['loop'], atol=1e-6)
