@@ -43,7 +43,7 @@ from benchmarks.bench_teach import (StepFailed, data_root_options, measure_model
 from benchmarks.tool_runs import add_fork_tools_option
 from projects.synthdet.evaluation.real_scans import (LabelledScan, evaluate_detections,
                                                      find_labelled_scans, labels_path)
-from projects.synthdet.self_training import UNSURE_THR
+from projects.synthdet.self_training import PSEUDO_LABEL_THR, UNSURE_THR
 from synthdet.cli import OneLineParser
 from synthdet.contracts import read_predictions
 from synthdet.scan_io import SCAN_SUFFIXES
@@ -170,7 +170,7 @@ def adapt(args: argparse.Namespace, scans: list[LabelledScan]) -> dict:
                                                        ('refresh', args.refresh),
                                                        ('unsure-thr', args.unsure_thr),
                                                        ('score-thr', args.pseudo_thr))
-                if value is not None]  # --unsure-thr always: a default that changes reruns
+                if value is not None]  # the thresholds always: a default that changes reruns
     command += ['--cfg-options', *data_root_options(args.adapt_config, args.data)]
     done = json.loads(record.read_text(encoding='utf-8')) if record.is_file() else {}
     if not adapted.is_file() or done.get('command') != command:
@@ -278,8 +278,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument('--refresh', type=int, help='adaptation iterations per round')
     parser.add_argument('--unsure-thr', type=float, default=UNSURE_THR,
                         help=f"the adaptation's --unsure-thr (default {UNSURE_THR})")
-    parser.add_argument('--pseudo-thr', type=float,
-                        help="the adaptation's --score-thr (default: tools/adapt.py's)")
+    parser.add_argument('--pseudo-thr', type=float, default=PSEUDO_LABEL_THR,
+                        help=f"the adaptation's --score-thr (default {PSEUDO_LABEL_THR})")
     add_fork_tools_option(parser)
     return parser.parse_args(argv)
 

@@ -2,7 +2,7 @@
 
 Usage: python tools/adapt.py SCANS_DIR --config configs/tr3d/adapt_selftrain.py
                              --checkpoint CKPT --work DIR --out ADAPTED.pth [--rounds 4]
-                             [--refresh N] [--score-thr 0.5] [--unsure-thr 0.3]
+                             [--refresh N] [--score-thr 0.4] [--unsure-thr 0.3]
                              [--agree-iou 0.5] [--runs 2]
                              [--seed 0] [--device cpu] [--voxel M] [--columns x,y,z,r,g,b]
                              [--cfg-options k=v ...]
@@ -45,11 +45,11 @@ from projects.synthdet.datasets.s3dis_converter import convert_s3dis
 from projects.synthdet.inference.detector import load_model
 from projects.synthdet.inference.windows import WindowSpec, inference_settings
 from projects.synthdet.config_helpers import area_info_file
-from projects.synthdet.self_training import (UNSURE_THR, PseudoLabelRule, add_ignored_regions,
-                                             adapt_repeat, check_share, ignored_regions,
-                                             pseudo_boxes, raw_area_dir, room_offset,
-                                             round_config, teacher_pseudo_labels, train_round,
-                                             write_pseudo_room)
+from projects.synthdet.self_training import (PSEUDO_LABEL_THR, UNSURE_THR, PseudoLabelRule,
+                                             add_ignored_regions, adapt_repeat, check_share,
+                                             ignored_regions, pseudo_boxes, raw_area_dir,
+                                             room_offset, round_config, teacher_pseudo_labels,
+                                             train_round, write_pseudo_room)
 from synthdet.cli import OneLineParser, add_score_option, float_in, int_in
 from synthdet.contracts import write_json_atomic
 from synthdet.outputs import check_output, readable
@@ -89,7 +89,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help='refreshes of the pseudo-labels (default 4)')
     parser.add_argument('--refresh', type=int_in(1, 10**6),
                         help="iterations per round (default: the config's refresh_iters)")
-    add_score_option(parser, '--score-thr', 0.5, 'lowest fused score of a pseudo-label')
+    add_score_option(parser, '--score-thr', PSEUDO_LABEL_THR,
+                     'lowest fused score of a pseudo-label')
     add_score_option(parser, '--unsure-thr', UNSURE_THR, 'lowest score of a box that is an '
                      'ignored region when it is no pseudo-label (at most --score-thr)')
     parser.add_argument('--agree-iou', type=float_in(0.0, 1.0, include_low=False), default=0.5,

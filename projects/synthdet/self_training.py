@@ -49,6 +49,7 @@ from synthdet.outputs import replaced_paths
 
 UNSURE_MARGIN = 0.05  # metres an unsure box grows on every side to an ignored region
 UNSURE_THR = 0.3  # the default lowest score of an unsure box (docs/teach.md: measured 0.1, 0.3)
+PSEUDO_LABEL_THR = 0.4  # the default lowest score of a pseudo-label (docs/teach.md: 0.4, 0.5)
 
 
 @dataclass(frozen=True)
