@@ -44,7 +44,7 @@ from benchmarks.tool_runs import add_fork_tools_option
 from projects.synthdet.evaluation.real_scans import (LabelledScan, evaluate_detections,
                                                      find_labelled_scans, labels_path)
 from projects.synthdet.self_training import PSEUDO_LABEL_THR, UNSURE_THR
-from synthdet.cli import OneLineParser
+from synthdet.cli import OneLineParser, add_score_option
 from synthdet.contracts import read_predictions
 from synthdet.scan_io import SCAN_SUFFIXES
 
@@ -271,15 +271,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         '(default configs/tr3d/teach_finetune.py)')
     parser.add_argument('--adapt-config', type=Path, default=CONFIGS / 'adapt_selftrain.py',
                         help='the self-training config (default configs/tr3d/adapt_selftrain.py)')
-    parser.add_argument('--score-thr', type=float, default=0.3,
-                        help='lowest score of a detection counted (default 0.3)')
+    add_score_option(parser, '--score-thr', 0.3, 'lowest score of a detection counted')
     parser.add_argument('--iters', type=int, help='fine-tune iterations instead of the epochs')
     parser.add_argument('--rounds', type=int, help="adaptation rounds (tools/adapt.py's default)")
     parser.add_argument('--refresh', type=int, help='adaptation iterations per round')
-    parser.add_argument('--unsure-thr', type=float, default=UNSURE_THR,
-                        help=f"the adaptation's --unsure-thr (default {UNSURE_THR})")
-    parser.add_argument('--pseudo-thr', type=float, default=PSEUDO_LABEL_THR,
-                        help=f"the adaptation's --score-thr (default {PSEUDO_LABEL_THR})")
+    add_score_option(parser, '--unsure-thr', UNSURE_THR, "the adaptation's --unsure-thr")
+    add_score_option(parser, '--pseudo-thr', PSEUDO_LABEL_THR, "the adaptation's --score-thr")
     add_fork_tools_option(parser)
     return parser.parse_args(argv)
 
